@@ -1,0 +1,229 @@
+//! The bounding volume hierarchy: built from triangles by a median split or binned SAH, stored
+//! as a flat array of 32-byte nodes, traversed with a small fixed stack.
+//!
+//! - [`build`](Bvh::build) takes the triangles and a [`BuildOptions`].
+//! - [`intersect`](Bvh::intersect) finds the closest hit; [`occluded`](Bvh::occluded) answers
+//!   whether anything lies on a segment; [`transmittance`](Bvh::transmittance) multiplies the
+//!   transparency of everything a shadow ray crosses; [`intersect_visit`](Bvh::intersect_visit)
+//!   reports every node entered and triangle tested, for debug drawing and cost heatmaps.
+//!
+//! Layout: node 0 is the root, slot 1 is unused, and the two children of an inner node sit side
+//! by side at an even index, so a pair of siblings shares one 64-byte cache line. Triangles are
+//! copied into leaf order; [`Bvh::prim_ids`] maps a leaf slot back to the caller's index.
+
+mod build;
+mod reference;
+mod stats;
+mod traverse;
+
+use glam::{Vec3, Vec3A};
+
+pub use stats::BvhStats;
+pub use reference::{all_hits_brute_force, closest_hit_brute_force};
+pub use traverse::{Hit, Visit};
+
+use crate::geometry::Aabb;
+
+/// How inner nodes are split.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum SplitMethod {
+    /// Object median on the longest axis of the centroid bounds: fast to build, balanced, but
+    /// blind to where the triangles are.
+    Median,
+    /// Binned surface area heuristic (Wald 2007) on all three axes of the centroid bounds.
+    Sah,
+}
+
+impl std::fmt::Display for SplitMethod {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            SplitMethod::Median => "median",
+            SplitMethod::Sah => "sah",
+        })
+    }
+}
+
+impl std::str::FromStr for SplitMethod {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s.to_ascii_lowercase().as_str() {
+            "median" => Ok(SplitMethod::Median),
+            "sah" => Ok(SplitMethod::Sah),
+            other => Err(format!("unknown split method `{other}` (expected median or sah)")),
+        }
+    }
+}
+
+/// Cost constants of the surface area heuristic, used by the SAH builder and in the stats.
+///
+/// `cost = C_TRAVERSE * sum(A(inner)) / A(root) + C_INTERSECT * sum(A(leaf) * n(leaf)) / A(root)`
+pub mod sah {
+    /// Cost of visiting an inner node (testing its two children's boxes).
+    pub const C_TRAVERSE: f64 = 1.0;
+    /// Cost of one ray/triangle test.
+    pub const C_INTERSECT: f64 = 1.0;
+}
+
+/// Build settings. The defaults are the ones the quality report in the README chose.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
+pub struct BuildOptions {
+    /// Median split or binned SAH.
+    pub split: SplitMethod,
+    /// SAH bins per axis (2..=64). More bins find better splits but cost build time; the
+    /// README's table shows the trade-off on the dragon. Ignored by the median split.
+    pub bins: u32,
+    /// Largest number of triangles a leaf may hold (1..=255). The SAH builder may stop earlier
+    /// when a leaf is cheaper than any split; the median builder splits down to this size.
+    pub max_leaf_size: u32,
+}
+
+impl BuildOptions {
+    /// Default SAH bin count (see the README's bins table).
+    pub const DEFAULT_BINS: u32 = 12;
+    /// Default maximum leaf size.
+    pub const DEFAULT_LEAF_SIZE: u32 = 4;
+
+    /// Binned SAH with the default bins and leaf size.
+    pub fn sah() -> Self {
+        Self {
+            split: SplitMethod::Sah,
+            bins: Self::DEFAULT_BINS,
+            max_leaf_size: Self::DEFAULT_LEAF_SIZE,
+        }
+    }
+
+    /// Median split with the default leaf size.
+    pub fn median() -> Self {
+        Self {
+            split: SplitMethod::Median,
+            ..Self::sah()
+        }
+    }
+
+    /// The same options with another split method.
+    pub fn with_split(self, split: SplitMethod) -> Self {
+        Self { split, ..self }
+    }
+
+    /// Checks the ranges; the message names the bad setting.
+    pub fn validate(&self) -> Result<(), String> {
+        if !(2..=64).contains(&self.bins) {
+            return Err(format!("bins must be between 2 and 64, got {}", self.bins));
+        }
+        if !(1..=255).contains(&self.max_leaf_size) {
+            return Err(format!(
+                "leaf size must be between 1 and 255, got {}",
+                self.max_leaf_size
+            ));
+        }
+        Ok(())
+    }
+}
+
+impl Default for BuildOptions {
+    fn default() -> Self {
+        Self::sah()
+    }
+}
+
+/// One node: a box, and either two children (`count == 0`, children at `first` and
+/// `first + 1`) or a leaf of `count` triangles starting at leaf slot `first`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[repr(C, align(32))]
+pub struct BvhNode {
+    /// Box minimum.
+    pub min: [f32; 3],
+    /// First child (inner node) or first triangle slot (leaf).
+    pub first: u32,
+    /// Box maximum.
+    pub max: [f32; 3],
+    /// Number of triangles; zero for an inner node.
+    pub count: u32,
+}
+
+impl BvhNode {
+    /// True for a leaf.
+    #[inline(always)]
+    pub fn is_leaf(&self) -> bool {
+        self.count > 0
+    }
+
+    /// The node's box.
+    #[inline(always)]
+    pub fn aabb(&self) -> Aabb {
+        Aabb {
+            min: Vec3A::from_array(self.min),
+            max: Vec3A::from_array(self.max),
+        }
+    }
+
+    pub(crate) fn set_aabb(&mut self, b: &Aabb) {
+        self.min = b.min.to_array();
+        self.max = b.max.to_array();
+    }
+
+    /// For a leaf, the range of leaf slots it holds.
+    pub fn leaf_range(&self) -> std::ops::Range<usize> {
+        self.first as usize..(self.first + self.count) as usize
+    }
+}
+
+/// The deepest a tree may grow. Past `MAX_DEPTH - 32` the builders switch to splitting by
+/// count, which halves every time, so no input (even a million copies of one triangle) can
+/// overflow the traversal stack.
+pub const MAX_DEPTH: usize = 96;
+
+/// A built BVH over a triangle list.
+#[derive(Clone, Debug)]
+pub struct Bvh {
+    /// Flat node array: root at 0, slot 1 unused, sibling pairs from 2 on.
+    pub nodes: Vec<BvhNode>,
+    /// Triangles in leaf order.
+    pub tris: Vec<[Vec3A; 3]>,
+    /// For each leaf slot, the index of the triangle in the caller's list.
+    pub prim_ids: Vec<u32>,
+    /// What the build produced and how long it took.
+    pub stats: BvhStats,
+    /// The options it was built with.
+    pub options: BuildOptions,
+}
+
+impl Bvh {
+    /// Builds a BVH over `triangles` (three vertices each). Triangles with a NaN or infinite
+    /// vertex are left out and counted in [`BvhStats::excluded`]; everything else, zero-area
+    /// triangles included, is kept. Never panics or loops, whatever the input.
+    pub fn build(triangles: &[[Vec3; 3]], options: &BuildOptions) -> Bvh {
+        build::build(triangles, options)
+    }
+
+    /// Number of triangles in the tree (excluded ones not counted).
+    pub fn triangle_count(&self) -> usize {
+        self.tris.len()
+    }
+
+    /// Box around everything in the tree (empty for an empty tree).
+    pub fn bounds(&self) -> Aabb {
+        if self.tris.is_empty() {
+            Aabb::EMPTY
+        } else {
+            self.nodes[0].aabb()
+        }
+    }
+
+    /// Visits every node with its depth (root at 0), parents before children.
+    pub fn for_each_node(&self, mut f: impl FnMut(usize, &BvhNode, u32)) {
+        if self.tris.is_empty() {
+            return;
+        }
+        let mut stack = vec![(0usize, 0u32)];
+        while let Some((i, depth)) = stack.pop() {
+            let n = &self.nodes[i];
+            f(i, n, depth);
+            if !n.is_leaf() {
+                stack.push((n.first as usize + 1, depth + 1));
+                stack.push((n.first as usize, depth + 1));
+            }
+        }
+    }
+}

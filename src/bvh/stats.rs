@@ -1,0 +1,69 @@
+use std::time::Duration;
+
+use super::{Bvh, sah};
+
+/// What a build produced.
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
+pub struct BvhStats {
+    /// Triangles in the tree.
+    pub triangles: usize,
+    /// Triangles left out because a vertex was NaN or infinite.
+    pub excluded: usize,
+    /// Nodes in the tree, leaves included.
+    pub nodes: usize,
+    /// Leaf nodes.
+    pub leaves: usize,
+    /// Levels: the depth of the deepest leaf plus one (a lone root leaf is one level).
+    pub levels: u32,
+    /// Fewest triangles in a leaf.
+    pub min_leaf_size: u32,
+    /// Mean triangles per leaf.
+    pub mean_leaf_size: f64,
+    /// Most triangles in a leaf.
+    pub max_leaf_size: u32,
+    /// SAH cost of the tree with the constants of [`sah`]: expected cost of a random ray
+    /// that meets the root box, in units of one triangle test.
+    pub sah_cost: f64,
+    /// Wall-clock build time in milliseconds.
+    pub build_ms: f64,
+}
+
+impl BvhStats {
+    pub(super) fn measure(bvh: &Bvh, excluded: usize, build_time: Duration) -> Self {
+        let mut s = BvhStats {
+            triangles: bvh.tris.len(),
+            excluded,
+            build_ms: build_time.as_secs_f64() * 1e3,
+            min_leaf_size: u32::MAX,
+            ..Default::default()
+        };
+        let root_area = bvh.bounds().half_area();
+        let mut inner_area = 0.0;
+        let mut leaf_area = 0.0;
+        bvh.for_each_node(|_, n, depth| {
+            s.nodes += 1;
+            s.levels = s.levels.max(depth + 1);
+            let a = n.aabb().half_area();
+            if n.is_leaf() {
+                s.leaves += 1;
+                s.min_leaf_size = s.min_leaf_size.min(n.count);
+                s.max_leaf_size = s.max_leaf_size.max(n.count);
+                leaf_area += a * n.count as f64;
+            } else {
+                inner_area += a;
+            }
+        });
+        if s.leaves == 0 {
+            s.min_leaf_size = 0;
+        } else {
+            s.mean_leaf_size = s.triangles as f64 / s.leaves as f64;
+        }
+        s.sah_cost = if root_area > 0.0 {
+            (sah::C_TRAVERSE * inner_area + sah::C_INTERSECT * leaf_area) / root_area
+        } else {
+            // A flat or point-like scene: every ray meeting the root tests everything.
+            sah::C_INTERSECT * s.triangles as f64
+        };
+        s
+    }
+}

@@ -1,0 +1,291 @@
+//! Stack-based traversal: closest hit (nearer child first), any hit, transmittance, and a
+//! visiting variant that reports what it touched.
+
+use glam::Vec3;
+
+use super::{Bvh, BvhNode, MAX_DEPTH};
+use crate::geometry::{PreparedRay, Ray, intersect_triangle, intersect_triangle_t};
+
+/// The closest hit of a ray.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Hit {
+    /// Distance along the ray.
+    pub t: f32,
+    /// Index of the triangle in the list the BVH was built from.
+    pub prim: u32,
+    /// Barycentric weight of the triangle's second vertex.
+    pub u: f32,
+    /// Barycentric weight of the triangle's third vertex.
+    pub v: f32,
+}
+
+/// One step of a traversal, as reported by [`Bvh::intersect_visit`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Visit {
+    /// The ray entered this node (its box was hit and not culled).
+    Node {
+        /// Index into [`Bvh::nodes`].
+        index: u32,
+        /// Depth of the node, root at 0.
+        depth: u32,
+    },
+    /// The ray was tested against this triangle.
+    Triangle {
+        /// Index of the triangle in the caller's list.
+        prim: u32,
+        /// Whether the test found an intersection in range (not necessarily the closest).
+        hit: bool,
+    },
+}
+
+/// Boxes are culled only when they start clearly beyond the best hit so far: the slack keeps a
+/// box whose entry distance rounds a hair past an equally distant hit, so ties in `t` still go
+/// to the lowest triangle index exactly as brute force decides them.
+const CULL_SLACK: f32 = 1.0 + 1.0 / 65536.0;
+
+trait Observer {
+    const ACTIVE: bool;
+    fn node(&mut self, index: u32, depth: u32);
+    fn triangle(&mut self, prim: u32, hit: bool);
+}
+
+struct Silent;
+impl Observer for Silent {
+    const ACTIVE: bool = false;
+    #[inline(always)]
+    fn node(&mut self, _: u32, _: u32) {}
+    #[inline(always)]
+    fn triangle(&mut self, _: u32, _: bool) {}
+}
+
+struct Report<F: FnMut(Visit)>(F);
+impl<F: FnMut(Visit)> Observer for Report<F> {
+    const ACTIVE: bool = true;
+    fn node(&mut self, index: u32, depth: u32) {
+        (self.0)(Visit::Node { index, depth })
+    }
+    fn triangle(&mut self, prim: u32, hit: bool) {
+        (self.0)(Visit::Triangle { prim, hit })
+    }
+}
+
+/// Entry distance of the box if the ray meets it before `limit`, else `+inf`.
+#[inline(always)]
+fn enter(node: &BvhNode, ray: &PreparedRay, limit: f32) -> f32 {
+    let (near, far) = node.aabb().slab(ray);
+    let near = near.max(0.0);
+    if near <= far.min(limit) {
+        near
+    } else {
+        f32::INFINITY
+    }
+}
+
+impl Bvh {
+    /// The closest triangle the ray hits at `0 < t < t_max`. Ties in `t` go to the lowest
+    /// triangle index.
+    #[inline]
+    pub fn intersect(&self, ray: &Ray, t_max: f32) -> Option<Hit> {
+        self.closest(&PreparedRay::new(ray), t_max, &mut Silent)
+    }
+
+    /// [`Bvh::intersect`] for a ray already prepared (saves the setup when one ray is traced
+    /// against several structures).
+    #[inline]
+    pub fn intersect_prepared(&self, ray: &PreparedRay, t_max: f32) -> Option<Hit> {
+        self.closest(ray, t_max, &mut Silent)
+    }
+
+    /// [`Bvh::intersect`] that also calls `visit` for every node entered and every triangle
+    /// tested, in traversal order.
+    pub fn intersect_visit(
+        &self,
+        ray: &Ray,
+        t_max: f32,
+        visit: impl FnMut(Visit),
+    ) -> Option<Hit> {
+        self.closest(&PreparedRay::new(ray), t_max, &mut Report(visit))
+    }
+
+    #[inline(always)]
+    fn closest<O: Observer>(&self, ray: &PreparedRay, t_max: f32, obs: &mut O) -> Option<Hit> {
+        if self.tris.is_empty() || !(t_max > 0.0) {
+            return None;
+        }
+        let mut best_t = t_max;
+        let mut best_slot = usize::MAX;
+        let mut best_id = u32::MAX;
+        let nodes = &self.nodes[..];
+        if enter(&nodes[0], ray, t_max) == f32::INFINITY {
+            return None;
+        }
+        // Each entry keeps the entry distance, so a pop can skip a box that now starts beyond
+        // the best hit without testing it again.
+        let mut stack = [(0u32, 0.0f32); MAX_DEPTH];
+        let mut depths = [0u32; MAX_DEPTH];
+        let mut sp = 0usize;
+        let mut current = 0u32;
+        let mut depth = 0u32;
+        loop {
+            let node = &nodes[current as usize];
+            if O::ACTIVE {
+                obs.node(current, depth);
+            }
+            if node.is_leaf() {
+                let limit = best_t.next_up();
+                for slot in node.leaf_range() {
+                    let t = intersect_triangle_t(ray, &self.tris[slot], limit);
+                    if O::ACTIVE {
+                        obs.triangle(self.prim_ids[slot], t <= best_t);
+                    }
+                    if t <= best_t {
+                        let id = self.prim_ids[slot];
+                        if t < best_t || id < best_id {
+                            best_t = t;
+                            best_slot = slot;
+                            best_id = id;
+                        }
+                    }
+                }
+            } else {
+                let cull = best_t * CULL_SLACK;
+                let first = node.first;
+                let d0 = enter(&nodes[first as usize], ray, cull);
+                let d1 = enter(&nodes[first as usize + 1], ray, cull);
+                let (near, near_d, far, far_d) = if d1 < d0 {
+                    (first + 1, d1, first, d0)
+                } else {
+                    (first, d0, first + 1, d1)
+                };
+                if near_d != f32::INFINITY {
+                    depth += 1;
+                    if far_d != f32::INFINITY {
+                        stack[sp] = (far, far_d);
+                        if O::ACTIVE {
+                            depths[sp] = depth;
+                        }
+                        sp += 1;
+                    }
+                    current = near;
+                    continue;
+                }
+            }
+            // Pop, skipping boxes that now start beyond the best hit.
+            loop {
+                if sp == 0 {
+                    return self.finish(ray, best_slot, best_id, best_t, t_max);
+                }
+                sp -= 1;
+                let (n, d) = stack[sp];
+                if d <= best_t * CULL_SLACK {
+                    current = n;
+                    if O::ACTIVE {
+                        depth = depths[sp];
+                    }
+                    break;
+                }
+            }
+        }
+    }
+
+    fn finish(
+        &self,
+        ray: &PreparedRay,
+        slot: usize,
+        id: u32,
+        t: f32,
+        t_max: f32,
+    ) -> Option<Hit> {
+        if slot == usize::MAX || !(t < t_max) {
+            return None;
+        }
+        let h = intersect_triangle(ray, &self.tris[slot], t.next_up())?;
+        Some(Hit {
+            t: h.t,
+            prim: id,
+            u: h.u,
+            v: h.v,
+        })
+    }
+
+    /// True when any triangle lies on the ray at `0 < t < t_max` (shadow rays).
+    pub fn occluded(&self, ray: &Ray, t_max: f32) -> bool {
+        let mut blocked = false;
+        self.for_each_hit(ray, t_max, |_, _| {
+            blocked = true;
+            false
+        });
+        blocked
+    }
+
+    /// Light that passes along the ray up to `t_max`: the product of `pass(prim, t)` over every
+    /// triangle the ray crosses at `0 < t < t_max`. Each triangle counts once, and a ray through
+    /// a shared edge crosses exactly one of the two triangles (see
+    /// [`crate::geometry::intersect_triangle`]). Stops as soon as nothing passes.
+    pub fn transmittance(
+        &self,
+        ray: &Ray,
+        t_max: f32,
+        mut pass: impl FnMut(u32, f32) -> Vec3,
+    ) -> Vec3 {
+        let mut through = Vec3::ONE;
+        self.for_each_hit(ray, t_max, |prim, t| {
+            through *= pass(prim, t);
+            through.max_element() > 0.0
+        });
+        through
+    }
+
+    /// Calls `f(prim, t)` for every triangle hit at `0 < t < t_max`, in no particular order,
+    /// until `f` returns false.
+    pub fn for_each_hit(&self, ray: &Ray, t_max: f32, mut f: impl FnMut(u32, f32) -> bool) {
+        if self.tris.is_empty() || !(t_max > 0.0) {
+            return;
+        }
+        let ray = PreparedRay::new(ray);
+        let nodes = &self.nodes[..];
+        let mut stack = [0u32; MAX_DEPTH];
+        let mut sp = 0usize;
+        if enter(&nodes[0], &ray, t_max) == f32::INFINITY {
+            return;
+        }
+        let mut current = 0u32;
+        loop {
+            let node = &nodes[current as usize];
+            if node.is_leaf() {
+                for slot in node.leaf_range() {
+                    let t = intersect_triangle_t(&ray, &self.tris[slot], t_max);
+                    if t < t_max && !f(self.prim_ids[slot], t) {
+                        return;
+                    }
+                }
+            } else {
+                let first = node.first;
+                let hit0 = enter(&nodes[first as usize], &ray, t_max) != f32::INFINITY;
+                let hit1 = enter(&nodes[first as usize + 1], &ray, t_max) != f32::INFINITY;
+                match (hit0, hit1) {
+                    (true, true) => {
+                        stack[sp] = first + 1;
+                        sp += 1;
+                        current = first;
+                        continue;
+                    }
+                    (true, false) => {
+                        current = first;
+                        continue;
+                    }
+                    (false, true) => {
+                        current = first + 1;
+                        continue;
+                    }
+                    (false, false) => {}
+                }
+            }
+            if sp == 0 {
+                return;
+            }
+            sp -= 1;
+            current = stack[sp];
+        }
+    }
+}

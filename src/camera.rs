@@ -1,0 +1,107 @@
+//! Camera rays: pinhole and thin lens, pixel row 0 at the top.
+
+use glam::{Vec2, Vec3};
+
+use crate::geometry::Ray;
+use crate::scene::Camera;
+
+/// A camera's orthonormal frame and image plane, ready to make rays for a `width x height`
+/// image.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CameraRays {
+    /// Eye position (centre of the lens).
+    pub eye: Vec3,
+    /// Unit view direction.
+    pub forward: Vec3,
+    /// Unit direction of increasing pixel x.
+    pub right: Vec3,
+    /// Unit direction of decreasing pixel y (image up).
+    pub up: Vec3,
+    /// Half-height of the image plane at distance 1: `tan(vfov / 2)`.
+    pub tan_half: f32,
+    /// Width over height.
+    pub aspect: f32,
+    /// Image width in pixels.
+    pub width: u32,
+    /// Image height in pixels.
+    pub height: u32,
+    /// Lens radius (0: pinhole).
+    pub lens_radius: f32,
+    /// Distance to the plane in focus.
+    pub focus_distance: f32,
+}
+
+impl CameraRays {
+    /// Frames `camera` for a `width x height` image. A view direction parallel to `up` (or a
+    /// zero or non-finite one) falls back to a valid frame instead of producing NaN.
+    pub fn new(camera: &Camera, width: u32, height: u32) -> Self {
+        let forward = (camera.look_at - camera.position)
+            .try_normalize()
+            .unwrap_or(Vec3::NEG_Z);
+        let right = forward
+            .cross(camera.up)
+            .try_normalize()
+            .or_else(|| forward.cross(Vec3::Z).try_normalize())
+            .or_else(|| forward.cross(Vec3::X).try_normalize())
+            .unwrap_or(Vec3::X);
+        let up = right.cross(forward);
+        let vfov = camera.vfov_deg.clamp(1e-3, 179.0).to_radians();
+        let focus = if camera.focus_distance.is_finite() && camera.focus_distance > 0.0 {
+            camera.focus_distance
+        } else {
+            1.0
+        };
+        Self {
+            eye: camera.position,
+            forward,
+            right,
+            up,
+            tan_half: (vfov * 0.5).tan(),
+            aspect: width.max(1) as f32 / height.max(1) as f32,
+            width,
+            height,
+            lens_radius: camera.lens_radius.max(0.0),
+            focus_distance: focus,
+        }
+    }
+
+    /// Direction (not normalized) through the image point `(px, py)` in pixel units, where
+    /// `(0, 0)` is the top-left corner of the image and `(width, height)` the bottom-right.
+    #[inline]
+    pub fn direction(&self, px: f32, py: f32) -> Vec3 {
+        let sx = (2.0 * px / self.width as f32 - 1.0) * self.tan_half * self.aspect;
+        let sy = (1.0 - 2.0 * py / self.height as f32) * self.tan_half;
+        self.forward + sx * self.right + sy * self.up
+    }
+
+    /// The pinhole ray through `(px, py)`, with a unit direction.
+    #[inline]
+    pub fn pinhole(&self, px: f32, py: f32) -> Ray {
+        Ray::new(self.eye, self.direction(px, py).normalize())
+    }
+
+    /// The thin-lens ray through `(px, py)` from lens point `lens` in the unit disk. With a
+    /// lens radius of 0 this is exactly [`CameraRays::pinhole`].
+    #[inline]
+    pub fn thin_lens(&self, px: f32, py: f32, lens: Vec2) -> Ray {
+        if self.lens_radius == 0.0 {
+            return self.pinhole(px, py);
+        }
+        let d = self.direction(px, py);
+        // The point in focus lies on the plane at focus_distance along `forward`.
+        let focus = self.eye + d * (self.focus_distance / d.dot(self.forward));
+        let origin = self.eye + self.lens_radius * (lens.x * self.right + lens.y * self.up);
+        Ray::new(origin, (focus - origin).normalize())
+    }
+
+    /// The rays through every pixel centre, row by row from the top (the benchmark rays).
+    pub fn pixel_center_rays(&self) -> Vec<Ray> {
+        let mut rays = Vec::with_capacity(self.width as usize * self.height as usize);
+        for y in 0..self.height {
+            for x in 0..self.width {
+                rays.push(self.pinhole(x as f32 + 0.5, y as f32 + 0.5));
+            }
+        }
+        rays
+    }
+}

@@ -1,0 +1,163 @@
+//! `tracery bench`: build and trace the canonical camera rays with our builders and obvhs.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::Result;
+use clap::Args;
+use tracery::bench::{self, BenchConfig, EngineResult};
+use tracery::bvh::BuildOptions;
+use tracery::scene::Scene;
+
+use super::ensure_parent;
+
+#[derive(Args, Debug)]
+pub struct BenchArgs {
+    /// Meshes (OBJ, PLY) or scene files (TOML); the built-in Cornell box when left out.
+    meshes: Vec<PathBuf>,
+    /// Threads for the all-threads figures (default: every core). One thread is always measured.
+    #[arg(long)]
+    threads: Option<usize>,
+    /// Repeat each measurement this many times and keep the best.
+    #[arg(long, default_value_t = 3)]
+    repeat: usize,
+    /// SAH bins per axis for our SAH builder.
+    #[arg(long, default_value_t = BuildOptions::DEFAULT_BINS)]
+    bins: u32,
+    /// Largest leaf size for our builders.
+    #[arg(long, default_value_t = BuildOptions::DEFAULT_LEAF_SIZE)]
+    leaf_size: u32,
+    /// Leave out the obvhs peer.
+    #[arg(long)]
+    no_peers: bool,
+    /// Print a JSON array (one object per engine and thread count) instead of tables.
+    #[arg(long)]
+    json: bool,
+    /// Write the canonical rays to this file (a mesh-name suffix is added for several meshes).
+    #[arg(long)]
+    rays_out: Option<PathBuf>,
+    /// Write tracery-sah's closest hits to this file (suffixed like --rays-out).
+    #[arg(long)]
+    hits_out: Option<PathBuf>,
+}
+
+fn per_mesh(path: &Path, mesh: &str, several: bool) -> PathBuf {
+    if !several {
+        return path.to_path_buf();
+    }
+    let stem = path.file_stem().map(|s| s.to_string_lossy()).unwrap_or_default();
+    let ext = path.extension().map(|e| format!(".{}", e.to_string_lossy())).unwrap_or_default();
+    path.with_file_name(format!("{stem}-{mesh}{ext}"))
+}
+
+pub fn run(a: BenchArgs) -> Result<()> {
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let all = a.threads.unwrap_or(cores).max(1);
+    let mut threads = vec![1];
+    if all > 1 {
+        threads.push(all);
+    }
+    let options = BuildOptions {
+        bins: a.bins,
+        max_leaf_size: a.leaf_size,
+        ..BuildOptions::sah()
+    };
+    options.validate().map_err(anyhow::Error::msg)?;
+    let config = BenchConfig {
+        threads,
+        repeat: a.repeat,
+        options,
+        peers: !a.no_peers,
+    };
+
+    let sources: Vec<Option<PathBuf>> = if a.meshes.is_empty() {
+        vec![None]
+    } else {
+        a.meshes.iter().cloned().map(Some).collect()
+    };
+    let several = sources.len() > 1;
+    let mut all_results: Vec<EngineResult> = Vec::new();
+    for src in &sources {
+        let scene = match src {
+            Some(p) => Scene::load(p)?,
+            None => Scene::cornell_box(),
+        };
+        let tris = &scene.mesh.triangles;
+        let rays = bench::canonical_rays(&scene.mesh.bounds());
+        eprintln!(
+            "{}: {} triangles, {} canonical rays",
+            scene.name,
+            tris.len(),
+            rays.len()
+        );
+        if let Some(p) = &a.rays_out {
+            let p = ensure_parent(&per_mesh(p, &scene.name, several))?;
+            bench::write_rays(&p, &rays)?;
+            eprintln!("wrote rays to {}", p.display());
+        }
+        let out = bench::run(&scene.name, tris, &rays, &config, &mut |line| {
+            eprintln!("  {line}")
+        });
+        if let Some(p) = &a.hits_out {
+            let p = ensure_parent(&per_mesh(p, &scene.name, several))?;
+            bench::write_hits(&p, &out.sah_hits)?;
+            eprintln!("wrote tracery-sah hits to {}", p.display());
+        }
+        if !a.json {
+            print_table(&scene.name, tris.len(), &out.results);
+        }
+        all_results.extend(out.results);
+    }
+    if a.json {
+        println!("{}", serde_json::to_string_pretty(&all_results)?);
+    }
+    Ok(())
+}
+
+fn print_table(mesh: &str, triangles: usize, rows: &[EngineResult]) {
+    println!("\n{mesh} ({triangles} triangles), canonical camera 1024x1024, best of runs");
+    println!(
+        "{:<15} {:>7} {:>9} {:>7} {:>8} {:>9} {:>13} {:>14} {:>9}",
+        "engine", "threads", "build ms", "levels", "leaves", "SAH cost", "closest Mr/s", "occluded Mr/s", "agree %"
+    );
+    for r in rows {
+        let (levels, leaves, sah) = match &r.stats {
+            Some(s) => (s.levels.to_string(), s.leaves.to_string(), format!("{:.2}", s.sah_cost)),
+            None => ("-".into(), "-".into(), "-".into()),
+        };
+        println!(
+            "{:<15} {:>7} {:>9.1} {:>7} {:>8} {:>9} {:>13.2} {:>14.2} {:>9.3}",
+            r.engine, r.threads, r.build_ms, levels, leaves, sah, r.closest_mrays, r.occluded_mrays, r.agreement * 100.0
+        );
+    }
+    let find = |e: &str, t: usize| rows.iter().find(|r| r.engine == e && r.threads == t);
+    let threads: Vec<usize> = {
+        let mut t: Vec<usize> = rows.iter().map(|r| r.threads).collect();
+        t.dedup();
+        t.sort();
+        t.dedup();
+        t
+    };
+    for peer in ["obvhs-bvh2", "obvhs-cwbvh"] {
+        for &t in &threads {
+            if let (Some(us), Some(them)) = (find("tracery-sah", t), find(peer, t)) {
+                println!(
+                    "tracery-sah / {peer} ({t} thread{}): build time {:.2}x, closest {:.2}x, occluded {:.2}x",
+                    if t == 1 { "" } else { "s" },
+                    us.build_ms / them.build_ms,
+                    us.closest_mrays / them.closest_mrays,
+                    us.occluded_mrays / them.occluded_mrays
+                );
+            }
+        }
+    }
+    if let (Some(one), Some(&t)) = (find("tracery-sah", 1), threads.last())
+        && t > 1
+        && let Some(all) = find("tracery-sah", t)
+    {
+        println!(
+            "tracery-sah scaling, {t} threads over 1: closest {:.2}x, occluded {:.2}x",
+            all.closest_mrays / one.closest_mrays,
+            all.occluded_mrays / one.occluded_mrays
+        );
+    }
+}

@@ -1,0 +1,99 @@
+//! Command-line parsing and the commands.
+
+mod bench;
+mod render;
+mod stats;
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, Result};
+use clap::{Args, Parser, Subcommand};
+use tracery::bvh::{BuildOptions, SplitMethod};
+use tracery::scene::Scene;
+
+/// Tracery: a CPU ray tracer with a BVH you can see into.
+#[derive(Parser, Debug)]
+#[command(version, about, long_about = None)]
+pub struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand, Debug)]
+enum Command {
+    /// Render a scene (TOML scene file, OBJ or PLY; the built-in Cornell box by default) to PNG.
+    Render(render::RenderArgs),
+    /// Build the BVH of a mesh or scene and print its statistics (median and SAH side by side).
+    Stats(stats::StatsArgs),
+    /// Benchmark the builders and traversal on the canonical camera rays, against obvhs.
+    Bench(bench::BenchArgs),
+}
+
+/// BVH settings shared by the commands.
+#[derive(Args, Debug, Clone)]
+pub struct BvhArgs {
+    /// Split method: median or sah.
+    #[arg(long, default_value_t = SplitMethod::Sah)]
+    split: SplitMethod,
+    /// SAH bins per axis (2 to 64).
+    #[arg(long, default_value_t = BuildOptions::DEFAULT_BINS)]
+    bins: u32,
+    /// Largest number of triangles in a leaf (1 to 255).
+    #[arg(long, default_value_t = BuildOptions::DEFAULT_LEAF_SIZE)]
+    leaf_size: u32,
+}
+
+impl BvhArgs {
+    fn options(&self) -> Result<BuildOptions> {
+        let o = BuildOptions {
+            split: self.split,
+            bins: self.bins,
+            max_leaf_size: self.leaf_size,
+        };
+        o.validate().map_err(anyhow::Error::msg)?;
+        Ok(o)
+    }
+}
+
+/// Runs the parsed command.
+pub fn run(cli: Cli) -> Result<()> {
+    match cli.command {
+        Command::Render(a) => render::run(a),
+        Command::Stats(a) => stats::run(a),
+        Command::Bench(a) => bench::run(a),
+    }
+}
+
+/// Loads a scene from a path, or the built-in Cornell box; prints load warnings.
+pub fn load_scene(path: Option<&Path>) -> Result<Scene> {
+    let scene = match path {
+        Some(p) => Scene::load(p)?,
+        None => Scene::cornell_box(),
+    };
+    for w in &scene.warnings {
+        eprintln!("warning: {w}");
+    }
+    Ok(scene)
+}
+
+/// Makes the global rayon pool use `threads` threads (0: all cores).
+pub fn set_threads(threads: usize) -> Result<()> {
+    if threads > 0 {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build_global()
+            .context("cannot set up the thread pool")?;
+    }
+    Ok(())
+}
+
+/// Creates the parent folder of an output file.
+pub fn ensure_parent(path: &Path) -> Result<PathBuf> {
+    if let Some(parent) = path.parent()
+        && !parent.as_os_str().is_empty()
+    {
+        std::fs::create_dir_all(parent)
+            .with_context(|| format!("{}: cannot create folder", parent.display()))?;
+    }
+    Ok(path.to_path_buf())
+}

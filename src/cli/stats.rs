@@ -1,0 +1,87 @@
+//! `tracery stats`: BVH statistics, median and SAH side by side.
+
+use std::path::PathBuf;
+
+use anyhow::Result;
+use clap::Args;
+use tracery::bvh::{Bvh, BvhStats, SplitMethod};
+
+use super::{BvhArgs, load_scene};
+
+#[derive(Args, Debug)]
+pub struct StatsArgs {
+    /// Mesh (OBJ, PLY) or scene file (TOML); the built-in Cornell box when left out.
+    path: Option<PathBuf>,
+    #[command(flatten)]
+    bvh: BvhArgs,
+    /// Only the split method given by --split (default: median and SAH side by side).
+    #[arg(long)]
+    only: bool,
+    /// Print JSON instead of a table.
+    #[arg(long)]
+    json: bool,
+}
+
+#[derive(serde::Serialize)]
+struct Row {
+    scene: String,
+    split: SplitMethod,
+    bins: u32,
+    leaf_size: u32,
+    #[serde(flatten)]
+    stats: BvhStats,
+}
+
+pub fn run(a: StatsArgs) -> Result<()> {
+    let scene = load_scene(a.path.as_deref())?;
+    let base = a.bvh.options()?;
+    let splits = if a.only {
+        vec![base.split]
+    } else {
+        vec![SplitMethod::Median, SplitMethod::Sah]
+    };
+    let mut rows = Vec::new();
+    for split in splits {
+        let options = base.with_split(split);
+        let bvh = Bvh::build(&scene.mesh.triangles, &options);
+        rows.push(Row {
+            scene: scene.name.clone(),
+            split,
+            bins: options.bins,
+            leaf_size: options.max_leaf_size,
+            stats: bvh.stats,
+        });
+    }
+    if a.json {
+        println!("{}", serde_json::to_string_pretty(&rows)?);
+        return Ok(());
+    }
+    println!(
+        "{}: {} triangles (SAH cost constants: traversal {}, intersection {})",
+        scene.name,
+        scene.triangle_count(),
+        tracery::bvh::sah::C_TRAVERSE,
+        tracery::bvh::sah::C_INTERSECT
+    );
+    println!(
+        "{:<8} {:>5} {:>5} {:>10} {:>9} {:>7} {:>16} {:>9} {:>9} {:>10}",
+        "split", "bins", "leaf", "nodes", "leaves", "levels", "leaf min/mean/max", "SAH cost", "excluded", "build ms"
+    );
+    for r in &rows {
+        let s = &r.stats;
+        println!(
+            "{:<8} {:>5} {:>5} {:>10} {:>9} {:>7} {:>16} {:>9.2} {:>9} {:>10.2}",
+            r.split.to_string(),
+            if r.split == SplitMethod::Sah { r.bins.to_string() } else { "-".into() },
+            r.leaf_size,
+            s.nodes,
+            s.leaves,
+            s.levels,
+            format!("{}/{:.2}/{}", s.min_leaf_size, s.mean_leaf_size, s.max_leaf_size),
+            s.sah_cost,
+            s.excluded,
+            s.build_ms
+        );
+    }
+    Ok(())
+}

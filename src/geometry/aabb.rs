@@ -1,0 +1,147 @@
+use glam::{Vec3, Vec3A};
+
+use super::{PreparedRay, gamma};
+
+/// An axis-aligned bounding box. The empty box has `min = +inf`, `max = -inf`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Aabb {
+    /// Smallest corner.
+    pub min: Vec3A,
+    /// Largest corner.
+    pub max: Vec3A,
+}
+
+impl Default for Aabb {
+    fn default() -> Self {
+        Self::EMPTY
+    }
+}
+
+impl Aabb {
+    /// The empty box: growing it by anything gives that thing's box.
+    pub const EMPTY: Aabb = Aabb {
+        min: Vec3A::INFINITY,
+        max: Vec3A::NEG_INFINITY,
+    };
+
+    /// The box spanning two corners.
+    pub fn new(min: Vec3, max: Vec3) -> Self {
+        Self {
+            min: min.into(),
+            max: max.into(),
+        }
+    }
+
+    /// The smallest box holding all the points.
+    pub fn from_points(points: &[Vec3]) -> Self {
+        let mut b = Self::EMPTY;
+        for p in points {
+            b.grow_point(Vec3A::from(*p));
+        }
+        b
+    }
+
+    /// Grows the box to hold `p`.
+    #[inline]
+    pub fn grow_point(&mut self, p: Vec3A) {
+        self.min = self.min.min(p);
+        self.max = self.max.max(p);
+    }
+
+    /// Grows the box to hold `other`.
+    #[inline]
+    pub fn grow(&mut self, other: &Aabb) {
+        self.min = self.min.min(other.min);
+        self.max = self.max.max(other.max);
+    }
+
+    /// The union of two boxes.
+    #[inline]
+    pub fn union(&self, other: &Aabb) -> Aabb {
+        let mut b = *self;
+        b.grow(other);
+        b
+    }
+
+    /// True for the empty box (or any box with `min > max` on some axis).
+    pub fn is_empty(&self) -> bool {
+        self.min.cmpgt(self.max).any()
+    }
+
+    /// `max - min`, zero for an empty box.
+    pub fn extent(&self) -> Vec3A {
+        if self.is_empty() {
+            Vec3A::ZERO
+        } else {
+            self.max - self.min
+        }
+    }
+
+    /// Midpoint, computed so that it cannot overflow for finite corners.
+    pub fn center(&self) -> Vec3A {
+        self.min * 0.5 + self.max * 0.5
+    }
+
+    /// Half the surface area, in f64 so that boxes with coordinates near `f32::MAX` give a
+    /// finite, exact-enough number for the SAH.
+    #[inline]
+    pub fn half_area(&self) -> f64 {
+        if self.is_empty() {
+            return 0.0;
+        }
+        let e = self.max - self.min;
+        let (x, y, z) = (e.x as f64, e.y as f64, e.z as f64);
+        x * y + y * z + z * x
+    }
+
+    /// The axis (0, 1, 2) along which the box is longest.
+    pub fn longest_axis(&self) -> usize {
+        let e = self.extent();
+        if e.x >= e.y && e.x >= e.z {
+            0
+        } else if e.y >= e.z {
+            1
+        } else {
+            2
+        }
+    }
+
+    /// True when `p` lies in the closed box.
+    pub fn contains(&self, p: Vec3A) -> bool {
+        p.cmpge(self.min).all() && p.cmple(self.max).all()
+    }
+
+    /// The slab test. Returns the entry distance (clamped to `>= 0`) when the ray meets the
+    /// closed box at some `t` in `[0, t_max]`, otherwise `None`.
+    ///
+    /// Robustness: a zero direction component (either sign) gives an infinite reciprocal; when
+    /// the origin also lies on that slab's plane, `0 * inf = NaN` for that plane, and the NaN is
+    /// ignored, which is the right answer because a ray lying in the plane of a closed slab is
+    /// inside it. The far distance is enlarged by `1 + 2 gamma(3)` (Ize, "Robust BVH Ray
+    /// Traversal", 2013), so rounding can never make the test miss a box the exact ray meets.
+    #[inline(always)]
+    pub fn intersect(&self, ray: &PreparedRay, t_max: f32) -> Option<f32> {
+        let (t_near, t_far) = self.slab(ray);
+        let t_near = t_near.max(0.0);
+        let t_far = t_far.min(t_max);
+        (t_near <= t_far).then_some(t_near)
+    }
+
+    /// Raw slab distances `(t_near, t_far)` over the whole line, `t_far` already conservative.
+    /// `t_near > t_far` when the line misses the box.
+    #[inline(always)]
+    pub fn slab(&self, ray: &PreparedRay) -> (f32, f32) {
+        const FAR_SCALE: f32 = 1.0 + 2.0 * gamma(3);
+        let t0 = (self.min - ray.origin) * ray.inv_dir;
+        let t1 = (self.max - ray.origin) * ray.inv_dir;
+        // Near plane by the direction's sign bit, so `+0` and `-0` give the same answer.
+        let near = Vec3A::select(ray.neg_mask, t1, t0);
+        let far = Vec3A::select(ray.neg_mask, t0, t1) * FAR_SCALE;
+        // A NaN lane (origin on the plane of a slab the ray runs parallel to) constrains
+        // nothing: `max(NaN, -inf)` and `min(NaN, +inf)` give the infinity with both the SSE
+        // instruction (which returns its second operand on NaN) and f32::max/min.
+        let near = near.max(Vec3A::NEG_INFINITY);
+        let far = far.min(Vec3A::INFINITY);
+        (near.max_element(), far.min_element())
+    }
+}

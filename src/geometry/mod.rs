@@ -1,0 +1,24 @@
+//! Rays, axis-aligned boxes and triangles: the exact, robust primitives the BVH is built on.
+//!
+//! The rules this module keeps, and why:
+//! - The slab test ([`Aabb::intersect`]) is defined for `+0` and `-0` direction components and
+//!   for an origin lying on a slab plane, and its far distance is made conservative (Ize 2013),
+//!   so the BVH never culls a box that holds a triangle the ray hits.
+//! - The ray/triangle test ([`intersect_triangle`]) is watertight (Woop, Benthin and Wald 2013):
+//!   a ray through a shared edge or vertex hits exactly one of the triangles that meet there.
+//! - Secondary rays leave a surface from [`offset_ray_origin`] (Waechter and Binder 2019), an
+//!   offset that scales with the magnitude of the coordinates instead of a fixed epsilon.
+
+mod aabb;
+mod ray;
+mod triangle;
+
+pub use aabb::Aabb;
+pub use ray::{PreparedRay, Ray, offset_ray_origin};
+pub use triangle::{TriangleHit, intersect_triangle, intersect_triangle_t};
+
+/// `gamma(n)` of Higham / pbrt: a bound on the relative error of `n` chained f32 roundings.
+pub const fn gamma(n: u32) -> f32 {
+    let e = f32::EPSILON * 0.5 * n as f32;
+    e / (1.0 - e)
+}

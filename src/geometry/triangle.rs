@@ -1,0 +1,140 @@
+use glam::Vec3A;
+
+use super::PreparedRay;
+
+/// Where a ray meets a triangle: distance and barycentric coordinates.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TriangleHit {
+    /// Distance along the ray, in units of the direction's length.
+    pub t: f32,
+    /// Barycentric weight of the second vertex.
+    pub u: f32,
+    /// Barycentric weight of the third vertex.
+    pub v: f32,
+}
+
+/// Watertight ray/triangle distance (Woop, Benthin and Wald, "Watertight Ray/Triangle
+/// Intersection", JCGT 2013). Returns the distance `t` with `0 < t < t_max`, or `+inf` on a miss.
+///
+/// Two extensions keep the result exact at the places the f32 arithmetic cannot decide:
+/// - An edge function that is exactly zero in f32 is recomputed in f64, where the products of
+///   f32 values are exact and the sign is right (each edge on its own, so two triangles that
+///   share an edge always agree on its sign).
+/// - When it is still zero, the ray passes exactly through the edge (or a vertex). A tie rule
+///   gives the edge to exactly one of the two triangles on either side of it: the one lying in
+///   the direction `(1, +0)` from the edge in the sheared ray plane, as if the ray were nudged
+///   an infinitesimal step that way. A ray through a shared edge or a fan vertex therefore
+///   reports exactly one triangle: no crack, no double hit.
+#[inline(always)]
+pub fn intersect_triangle_t(ray: &PreparedRay, tri: &[Vec3A; 3], t_max: f32) -> f32 {
+    match intersect(ray, tri, t_max) {
+        Some((t, _, _)) => t,
+        None => f32::INFINITY,
+    }
+}
+
+/// Like [`intersect_triangle_t`], also returning the barycentric coordinates.
+#[inline]
+pub fn intersect_triangle(ray: &PreparedRay, tri: &[Vec3A; 3], t_max: f32) -> Option<TriangleHit> {
+    intersect(ray, tri, t_max).map(|(t, u, v)| TriangleHit { t, u, v })
+}
+
+#[inline(always)]
+fn intersect(ray: &PreparedRay, tri: &[Vec3A; 3], t_max: f32) -> Option<(f32, f32, f32)> {
+    let [kx, ky, kz] = ray.k;
+    let [sx, sy, sz] = ray.shear;
+    let [ox, oy, oz] = ray.org_k;
+    let a = tri[0].to_array();
+    let b = tri[1].to_array();
+    let c = tri[2].to_array();
+    let (a_z, b_z, c_z) = (a[kz] - oz, b[kz] - oz, c[kz] - oz);
+    let ax = (a[kx] - ox) - sx * a_z;
+    let ay = (a[ky] - oy) - sy * a_z;
+    let bx = (b[kx] - ox) - sx * b_z;
+    let by = (b[ky] - oy) - sy * b_z;
+    let cx = (c[kx] - ox) - sx * c_z;
+    let cy = (c[ky] - oy) - sy * c_z;
+
+    let u = cx * by - cy * bx;
+    let v = ax * cy - ay * cx;
+    let w = bx * ay - by * ax;
+    if u == 0.0 || v == 0.0 || w == 0.0 {
+        return intersect_exact(
+            [(ax, ay), (bx, by), (cx, cy)],
+            [a_z * sz, b_z * sz, c_z * sz],
+            t_max,
+        );
+    }
+    if (u < 0.0 || v < 0.0 || w < 0.0) && (u > 0.0 || v > 0.0 || w > 0.0) {
+        return None;
+    }
+    let det = u + v + w;
+    if det == 0.0 {
+        return None;
+    }
+    let t_scaled = (u * a_z + v * b_z + w * c_z) * sz;
+    let inv = 1.0 / det;
+    let t = t_scaled * inv;
+    if !(t > 0.0 && t < t_max) {
+        return None;
+    }
+    Some((t, v * inv, w * inv))
+}
+
+/// The rare path: some edge function was exactly zero in f32.
+#[cold]
+#[inline(never)]
+fn intersect_exact(p: [(f32, f32); 3], z: [f32; 3], t_max: f32) -> Option<(f32, f32, f32)> {
+    // Edge functions in the same form as the fast path: the edge opposite vertex i.
+    let edge = |i: usize| {
+        let (q, r) = (p[(i + 1) % 3], p[(i + 2) % 3]);
+        // Products of two f32 are exact in f64; the difference is rounded once, sign exact.
+        let e = (r.0 as f64) * (q.1 as f64) - (r.1 as f64) * (q.0 as f64);
+        (e, q, r)
+    };
+    let mut e = [0.0f64; 3];
+    let mut pos = false;
+    let mut neg = false;
+    for (i, ei) in e.iter_mut().enumerate() {
+        let (val, q, r) = edge(i);
+        *ei = val;
+        if val > 0.0 {
+            pos = true;
+        } else if val < 0.0 {
+            neg = true;
+        } else if !owns_edge(q, r, p[i]) {
+            return None;
+        }
+    }
+    if pos && neg {
+        return None;
+    }
+    let det = e[0] + e[1] + e[2];
+    if det == 0.0 {
+        return None;
+    }
+    let t = (e[0] * z[0] as f64 + e[1] * z[1] as f64 + e[2] * z[2] as f64) / det;
+    let t = t as f32;
+    if !(t > 0.0 && t < t_max) {
+        return None;
+    }
+    Some((t, (e[1] / det) as f32, (e[2] / det) as f32))
+}
+
+/// Tie rule for a ray passing exactly through the edge `q`-`r` (in the sheared 2D ray plane,
+/// where the ray is the origin): the edge belongs to the triangle whose interior lies in the
+/// direction `(1, +0)` from it. The two triangles sharing an edge lie on opposite sides, so
+/// exactly one owns it, whatever their winding.
+fn owns_edge(q: (f32, f32), r: (f32, f32), opposite: (f32, f32)) -> bool {
+    let (ex, ey) = (r.0 as f64 - q.0 as f64, r.1 as f64 - q.1 as f64);
+    // Normal of the edge line, turned towards the opposite vertex.
+    let (mut nx, mut ny) = (-ey, ex);
+    let side = nx * (opposite.0 as f64 - q.0 as f64) + ny * (opposite.1 as f64 - q.1 as f64);
+    if side < 0.0 {
+        nx = -nx;
+        ny = -ny;
+    } else if side == 0.0 {
+        return false; // degenerate in the ray plane: no area to hit
+    }
+    nx > 0.0 || (nx == 0.0 && ny > 0.0)
+}

@@ -1,0 +1,422 @@
+//! Scene files (TOML): meshes with transforms and material overrides, materials, lights,
+//! camera and environment. Paths resolve relative to the scene file; unknown keys, wrong types
+//! and missing files are errors that name the file and line.
+//!
+//! ```toml
+//! [camera]
+//! position = [0.0, 1.0, 3.9]
+//! look_at = [0.0, 1.0, 0.0]
+//! fov = 40.0                 # vertical, degrees (default 45)
+//!
+//! [materials.white]
+//! diffuse = [0.73, 0.73, 0.73]
+//!
+//! [[meshes]]
+//! path = "../models/cornell_box.obj"
+//!
+//! [[meshes]]
+//! shape = "sphere"           # or "cube", "quad" (unit shapes), instead of a path
+//! translate = [0.5, 0.3, 0.2]
+//! scale = 0.3
+//! material = "white"
+//!
+//! [[lights]]
+//! kind = "rect"
+//! corner = [-0.25, 1.98, -0.25]
+//! edge_u = [0.5, 0.0, 0.0]
+//! edge_v = [0.0, 0.0, 0.5]
+//! intensity = 15.0
+//!
+//! [environment]
+//! kind = "sky"               # none, color, sky, cubemap, equirect
+//! ```
+
+use std::collections::BTreeMap;
+use std::io::Cursor;
+use std::path::{Path, PathBuf};
+
+use anyhow::{Result, anyhow, bail};
+use glam::{Affine3A, EulerRot, Quat, Vec3};
+use serde::Deserialize;
+use toml::Spanned;
+
+use super::{
+    Camera, Environment, Light, Material, Mesh, Scene, line_of, name_of, obj, ply, read_file,
+    shapes,
+};
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct SceneDef {
+    camera: Option<CameraDef>,
+    #[serde(default)]
+    materials: BTreeMap<String, MaterialDef>,
+    #[serde(default)]
+    meshes: Vec<Spanned<MeshDef>>,
+    #[serde(default)]
+    lights: Vec<LightDef>,
+    environment: Option<Spanned<EnvDef>>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct CameraDef {
+    position: [f32; 3],
+    look_at: [f32; 3],
+    up: Option<[f32; 3]>,
+    fov: Option<f32>,
+    lens_radius: Option<f32>,
+    focus_distance: Option<f32>,
+}
+
+#[derive(Deserialize, Default)]
+#[serde(deny_unknown_fields)]
+struct MaterialDef {
+    diffuse: Option<[f32; 3]>,
+    specular: Option<[f32; 3]>,
+    shininess: Option<f32>,
+    emission: Option<[f32; 3]>,
+    opacity: Option<f32>,
+    ior: Option<f32>,
+    mirror: Option<[f32; 3]>,
+    absorption: Option<[f32; 3]>,
+}
+
+#[derive(Deserialize, Clone, Copy)]
+#[serde(rename_all = "lowercase")]
+enum ShapeDef {
+    Sphere,
+    Cube,
+    Quad,
+}
+
+#[derive(Deserialize)]
+#[serde(untagged)]
+enum ScaleDef {
+    Uniform(f32),
+    PerAxis([f32; 3]),
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct MeshDef {
+    path: Option<Spanned<String>>,
+    shape: Option<ShapeDef>,
+    subdivisions: Option<u32>,
+    translate: Option<[f32; 3]>,
+    /// Degrees about x, then y, then z.
+    rotate: Option<[f32; 3]>,
+    scale: Option<ScaleDef>,
+    material: Option<Spanned<String>>,
+}
+
+#[derive(Deserialize)]
+#[serde(tag = "kind", rename_all = "lowercase", deny_unknown_fields)]
+enum LightDef {
+    Point {
+        position: [f32; 3],
+        color: Option<[f32; 3]>,
+        intensity: Option<f32>,
+    },
+    Rect {
+        corner: [f32; 3],
+        edge_u: [f32; 3],
+        edge_v: [f32; 3],
+        color: Option<[f32; 3]>,
+        intensity: Option<f32>,
+        samples: Option<u32>,
+    },
+}
+
+#[derive(Deserialize)]
+#[serde(tag = "kind", rename_all = "lowercase", deny_unknown_fields)]
+enum EnvDef {
+    None,
+    Color {
+        color: [f32; 3],
+    },
+    Sky {
+        intensity: Option<f32>,
+        rotation: Option<f32>,
+    },
+    Cubemap {
+        faces: [String; 6],
+        intensity: Option<f32>,
+        rotation: Option<f32>,
+    },
+    Equirect {
+        path: String,
+        intensity: Option<f32>,
+        rotation: Option<f32>,
+    },
+}
+
+/// Reads files a scene refers to (the disk, or the files built into the binary).
+type ReadFn<'a> = &'a dyn Fn(&Path) -> Result<Vec<u8>>;
+
+/// Loads a scene file from disk.
+pub fn load(path: &Path) -> Result<Scene> {
+    let bytes = read_file(path)?;
+    let text = String::from_utf8(bytes)
+        .map_err(|_| anyhow!("{}: not UTF-8 text", path.display()))?;
+    parse(path, &text, &|p: &Path| read_file(p), true)
+}
+
+const CORNELL_TOML: &str = include_str!("../../assets/scenes/cornell_box.toml");
+const CORNELL_OBJ: &[u8] = include_bytes!("../../assets/models/cornell_box.obj");
+const CORNELL_MTL: &[u8] = include_bytes!("../../assets/models/cornell_box.mtl");
+
+/// The Cornell box from the copies of its files built into the binary.
+pub(super) fn load_embedded_cornell_box() -> Scene {
+    let read = |p: &Path| -> Result<Vec<u8>> {
+        match p.file_name().and_then(|n| n.to_str()) {
+            Some("cornell_box.obj") => Ok(CORNELL_OBJ.to_vec()),
+            Some("cornell_box.mtl") => Ok(CORNELL_MTL.to_vec()),
+            _ => bail!("{}: not built in", p.display()),
+        }
+    };
+    parse(
+        Path::new("assets/scenes/cornell_box.toml"),
+        CORNELL_TOML,
+        &read,
+        false,
+    )
+    .expect("the built-in Cornell box scene is valid (checked by a test)")
+}
+
+/// Parses scene text named `path`. `check_files` verifies environment images exist.
+pub fn parse(path: &Path, text: &str, read: ReadFn, check_files: bool) -> Result<Scene> {
+    let at = |pos: usize, msg: String| anyhow!("{}:{}: {msg}", path.display(), line_of(text, pos));
+    let def: SceneDef = toml::from_str(text).map_err(|e| match e.span() {
+        Some(span) => at(span.start, e.message().to_string()),
+        None => anyhow!("{}: {}", path.display(), e.message()),
+    })?;
+    let dir = path.parent().unwrap_or(Path::new("")).to_path_buf();
+    let resolve = |p: &str| -> PathBuf { dir.join(p) };
+
+    let mut materials: Vec<Material> = Vec::new();
+    let mut by_name: BTreeMap<String, u32> = BTreeMap::new();
+    for (name, m) in &def.materials {
+        by_name.insert(name.clone(), materials.len() as u32);
+        materials.push(material_from_def(name, m));
+    }
+
+    let mut mesh = Mesh::default();
+    let mut warnings = Vec::new();
+    for m in &def.meshes {
+        let span = m.span();
+        let m = m.get_ref();
+        let override_id = match &m.material {
+            Some(name) => Some(*by_name.get(name.get_ref()).ok_or_else(|| {
+                at(
+                    name.span().start,
+                    format!(
+                        "unknown material `{}` (defined: {})",
+                        name.get_ref(),
+                        by_name.keys().cloned().collect::<Vec<_>>().join(", ")
+                    ),
+                )
+            })?),
+            None => None,
+        };
+        let (mut part, part_materials) = match (&m.path, m.shape) {
+            (Some(p), None) => {
+                let file = resolve(p.get_ref());
+                let loaded = load_mesh_file(&file, read)
+                    .map_err(|e| at(p.span().start, format!("mesh `{}`: {e:#}", p.get_ref())))?;
+                warnings.extend(loaded.2);
+                (loaded.0, loaded.1)
+            }
+            (None, Some(shape)) => {
+                let tris = match shape {
+                    ShapeDef::Sphere => shapes::icosphere(m.subdivisions.unwrap_or(3).min(7)),
+                    ShapeDef::Cube => shapes::cube(),
+                    ShapeDef::Quad => shapes::quad(),
+                };
+                let part = match shape {
+                    ShapeDef::Sphere => shapes::smooth_sphere(tris),
+                    _ => Mesh::from_triangles(tris, 0),
+                };
+                (part, vec![Material::default()])
+            }
+            _ => {
+                return Err(at(
+                    span.start,
+                    "a mesh needs exactly one of `path` or `shape`".into(),
+                ));
+            }
+        };
+        part.transform(&transform_of(m));
+        match override_id {
+            Some(id) => {
+                part.material_ids.iter_mut().for_each(|x| *x = id);
+                mesh.append(part, 0);
+            }
+            None => {
+                let offset = materials.len() as u32;
+                materials.extend(part_materials);
+                mesh.append(part, offset);
+            }
+        }
+    }
+    if materials.is_empty() {
+        materials.push(Material::default());
+    }
+
+    let lights = def.lights.iter().map(light_from_def).collect();
+
+    let bounds = mesh.bounds();
+    let camera = match &def.camera {
+        Some(c) => {
+            let position = Vec3::from(c.position);
+            let look_at = Vec3::from(c.look_at);
+            Camera {
+                position,
+                look_at,
+                up: c.up.map(Vec3::from).unwrap_or(Vec3::Y),
+                vfov_deg: c.fov.unwrap_or(45.0),
+                lens_radius: c.lens_radius.unwrap_or(0.0),
+                focus_distance: c.focus_distance.unwrap_or((look_at - position).length()),
+            }
+        }
+        None => Camera::canonical(&bounds),
+    };
+
+    let environment = match &def.environment {
+        None => Environment::None,
+        Some(e) => {
+            let pos = e.span().start;
+            let check = |p: PathBuf| -> Result<PathBuf> {
+                if check_files && !p.is_file() {
+                    return Err(at(pos, format!("environment image {} not found", p.display())));
+                }
+                Ok(p)
+            };
+            match e.get_ref() {
+                EnvDef::None => Environment::None,
+                EnvDef::Color { color } => Environment::Color(Vec3::from(*color)),
+                EnvDef::Sky {
+                    intensity,
+                    rotation,
+                } => Environment::Sky {
+                    intensity: intensity.unwrap_or(1.0),
+                    rotation_deg: rotation.unwrap_or(0.0),
+                },
+                EnvDef::Cubemap {
+                    faces,
+                    intensity,
+                    rotation,
+                } => {
+                    let mut out: [PathBuf; 6] = Default::default();
+                    for (o, f) in out.iter_mut().zip(faces) {
+                        *o = check(resolve(f))?;
+                    }
+                    Environment::CubeMap {
+                        faces: out,
+                        intensity: intensity.unwrap_or(1.0),
+                        rotation_deg: rotation.unwrap_or(0.0),
+                    }
+                }
+                EnvDef::Equirect {
+                    path: p,
+                    intensity,
+                    rotation,
+                } => Environment::Equirect {
+                    path: check(resolve(p))?,
+                    intensity: intensity.unwrap_or(1.0),
+                    rotation_deg: rotation.unwrap_or(0.0),
+                },
+            }
+        }
+    };
+
+    Ok(Scene {
+        name: name_of(path),
+        mesh,
+        materials,
+        lights,
+        camera,
+        environment,
+        warnings,
+    })
+}
+
+/// Loads an OBJ or PLY through `read`: mesh, its materials, warnings.
+fn load_mesh_file(file: &Path, read: ReadFn) -> Result<(Mesh, Vec<Material>, Vec<String>)> {
+    let ext = file
+        .extension()
+        .and_then(|e| e.to_str())
+        .map(|e| e.to_ascii_lowercase());
+    let bytes = read(file)?;
+    match ext.as_deref() {
+        Some("obj") => {
+            let dir = file.parent().unwrap_or(Path::new("")).to_path_buf();
+            let d = obj::load_from(file, &bytes, &|m: &Path| read(&dir.join(m)))?;
+            Ok((d.mesh, d.materials, d.warnings))
+        }
+        Some("ply") => Ok((
+            ply::load_from(file, Cursor::new(bytes))?,
+            vec![Material::default()],
+            Vec::new(),
+        )),
+        _ => bail!("unknown mesh type (expected .obj or .ply)"),
+    }
+}
+
+fn transform_of(m: &MeshDef) -> Affine3A {
+    let scale = match m.scale {
+        Some(ScaleDef::Uniform(s)) => Vec3::splat(s),
+        Some(ScaleDef::PerAxis(s)) => Vec3::from(s),
+        None => Vec3::ONE,
+    };
+    let r = m.rotate.unwrap_or([0.0; 3]).map(f32::to_radians);
+    let rotation = Quat::from_euler(EulerRot::ZYX, r[2], r[1], r[0]);
+    let translation = Vec3::from(m.translate.unwrap_or([0.0; 3]));
+    Affine3A::from_scale_rotation_translation(scale, rotation, translation)
+}
+
+fn material_from_def(name: &str, m: &MaterialDef) -> Material {
+    let d = Material::default();
+    let v = |a: Option<[f32; 3]>, dv: Vec3| a.map(Vec3::from).unwrap_or(dv);
+    Material {
+        name: name.to_string(),
+        diffuse: v(m.diffuse, d.diffuse),
+        specular: v(m.specular, d.specular),
+        shininess: m.shininess.unwrap_or(d.shininess),
+        emission: v(m.emission, d.emission),
+        opacity: m.opacity.unwrap_or(1.0).clamp(0.0, 1.0),
+        ior: m.ior.unwrap_or(1.0),
+        mirror: v(m.mirror, d.mirror),
+        absorption: v(m.absorption, d.absorption),
+        illum: d.illum,
+    }
+}
+
+fn light_from_def(l: &LightDef) -> Light {
+    match l {
+        LightDef::Point {
+            position,
+            color,
+            intensity,
+        } => Light::Point {
+            position: Vec3::from(*position),
+            color: color.map(Vec3::from).unwrap_or(Vec3::ONE),
+            intensity: intensity.unwrap_or(1.0),
+        },
+        LightDef::Rect {
+            corner,
+            edge_u,
+            edge_v,
+            color,
+            intensity,
+            samples,
+        } => Light::Rect {
+            corner: Vec3::from(*corner),
+            edge_u: Vec3::from(*edge_u),
+            edge_v: Vec3::from(*edge_v),
+            color: color.map(Vec3::from).unwrap_or(Vec3::ONE),
+            intensity: intensity.unwrap_or(1.0),
+            samples: samples.unwrap_or(4).max(1),
+        },
+    }
+}

@@ -1,0 +1,396 @@
+//! Scenes: triangles with per-triangle materials, lights, a camera and an environment.
+//!
+//! Loaded from a scene file (TOML, [`file`]), a bare OBJ with its MTL ([`obj`]) or a PLY
+//! ([`ply`]); or made in code ([`shapes`], [`Scene::cornell_box`]). Every loader reports errors
+//! as `file:line: message` where a line is known.
+
+pub mod file;
+pub mod obj;
+pub mod ply;
+pub mod shapes;
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, Result, bail};
+use glam::Vec3;
+
+use crate::geometry::Aabb;
+
+/// Surface properties, following the MTL file's fields.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Material {
+    /// Name (from the MTL file or the scene file).
+    pub name: String,
+    /// Diffuse colour `Kd`.
+    pub diffuse: Vec3,
+    /// Specular colour `Ks` (Blinn-Phong highlight).
+    pub specular: Vec3,
+    /// Specular exponent `Ns`.
+    pub shininess: f32,
+    /// Emitted radiance `Ke`.
+    pub emission: Vec3,
+    /// Opacity `d` (`1 - Tr`): 1 is opaque, 0 lets all light through.
+    pub opacity: f32,
+    /// Index of refraction `Ni`; 1 means light passes without bending.
+    pub ior: f32,
+    /// Mirror reflectance per channel (MTL `illum` 3, 5 or 7 use `Ks`; scene files set it).
+    pub mirror: Vec3,
+    /// Absorption coefficient per unit length inside a closed transparent mesh (Beer-Lambert).
+    pub absorption: Vec3,
+    /// MTL illumination model number, kept for reference.
+    pub illum: u32,
+}
+
+impl Default for Material {
+    fn default() -> Self {
+        Self {
+            name: "default".into(),
+            diffuse: Vec3::splat(0.7),
+            specular: Vec3::ZERO,
+            shininess: 1.0,
+            emission: Vec3::ZERO,
+            opacity: 1.0,
+            ior: 1.0,
+            mirror: Vec3::ZERO,
+            absorption: Vec3::ZERO,
+            illum: 2,
+        }
+    }
+}
+
+impl Material {
+    /// True when some light passes through the surface.
+    pub fn is_transparent(&self) -> bool {
+        self.opacity < 1.0
+    }
+
+    /// True when the surface reflects like a mirror.
+    pub fn is_mirror(&self) -> bool {
+        self.mirror.max_element() > 0.0
+    }
+
+    /// True when the surface emits light.
+    pub fn is_emissive(&self) -> bool {
+        self.emission.max_element() > 0.0
+    }
+}
+
+/// A light source.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Light {
+    /// A point light: radiant intensity `color * intensity`, falling off with the squared
+    /// distance.
+    Point {
+        /// Where the light is.
+        position: Vec3,
+        /// Colour (linear RGB).
+        color: Vec3,
+        /// Scale of the colour.
+        intensity: f32,
+    },
+    /// A one-sided rectangle `corner + s * edge_u + t * edge_v` (`s, t` in `[0, 1]`) emitting
+    /// radiance `color * intensity` on the side `edge_u x edge_v` points to.
+    Rect {
+        /// One corner.
+        corner: Vec3,
+        /// First edge from the corner.
+        edge_u: Vec3,
+        /// Second edge from the corner.
+        edge_v: Vec3,
+        /// Colour (linear RGB).
+        color: Vec3,
+        /// Scale of the colour.
+        intensity: f32,
+        /// Shadow rays per shading point.
+        samples: u32,
+    },
+}
+
+impl Light {
+    /// Centre of the light (its position for a point light).
+    pub fn center(&self) -> Vec3 {
+        match self {
+            Light::Point { position, .. } => *position,
+            Light::Rect {
+                corner,
+                edge_u,
+                edge_v,
+                ..
+            } => *corner + 0.5 * (*edge_u + *edge_v),
+        }
+    }
+}
+
+/// A pinhole or thin-lens camera.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Camera {
+    /// Eye position.
+    pub position: Vec3,
+    /// Point the camera looks at.
+    pub look_at: Vec3,
+    /// Up direction (need not be orthogonal to the view direction).
+    pub up: Vec3,
+    /// Vertical field of view in degrees.
+    pub vfov_deg: f32,
+    /// Lens radius; 0 is a pinhole.
+    pub lens_radius: f32,
+    /// Distance to the plane in focus.
+    pub focus_distance: f32,
+}
+
+impl Camera {
+    /// The benchmark camera of DESIGN.md for a scene with bounds `b`: center `c`, radius
+    /// `r = |max - min| / 2`, eye `c + (0, 0.25 r, 2.2 r)`, looking at `c`, up `+y`, 45 degrees.
+    pub fn canonical(b: &Aabb) -> Self {
+        let (c, r) = if b.is_empty() {
+            (Vec3::ZERO, 1.0)
+        } else {
+            let c = Vec3::from(b.center());
+            let r = (Vec3::from(b.max) - Vec3::from(b.min)).length() * 0.5;
+            (c, if r > 0.0 && r.is_finite() { r } else { 1.0 })
+        };
+        let position = c + Vec3::new(0.0, 0.25 * r, 2.2 * r);
+        Self {
+            position,
+            look_at: c,
+            up: Vec3::Y,
+            vfov_deg: 45.0,
+            lens_radius: 0.0,
+            focus_distance: (position - c).length(),
+        }
+    }
+}
+
+/// What rays that leave the scene see.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Environment {
+    /// Black.
+    None,
+    /// One colour in every direction.
+    Color(Vec3),
+    /// The procedural sky (no files).
+    Sky {
+        /// Brightness scale.
+        intensity: f32,
+        /// Rotation about +y in degrees.
+        rotation_deg: f32,
+    },
+    /// Six images, in the order +x, -x, +y, -y, +z, -z.
+    CubeMap {
+        /// The face images.
+        faces: [PathBuf; 6],
+        /// Brightness scale.
+        intensity: f32,
+        /// Rotation about +y in degrees.
+        rotation_deg: f32,
+    },
+    /// One equirectangular image (HDR, EXR, PNG or JPEG).
+    Equirect {
+        /// The image.
+        path: PathBuf,
+        /// Brightness scale.
+        intensity: f32,
+        /// Rotation about +y in degrees.
+        rotation_deg: f32,
+    },
+}
+
+/// Triangles with their shading normals and materials, in file order.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Mesh {
+    /// Vertex positions, three per triangle.
+    pub triangles: Vec<[Vec3; 3]>,
+    /// Shading normals, three per triangle (computed when the file has none).
+    pub normals: Vec<[Vec3; 3]>,
+    /// Index into [`Scene::materials`] per triangle.
+    pub material_ids: Vec<u32>,
+}
+
+impl Mesh {
+    /// Appends another mesh, shifting its material ids by `material_offset`.
+    pub fn append(&mut self, other: Mesh, material_offset: u32) {
+        self.triangles.extend(other.triangles);
+        self.normals.extend(other.normals);
+        self.material_ids
+            .extend(other.material_ids.into_iter().map(|m| m + material_offset));
+    }
+
+    /// Builds a mesh from an indexed triangle list, with area-weighted vertex normals computed
+    /// over shared vertices. Indices must be in range.
+    pub fn from_indexed(positions: &[Vec3], indices: &[[u32; 3]], material: u32) -> Mesh {
+        let mut vn = vec![Vec3::ZERO; positions.len()];
+        for f in indices {
+            let [a, b, c] = f.map(|i| positions[i as usize]);
+            let n = (b - a).cross(c - a);
+            if n.is_finite() {
+                for &i in f {
+                    vn[i as usize] += n;
+                }
+            }
+        }
+        let mut mesh = Mesh::default();
+        for f in indices {
+            let tri = f.map(|i| positions[i as usize]);
+            let face_n = face_normal(&tri);
+            mesh.triangles.push(tri);
+            mesh.normals
+                .push(f.map(|i| vn[i as usize].try_normalize().unwrap_or(face_n)));
+            mesh.material_ids.push(material);
+        }
+        mesh
+    }
+
+    /// Builds a mesh from a triangle soup with flat normals.
+    pub fn from_triangles(triangles: Vec<[Vec3; 3]>, material: u32) -> Mesh {
+        let normals = triangles.iter().map(|t| [face_normal(t); 3]).collect();
+        let material_ids = vec![material; triangles.len()];
+        Mesh {
+            triangles,
+            normals,
+            material_ids,
+        }
+    }
+
+    /// Applies an affine transform to positions and normals.
+    pub fn transform(&mut self, m: &glam::Affine3A) {
+        let normal_m = m.matrix3.inverse().transpose();
+        for t in &mut self.triangles {
+            *t = t.map(|v| m.transform_point3(v));
+        }
+        for n in &mut self.normals {
+            *n = n.map(|v| Vec3::from(normal_m * glam::Vec3A::from(v)).normalize_or_zero());
+        }
+    }
+
+    /// Box around all finite vertices.
+    pub fn bounds(&self) -> Aabb {
+        let mut b = Aabb::EMPTY;
+        for t in &self.triangles {
+            for v in t {
+                if v.is_finite() {
+                    b.grow_point((*v).into());
+                }
+            }
+        }
+        b
+    }
+}
+
+/// Unit normal of a triangle (`+z` for a degenerate one).
+pub fn face_normal(t: &[Vec3; 3]) -> Vec3 {
+    (t[1] - t[0])
+        .cross(t[2] - t[0])
+        .try_normalize()
+        .unwrap_or(Vec3::Z)
+}
+
+/// Everything a render needs.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Scene {
+    /// Short name for messages and reports (the file stem).
+    pub name: String,
+    /// All triangles of all meshes, in file order.
+    pub mesh: Mesh,
+    /// Materials the triangles refer to.
+    pub materials: Vec<Material>,
+    /// Light sources.
+    pub lights: Vec<Light>,
+    /// The camera.
+    pub camera: Camera,
+    /// What escaping rays see.
+    pub environment: Environment,
+    /// Problems found while loading that did not stop it (a missing MTL file, say).
+    pub warnings: Vec<String>,
+}
+
+impl Scene {
+    /// Loads a scene file (`.toml`), an OBJ (`.obj`, with its MTL) or a PLY (`.ply`).
+    pub fn load(path: &Path) -> Result<Scene> {
+        let ext = path
+            .extension()
+            .and_then(|e| e.to_str())
+            .map(|e| e.to_ascii_lowercase());
+        match ext.as_deref() {
+            Some("toml") => file::load(path),
+            Some("obj") => {
+                let d = obj::load(path)?;
+                let mut scene = Scene::from_mesh(name_of(path), d.mesh, d.materials);
+                scene.warnings = d.warnings;
+                Ok(scene)
+            }
+            Some("ply") => {
+                let mesh = ply::load(path)?;
+                Ok(Scene::from_mesh(name_of(path), mesh, vec![Material::default()]))
+            }
+            _ => bail!(
+                "{}: unknown file type (expected .toml, .obj or .ply)",
+                path.display()
+            ),
+        }
+        .with_context(|| format!("cannot load scene {}", path.display()))
+    }
+
+    /// A scene for a bare mesh: the canonical camera, a point light above and behind the
+    /// camera, and the procedural sky.
+    pub fn from_mesh(name: String, mesh: Mesh, materials: Vec<Material>) -> Scene {
+        let b = mesh.bounds();
+        let camera = Camera::canonical(&b);
+        let r = (camera.position - camera.look_at).length() / 2.2;
+        let position = camera.position + Vec3::new(r, 2.0 * r, 0.0);
+        let d2 = (position - camera.look_at).length_squared();
+        let materials = if materials.is_empty() {
+            vec![Material::default()]
+        } else {
+            materials
+        };
+        Scene {
+            name,
+            mesh,
+            materials,
+            lights: vec![Light::Point {
+                position,
+                color: Vec3::ONE,
+                intensity: std::f32::consts::PI * d2,
+            }],
+            camera,
+            environment: Environment::Sky {
+                intensity: 0.3,
+                rotation_deg: 0.0,
+            },
+            warnings: Vec::new(),
+        }
+    }
+
+    /// The project's Cornell box (32 triangles: five walls, the ceiling light, two blocks),
+    /// from the scene and model files built into the binary.
+    pub fn cornell_box() -> Scene {
+        file::load_embedded_cornell_box()
+    }
+
+    /// Number of triangles.
+    pub fn triangle_count(&self) -> usize {
+        self.mesh.triangles.len()
+    }
+
+    /// The material of triangle `prim`.
+    pub fn material_of(&self, prim: u32) -> &Material {
+        &self.materials[self.mesh.material_ids[prim as usize] as usize]
+    }
+}
+
+/// The file stem, for scene names.
+pub fn name_of(path: &Path) -> String {
+    path.file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "scene".into())
+}
+
+/// Reads a whole file, naming it in the error.
+pub(crate) fn read_file(path: &Path) -> Result<Vec<u8>> {
+    std::fs::read(path).with_context(|| format!("{}: cannot read file", path.display()))
+}
+
+/// Splits the byte offset `pos` of `text` into a 1-based line number.
+pub(crate) fn line_of(text: &str, pos: usize) -> usize {
+    text[..pos.min(text.len())].matches('\n').count() + 1
+}

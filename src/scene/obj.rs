@@ -1,0 +1,261 @@
+//! Wavefront OBJ with MTL materials, through `tobj`.
+//!
+//! Polygons are fan-triangulated as `(0, k, k + 1)` in file order (the benchmark convention),
+//! negative (relative) indices are resolved by `tobj`, missing normals are computed from the
+//! faces around each vertex, and the MTL fields `Kd Ks Ns Ke d Tr Ni illum` become a
+//! [`Material`]. `tobj` reports what went wrong but not where; the loader then finds the first
+//! offending line itself so that the error reads `file:line: message`.
+
+use std::io::BufReader;
+use std::path::Path;
+
+use anyhow::{Result, anyhow};
+use glam::Vec3;
+
+use super::{Material, Mesh, face_normal, read_file};
+
+/// What an OBJ load produced: triangles, materials, and warnings (a missing MTL file, say)
+/// that did not stop the load.
+pub struct ObjData {
+    /// The triangles, with material ids into `materials`.
+    pub mesh: Mesh,
+    /// The materials (at least one).
+    pub materials: Vec<Material>,
+    /// Problems worth telling the user that did not stop the load.
+    pub warnings: Vec<String>,
+}
+
+/// Loads an OBJ file; MTL files are looked up next to it.
+pub fn load(path: &Path) -> Result<ObjData> {
+    let bytes = read_file(path)?;
+    let dir = path.parent().unwrap_or(Path::new(".")).to_path_buf();
+    load_from(path, &bytes, &|mtl: &Path| read_file(&dir.join(mtl)))
+}
+
+/// Loads OBJ text named `path` (for messages), reading MTL files through `read_mtl`.
+pub fn load_from(
+    path: &Path,
+    bytes: &[u8],
+    read_mtl: &dyn Fn(&Path) -> Result<Vec<u8>>,
+) -> Result<ObjData> {
+    let options = tobj::LoadOptions {
+        single_index: false,
+        triangulate: false,
+        ignore_points: true,
+        ignore_lines: true,
+        ..Default::default()
+    };
+    let mtl_error = std::cell::RefCell::new(None::<String>);
+    let result = tobj::load_obj_buf(&mut BufReader::new(bytes), &options, |mtl_path| {
+        let text = read_mtl(mtl_path).map_err(|e| {
+            *mtl_error.borrow_mut() = Some(format!("{e:#}"));
+            tobj::LoadError::OpenFileFailed
+        })?;
+        tobj::load_mtl_buf(&mut BufReader::new(&text[..])).map_err(|e| {
+            *mtl_error.borrow_mut() = Some(format!("{}: {e}", mtl_path.display()));
+            e
+        })
+    });
+    let (models, materials) = match result {
+        Ok(r) => r,
+        Err(e) => {
+            let text = String::from_utf8_lossy(bytes);
+            return Err(match locate_error(&text, e) {
+                Some((line, why)) => anyhow!("{}:{line}: {e}: {why}", path.display()),
+                None => anyhow!("{}: {e}", path.display()),
+            });
+        }
+    };
+
+    let mut warnings = Vec::new();
+    let mut mats: Vec<Material> = match materials {
+        Ok(m) => m.iter().map(convert_material).collect(),
+        Err(e) => {
+            let why = mtl_error.borrow().clone().unwrap_or_else(|| e.to_string());
+            warnings.push(format!(
+                "{}: materials not loaded ({why}); using the default material",
+                path.display()
+            ));
+            Vec::new()
+        }
+    };
+    let default_id = mats.len() as u32;
+    let mut need_default = false;
+
+    let mut mesh = Mesh::default();
+    for model in &models {
+        let m = &model.mesh;
+        let material = match m.material_id {
+            Some(id) if id < mats.len() => id as u32,
+            _ => {
+                need_default = true;
+                default_id
+            }
+        };
+        let positions: Vec<Vec3> = m
+            .positions
+            .chunks_exact(3)
+            .map(|p| Vec3::new(p[0], p[1], p[2]))
+            .collect();
+        let normals: Vec<Vec3> = m
+            .normals
+            .chunks_exact(3)
+            .map(|n| Vec3::new(n[0], n[1], n[2]))
+            .collect();
+        let has_normals = !m.normal_indices.is_empty() && m.normal_indices.len() == m.indices.len();
+
+        // Fan-triangulate every face: (0, k, k + 1).
+        let mut faces: Vec<[usize; 3]> = Vec::new(); // corners as offsets into m.indices
+        let mut offset = 0usize;
+        let arities: Box<dyn Iterator<Item = usize>> = if m.face_arities.is_empty() {
+            Box::new(std::iter::repeat_n(3, m.indices.len() / 3))
+        } else {
+            Box::new(m.face_arities.iter().map(|&a| a as usize))
+        };
+        for arity in arities {
+            for k in 1..arity.saturating_sub(1) {
+                faces.push([offset, offset + k, offset + k + 1]);
+            }
+            offset += arity;
+        }
+
+        if has_normals {
+            for f in &faces {
+                let tri = f.map(|c| positions[m.indices[c] as usize]);
+                let fallback = face_normal(&tri);
+                let n = f.map(|c| {
+                    normals
+                        .get(m.normal_indices[c] as usize)
+                        .and_then(|n| n.try_normalize())
+                        .unwrap_or(fallback)
+                });
+                mesh.triangles.push(tri);
+                mesh.normals.push(n);
+                mesh.material_ids.push(material);
+            }
+        } else {
+            let idx: Vec<[u32; 3]> = faces.iter().map(|f| f.map(|c| m.indices[c])).collect();
+            mesh.append(Mesh::from_indexed(&positions, &idx, material), 0);
+        }
+    }
+    if need_default || mats.is_empty() {
+        mats.push(Material::default());
+    }
+    Ok(ObjData {
+        mesh,
+        materials: mats,
+        warnings,
+    })
+}
+
+fn convert_material(m: &tobj::Material) -> Material {
+    let v = |a: Option<[f32; 3]>, d: Vec3| a.map(Vec3::from).unwrap_or(d);
+    let param = |k: &str| m.unknown_param.get(k).and_then(|s| s.trim().parse::<f32>().ok());
+    let illum = m.illumination_model.unwrap_or(2) as u32;
+    let specular = v(m.specular, Vec3::ZERO);
+    let opacity = m
+        .dissolve
+        .or_else(|| param("Tr").map(|tr| 1.0 - tr))
+        .unwrap_or(1.0)
+        .clamp(0.0, 1.0);
+    let emission = m
+        .emissive
+        .map(Vec3::from)
+        .or_else(|| {
+            m.unknown_param.get("Ke").and_then(|s| {
+                let v: Vec<f32> = s.split_whitespace().filter_map(|x| x.parse().ok()).collect();
+                (v.len() == 3).then(|| Vec3::new(v[0], v[1], v[2]))
+            })
+        })
+        .unwrap_or(Vec3::ZERO);
+    Material {
+        name: m.name.clone(),
+        diffuse: v(m.diffuse, Vec3::splat(0.7)),
+        specular,
+        shininess: m.shininess.unwrap_or(1.0),
+        emission,
+        opacity,
+        ior: m.optical_density.unwrap_or(1.0),
+        mirror: if matches!(illum, 3 | 5 | 7) {
+            specular
+        } else {
+            Vec3::ZERO
+        },
+        absorption: Vec3::ZERO,
+        illum,
+    }
+}
+
+/// Finds the first line that explains a `tobj` error: the line number and what is wrong.
+fn locate_error(text: &str, err: tobj::LoadError) -> Option<(usize, String)> {
+    use tobj::LoadError as E;
+    let (mut nv, mut nvt, mut nvn) = (0i64, 0i64, 0i64);
+    let floats = |rest: &[&str], min: usize, max: usize| {
+        rest.len() >= min && rest.len() <= max && rest.iter().all(|t| t.parse::<f32>().is_ok())
+    };
+    for (i, raw) in text.lines().enumerate() {
+        let line = i + 1;
+        let toks: Vec<&str> = raw.split_whitespace().collect();
+        let Some((&key, rest)) = toks.split_first() else {
+            continue;
+        };
+        match key {
+            "v" => {
+                if matches!(err, E::PositionParseError) && !floats(rest, 3, 7) {
+                    return Some((line, format!("expected 3 numbers in `{}`", raw.trim())));
+                }
+                nv += 1;
+            }
+            "vt" => {
+                if matches!(err, E::TexcoordParseError) && !floats(rest, 1, 3) {
+                    return Some((line, format!("expected 1 to 3 numbers in `{}`", raw.trim())));
+                }
+                nvt += 1;
+            }
+            "vn" => {
+                if matches!(err, E::NormalParseError) && !floats(rest, 3, 3) {
+                    return Some((line, format!("expected 3 numbers in `{}`", raw.trim())));
+                }
+                nvn += 1;
+            }
+            "f" => {
+                let face_err = matches!(
+                    err,
+                    E::FaceParseError
+                        | E::InvalidPolygon
+                        | E::FaceVertexOutOfBounds
+                        | E::FaceTexCoordOutOfBounds
+                        | E::FaceNormalOutOfBounds
+                );
+                if !face_err {
+                    continue;
+                }
+                if rest.len() < 3 {
+                    return Some((line, "a face needs at least 3 vertices".into()));
+                }
+                for corner in rest {
+                    let mut parts = corner.split('/');
+                    for (slot, count) in [nv, nvt, nvn].iter().enumerate() {
+                        let Some(p) = parts.next() else { break };
+                        if p.is_empty() && slot > 0 {
+                            continue;
+                        }
+                        let Ok(idx) = p.parse::<i64>() else {
+                            return Some((line, format!("`{corner}` is not a vertex reference")));
+                        };
+                        let resolved = if idx < 0 { count + idx } else { idx - 1 };
+                        if idx == 0 || resolved < 0 || resolved >= *count {
+                            let what = ["vertex", "texture coordinate", "normal"][slot];
+                            return Some((
+                                line,
+                                format!("{what} index {idx} is out of range ({count} defined so far)"),
+                            ));
+                        }
+                    }
+                }
+            }
+            _ => {}
+        }
+    }
+    None
+}
