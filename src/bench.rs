@@ -304,7 +304,7 @@ pub fn run(
     let mut results = Vec::new();
     let mut reference: Option<Vec<HitRecord>> = None;
 
-    let mut measure = |name: &str,
+    let measure = |name: &str,
                        build_ms: f64,
                        stats: Option<BvhStats>,
                        engine: &dyn Engine,

@@ -12,3 +12,5 @@ pub mod sampling;
 pub mod scene;
 pub mod camera;
 pub mod bench;
+pub mod film;
+pub mod render;

@@ -19,7 +19,7 @@ mod traverse;
 use glam::{Vec3, Vec3A};
 
 pub use stats::BvhStats;
-pub use reference::{all_hits_brute_force, closest_hit_brute_force};
+pub use reference::{BruteForce, closest_hit_brute_force};
 pub use traverse::{Hit, Visit};
 
 use crate::geometry::Aabb;

@@ -1,10 +1,101 @@
-//! `tracery render`: placeholder until the renderer lands below.
+//! `tracery render`: render a scene to PNG on all cores, with a progress bar.
+
+use std::path::PathBuf;
+use std::time::Instant;
+
 use anyhow::Result;
 use clap::Args;
+use indicatif::{ProgressBar, ProgressStyle};
+use tracery::bvh::Bvh;
+use tracery::render::{RenderSettings, render};
+
+use super::{BvhArgs, ensure_parent, load_scene, set_threads};
 
 #[derive(Args, Debug)]
-pub struct RenderArgs {}
+pub struct RenderArgs {
+    /// Scene file (TOML), OBJ or PLY; the built-in Cornell box when left out.
+    scene: Option<PathBuf>,
+    /// Output PNG.
+    #[arg(short, long, default_value = "out/render.png")]
+    output: PathBuf,
+    /// Image width in pixels.
+    #[arg(long, default_value_t = 512)]
+    width: u32,
+    /// Image height in pixels.
+    #[arg(long, default_value_t = 512)]
+    height: u32,
+    /// Samples per pixel.
+    #[arg(long, default_value_t = 16)]
+    spp: u32,
+    /// Seed of the random streams (the same seed gives the same image on any thread count).
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    /// Exposure multiplier applied before tone mapping.
+    #[arg(long, default_value_t = 1.0)]
+    exposure: f32,
+    #[command(flatten)]
+    bvh: BvhArgs,
+    /// Threads to render with (default: every core).
+    #[arg(long, default_value_t = 0)]
+    threads: usize,
+}
 
-pub fn run(_a: RenderArgs) -> Result<()> {
-    anyhow::bail!("not yet")
+pub fn run(a: RenderArgs) -> Result<()> {
+    set_threads(a.threads)?;
+    let settings = RenderSettings {
+        width: a.width,
+        height: a.height,
+        spp: a.spp,
+        seed: a.seed,
+    };
+    settings.validate().map_err(anyhow::Error::msg)?;
+    let options = a.bvh.options()?;
+    let scene = load_scene(a.scene.as_deref())?;
+    let bvh = Bvh::build(&scene.mesh.triangles, &options);
+    let s = &bvh.stats;
+    eprintln!(
+        "{}: {} triangles; BVH ({}, {} bins, leaf {}) built in {:.1} ms: {} levels, {} leaves, SAH cost {:.2}{}",
+        scene.name,
+        scene.triangle_count(),
+        options.split,
+        options.bins,
+        options.max_leaf_size,
+        s.build_ms,
+        s.levels,
+        s.leaves,
+        s.sah_cost,
+        if s.excluded > 0 {
+            format!(", {} triangles left out (non-finite vertices)", s.excluded)
+        } else {
+            String::new()
+        }
+    );
+    let bar = ProgressBar::new(settings.height as u64).with_style(
+        ProgressStyle::with_template("rendering {bar:40} {pos}/{len} rows, {elapsed} elapsed, eta {eta}")
+            .expect("valid template"),
+    );
+    let start = Instant::now();
+    let out = render(&scene, &bvh, &settings, &|_| bar.inc(1));
+    let took = start.elapsed();
+    bar.finish_and_clear();
+    let path = ensure_parent(&a.output)?;
+    out.film.save_png(&path, a.exposure)?;
+    let secs = took.as_secs_f64();
+    println!(
+        "wrote {} ({}x{}, {} spp) in {:.0} ms: {} camera rays, {} shadow rays, {:.2} Mrays/s{}",
+        path.display(),
+        settings.width,
+        settings.height,
+        settings.spp,
+        secs * 1e3,
+        out.rays.camera,
+        out.rays.shadow,
+        out.rays.total() as f64 / secs / 1e6,
+        if out.film.rejected > 0 {
+            format!("; {} non-finite samples left out", out.film.rejected)
+        } else {
+            String::new()
+        }
+    );
+    Ok(())
 }

@@ -40,8 +40,6 @@ pub struct PreparedRay {
     pub(crate) k: [usize; 3],
     /// Triangle test shear constants `Sx`, `Sy`, `Sz`.
     pub(crate) shear: [f32; 3],
-    /// The origin permuted by `k`.
-    pub(crate) org_k: [f32; 3],
 }
 
 impl PreparedRay {
@@ -69,14 +67,12 @@ impl PreparedRay {
             std::mem::swap(&mut kx, &mut ky);
         }
         let shear = [d[kx] / d[kz], d[ky] / d[kz], 1.0 / d[kz]];
-        let o = ray.origin;
         Self {
-            origin: o.into(),
+            origin: ray.origin.into(),
             inv_dir,
             neg_mask: BVec3A::new(neg[0], neg[1], neg[2]),
             k: [kx, ky, kz],
             shear,
-            org_k: [o[kx], o[ky], o[kz]],
         }
     }
 }

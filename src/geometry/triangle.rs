@@ -41,31 +41,52 @@ pub fn intersect_triangle(ray: &PreparedRay, tri: &[Vec3A; 3], t_max: f32) -> Op
 
 #[inline(always)]
 fn intersect(ray: &PreparedRay, tri: &[Vec3A; 3], t_max: f32) -> Option<(f32, f32, f32)> {
-    let [kx, ky, kz] = ray.k;
+    // Dispatch once on the axis permutation so that lane indices are constants (a runtime
+    // index would send every vertex through memory). The branch is the same for every
+    // triangle a ray meets, so it is predicted.
+    match ray.k {
+        [1, 2, 0] => sheared::<1, 2, 0>(ray, tri, t_max),
+        [2, 1, 0] => sheared::<2, 1, 0>(ray, tri, t_max),
+        [2, 0, 1] => sheared::<2, 0, 1>(ray, tri, t_max),
+        [0, 2, 1] => sheared::<0, 2, 1>(ray, tri, t_max),
+        [0, 1, 2] => sheared::<0, 1, 2>(ray, tri, t_max),
+        _ => sheared::<1, 0, 2>(ray, tri, t_max),
+    }
+}
+
+#[inline(always)]
+fn sheared<const KX: usize, const KY: usize, const KZ: usize>(
+    ray: &PreparedRay,
+    tri: &[Vec3A; 3],
+    t_max: f32,
+) -> Option<(f32, f32, f32)> {
     let [sx, sy, sz] = ray.shear;
-    let [ox, oy, oz] = ray.org_k;
-    let a = tri[0].to_array();
-    let b = tri[1].to_array();
-    let c = tri[2].to_array();
-    let (a_z, b_z, c_z) = (a[kz] - oz, b[kz] - oz, c[kz] - oz);
-    let ax = (a[kx] - ox) - sx * a_z;
-    let ay = (a[ky] - oy) - sy * a_z;
-    let bx = (b[kx] - ox) - sx * b_z;
-    let by = (b[ky] - oy) - sy * b_z;
-    let cx = (c[kx] - ox) - sx * c_z;
-    let cy = (c[ky] - oy) - sy * c_z;
+    // Vertices relative to the origin, then sheared so that the ray runs along +z.
+    let a = tri[0] - ray.origin;
+    let b = tri[1] - ray.origin;
+    let c = tri[2] - ray.origin;
+    let (a_z, b_z, c_z) = (a[KZ], b[KZ], c[KZ]);
+    let ax = a[KX] - sx * a_z;
+    let ay = a[KY] - sy * a_z;
+    let bx = b[KX] - sx * b_z;
+    let by = b[KY] - sy * b_z;
+    let cx = c[KX] - sx * c_z;
+    let cy = c[KY] - sy * c_z;
 
     let u = cx * by - cy * bx;
     let v = ax * cy - ay * cx;
     let w = bx * ay - by * ax;
-    if u == 0.0 || v == 0.0 || w == 0.0 {
+    // Non-short-circuit `|`: one well-predicted branch instead of several random ones.
+    if (u == 0.0) | (v == 0.0) | (w == 0.0) {
         return intersect_exact(
             [(ax, ay), (bx, by), (cx, cy)],
             [a_z * sz, b_z * sz, c_z * sz],
             t_max,
         );
     }
-    if (u < 0.0 || v < 0.0 || w < 0.0) && (u > 0.0 || v > 0.0 || w > 0.0) {
+    let any_neg = (u < 0.0) | (v < 0.0) | (w < 0.0);
+    let any_pos = (u > 0.0) | (v > 0.0) | (w > 0.0);
+    if any_neg & any_pos {
         return None;
     }
     let det = u + v + w;

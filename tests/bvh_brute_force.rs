@@ -1,0 +1,86 @@
+//! Both builders against brute force: 100,000 random rays and the canonical camera rays on the
+//! Cornell box, the generated meshes and (fetched) the Stanford dragon.
+
+mod common;
+
+use glam::Vec3;
+use tracery::bench::canonical_rays;
+use tracery::bvh::{BuildOptions, Bvh, SplitMethod};
+use tracery::scene::{Mesh, Scene, shapes};
+
+fn check_mesh(name: &str, tris: &[[Vec3; 3]], random: usize, canonical_step: usize) {
+    let rays = common::random_rays(tris, random, 0xC0FFEE ^ tris.len() as u64);
+    let bounds = Mesh::from_triangles(tris.to_vec(), 0).bounds();
+    let camera: Vec<_> = canonical_rays(&bounds).into_iter().step_by(canonical_step).collect();
+    let bvhs = common::both_builders().map(|o| Bvh::build(tris, &o));
+    let bvhs = [&bvhs[0], &bvhs[1]];
+    common::assert_matches_brute_force(&format!("{name}, sah and median, random rays"), tris, &bvhs, &rays);
+    common::assert_matches_brute_force(&format!("{name}, sah and median, canonical rays"), tris, &bvhs, &camera);
+}
+
+#[test]
+fn cornell_box_matches_brute_force() {
+    let scene = Scene::cornell_box();
+    check_mesh("cornell box", &scene.mesh.triangles, 100_000, 1);
+}
+
+#[test]
+fn icosphere_matches_brute_force() {
+    check_mesh("icosphere", &shapes::icosphere(4), 100_000, 1);
+}
+
+#[test]
+fn grid_of_tiny_triangles_matches_brute_force() {
+    check_mesh("grid", &shapes::grid(64, 1.0), 100_000, 1);
+}
+
+#[test]
+fn needle_triangles_match_brute_force() {
+    check_mesh("needles", &shapes::needles(500, 1e4), 100_000, 1);
+}
+
+#[test]
+fn random_soup_matches_brute_force() {
+    check_mesh("soup", &shapes::random_soup(3000, 0.1, 7), 100_000, 1);
+}
+
+#[test]
+fn other_leaf_sizes_and_bins_match_brute_force() {
+    let tris = shapes::random_soup(2000, 0.2, 11);
+    let rays = common::random_rays(&tris, 20_000, 5);
+    for split in [SplitMethod::Sah, SplitMethod::Median] {
+        for (bins, leaf) in [(2, 1), (4, 2), (32, 8), (64, 255)] {
+            let o = BuildOptions { split, bins, max_leaf_size: leaf };
+            let bvh = Bvh::build(&tris, &o);
+            assert!(bvh.stats.max_leaf_size <= leaf);
+            common::assert_matches_brute_force(&format!("{o:?}"), &tris, &[&bvh], &rays);
+        }
+    }
+}
+
+#[test]
+fn dragon_202k_matches_brute_force() {
+    let Some(path) = common::external("dragon/dragon_vrip_res2.ply") else {
+        return;
+    };
+    let scene = Scene::load(&path).expect("dragon loads");
+    assert_eq!(scene.triangle_count(), 202_520);
+    check_mesh("dragon", &scene.mesh.triangles, 100_000, 1);
+}
+
+#[test]
+fn ties_in_t_go_to_the_lowest_index() {
+    // The same triangle three times, far apart in the list, with others in between.
+    let mut tris = shapes::random_soup(500, 0.05, 3);
+    let dup = [Vec3::new(-1.0, -1.0, 5.0), Vec3::new(1.0, -1.0, 5.0), Vec3::new(0.0, 1.0, 5.0)];
+    tris.insert(17, dup);
+    tris.insert(300, dup);
+    tris.push(dup);
+    for options in common::both_builders() {
+        let bvh = Bvh::build(&tris, &options);
+        let hit = bvh
+            .intersect(&tracery::geometry::Ray::new(Vec3::new(0.0, -0.2, 10.0), Vec3::NEG_Z), f32::INFINITY)
+            .expect("hits the duplicated triangle");
+        assert_eq!(hit.prim, 17, "{:?}", options.split);
+    }
+}

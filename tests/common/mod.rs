@@ -1,0 +1,106 @@
+//! Helpers shared by the integration tests.
+#![allow(dead_code)]
+
+use std::path::PathBuf;
+
+use glam::Vec3;
+use rayon::prelude::*;
+use tracery::bvh::{BruteForce, BuildOptions, Bvh, Hit};
+use tracery::geometry::{Aabb, Ray};
+use tracery::sampling::SplitMix64;
+
+/// A fetched third-party asset, or `None` (with a note) when `scripts/fetch-assets` has not
+/// run. In CI (`CI` set) a missing asset fails the test instead.
+pub fn external(rel: &str) -> Option<PathBuf> {
+    let p = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("assets/external").join(rel);
+    if p.is_file() {
+        return Some(p);
+    }
+    if std::env::var_os("CI").is_some() {
+        panic!("{} is missing: CI must run scripts/fetch-assets first", p.display());
+    }
+    eprintln!("skipped: {} not fetched (run scripts/fetch-assets)", p.display());
+    None
+}
+
+fn unit_vector(rng: &mut SplitMix64) -> Vec3 {
+    loop {
+        let v = Vec3::new(
+            rng.next_f32() * 2.0 - 1.0,
+            rng.next_f32() * 2.0 - 1.0,
+            rng.next_f32() * 2.0 - 1.0,
+        );
+        let l = v.length_squared();
+        if l > 1e-6 && l <= 1.0 {
+            return v / l.sqrt();
+        }
+    }
+}
+
+/// `count` random rays for a mesh: half from random points around its bounds in random
+/// directions, half aimed at a random point of a random triangle (so that many hit).
+pub fn random_rays(tris: &[[Vec3; 3]], count: usize, seed: u64) -> Vec<Ray> {
+    let mut rng = SplitMix64::new(seed);
+    let mut b = Aabb::EMPTY;
+    for t in tris {
+        for v in t {
+            b.grow_point((*v).into());
+        }
+    }
+    let c = Vec3::from(b.center());
+    let r = (Vec3::from(b.max) - Vec3::from(b.min)).length().max(1e-3);
+    (0..count)
+        .map(|i| {
+            let origin = c + unit_vector(&mut rng) * r * (0.2 + 1.3 * rng.next_f32());
+            if i % 2 == 0 || tris.is_empty() {
+                Ray::new(origin, unit_vector(&mut rng))
+            } else {
+                let t = &tris[(rng.next_u64() % tris.len() as u64) as usize];
+                let (mut u, mut v) = (rng.next_f32(), rng.next_f32());
+                if u + v > 1.0 {
+                    (u, v) = (1.0 - u, 1.0 - v);
+                }
+                let target = t[0] + (t[1] - t[0]) * u + (t[2] - t[0]) * v;
+                Ray::new(origin, (target - origin).normalize_or(Vec3::X))
+            }
+        })
+        .collect()
+}
+
+/// Checks BVHs against brute force on every ray: same hit or miss, same triangle, `t` equal
+/// within 1e-6 relative. Brute force runs once per ray for all the BVHs. Panics with the
+/// first few differences.
+pub fn assert_matches_brute_force(what: &str, tris: &[[Vec3; 3]], bvhs: &[&Bvh], rays: &[Ray]) {
+    let reference = BruteForce::new(tris);
+    let bad: Vec<(usize, usize, Option<Hit>, Option<Hit>)> = rays
+        .par_iter()
+        .enumerate()
+        .flat_map_iter(|(i, r)| {
+            let slow = reference.closest(r, f32::INFINITY);
+            bvhs.iter().enumerate().filter_map(move |(k, bvh)| {
+                let fast = bvh.intersect(r, f32::INFINITY);
+                let same = match (fast, slow) {
+                    (None, None) => true,
+                    (Some(a), Some(b)) => {
+                        a.prim == b.prim
+                            && (a.t - b.t).abs() <= 1e-6 * b.t.abs().max(f32::MIN_POSITIVE)
+                    }
+                    _ => false,
+                };
+                (!same).then_some((i, k, fast, slow))
+            })
+        })
+        .collect();
+    assert!(
+        bad.is_empty(),
+        "{what}: {} (ray, bvh) pairs of {} rays differ from brute force, first (ray, bvh, bvh hit, brute force hit): {:?}",
+        bad.len(),
+        rays.len(),
+        &bad[..bad.len().min(5)]
+    );
+}
+
+/// Both builders with their default settings.
+pub fn both_builders() -> [BuildOptions; 2] {
+    [BuildOptions::sah(), BuildOptions::median()]
+}
