@@ -12,12 +12,14 @@
 //! copied into leaf order; [`Bvh::prim_ids`] maps a leaf slot back to the caller's index.
 
 mod build;
+mod pairs;
 mod reference;
 mod stats;
 mod traverse;
 
 use glam::{Vec3, Vec3A};
 
+pub use pairs::PairNode;
 pub use stats::BvhStats;
 pub use reference::{BruteForce, closest_hit_brute_force};
 pub use traverse::{Hit, Visit};
@@ -183,6 +185,8 @@ pub struct Bvh {
     pub tris: Vec<[Vec3A; 3]>,
     /// For each leaf slot, the index of the triangle in the caller's list.
     pub prim_ids: Vec<u32>,
+    /// The traversal layout derived from `nodes` (see [`PairNode`]).
+    pub pairs: Vec<PairNode>,
     /// What the build produced and how long it took.
     pub stats: BvhStats,
     /// The options it was built with.
@@ -211,18 +215,22 @@ impl Bvh {
         }
     }
 
-    /// Visits every node with its depth (root at 0), parents before children.
-    pub fn for_each_node(&self, mut f: impl FnMut(usize, &BvhNode, u32)) {
+    /// Visits every node of the tree with its depth (root at 0), parents before children.
+    pub fn for_each_node(&self, mut f: impl FnMut(&BvhNode, u32)) {
         if self.tris.is_empty() {
             return;
         }
-        let mut stack = vec![(0usize, 0u32)];
-        while let Some((i, depth)) = stack.pop() {
-            let n = &self.nodes[i];
-            f(i, n, depth);
+        // Children are always stored after their parent, so one forward pass knows each
+        // node's depth before it reaches the node.
+        let mut depth = vec![0u32; self.nodes.len()];
+        for (i, n) in self.nodes.iter().enumerate() {
+            if i == 1 {
+                continue; // the unused slot
+            }
+            f(n, depth[i]);
             if !n.is_leaf() {
-                stack.push((n.first as usize + 1, depth + 1));
-                stack.push((n.first as usize, depth + 1));
+                depth[n.first as usize] = depth[i] + 1;
+                depth[n.first as usize + 1] = depth[i] + 1;
             }
         }
     }

@@ -40,7 +40,7 @@ impl BvhStats {
         let root_area = bvh.bounds().half_area();
         let mut inner_area = 0.0;
         let mut leaf_area = 0.0;
-        bvh.for_each_node(|_, n, depth| {
+        bvh.for_each_node(|n, depth| {
             s.nodes += 1;
             s.levels = s.levels.max(depth + 1);
             let a = n.aabb().half_area();

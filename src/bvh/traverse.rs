@@ -3,6 +3,7 @@
 
 use glam::Vec3;
 
+use super::pairs::{RayLanes, by_octant, hits, test_pair};
 use super::{Bvh, BvhNode, MAX_DEPTH};
 use crate::geometry::{PreparedRay, Ray, intersect_triangle, intersect_triangle_t};
 
@@ -43,32 +44,6 @@ pub enum Visit {
 /// to the lowest triangle index exactly as brute force decides them.
 const CULL_SLACK: f32 = 1.0 + 1.0 / 65536.0;
 
-trait Observer {
-    const ACTIVE: bool;
-    fn node(&mut self, index: u32, depth: u32);
-    fn triangle(&mut self, prim: u32, hit: bool);
-}
-
-struct Silent;
-impl Observer for Silent {
-    const ACTIVE: bool = false;
-    #[inline(always)]
-    fn node(&mut self, _: u32, _: u32) {}
-    #[inline(always)]
-    fn triangle(&mut self, _: u32, _: bool) {}
-}
-
-struct Report<F: FnMut(Visit)>(F);
-impl<F: FnMut(Visit)> Observer for Report<F> {
-    const ACTIVE: bool = true;
-    fn node(&mut self, index: u32, depth: u32) {
-        (self.0)(Visit::Node { index, depth })
-    }
-    fn triangle(&mut self, prim: u32, hit: bool) {
-        (self.0)(Visit::Triangle { prim, hit })
-    }
-}
-
 /// Entry distance of the box if the ray meets it before `limit`, else `+inf`.
 #[inline(always)]
 fn enter(node: &BvhNode, ray: &PreparedRay, limit: f32) -> f32 {
@@ -86,29 +61,59 @@ impl Bvh {
     /// triangle index.
     #[inline]
     pub fn intersect(&self, ray: &Ray, t_max: f32) -> Option<Hit> {
-        self.closest(&PreparedRay::new(ray), t_max, &mut Silent)
+        self.intersect_prepared(&PreparedRay::new(ray), t_max)
     }
 
     /// [`Bvh::intersect`] for a ray already prepared (saves the setup when one ray is traced
     /// against several structures).
     #[inline]
     pub fn intersect_prepared(&self, ray: &PreparedRay, t_max: f32) -> Option<Hit> {
-        self.closest(ray, t_max, &mut Silent)
+        if self.tris.is_empty() || !(t_max > 0.0) {
+            return None;
+        }
+        if enter(&self.nodes[0], ray, t_max) == f32::INFINITY {
+            return None;
+        }
+        let mut best = Best {
+            t: t_max,
+            slot: usize::MAX,
+            id: u32::MAX,
+        };
+        if self.pairs.is_empty() {
+            self.closest_in_leaf(ray, 0, self.tris.len() as u32, &mut best);
+        } else {
+            by_octant!(ray.neg_mask, closest_pairs, self, ray, &mut best);
+        }
+        self.finish(ray, best.slot, best.id, best.t, t_max)
+    }
+
+    /// Tests a leaf's triangles, keeping the closest (lowest index on ties).
+    #[inline(always)]
+    fn closest_in_leaf(&self, ray: &PreparedRay, first: u32, count: u32, best: &mut Best) {
+        let limit = best.t.next_up();
+        for slot in first as usize..(first + count) as usize {
+            let t = intersect_triangle_t(ray, &self.tris[slot], limit);
+            if t <= best.t {
+                let id = self.prim_ids[slot];
+                if t < best.t || id < best.id {
+                    *best = Best { t, slot, id };
+                }
+            }
+        }
     }
 
     /// [`Bvh::intersect`] that also calls `visit` for every node entered and every triangle
     /// tested, in traversal order.
+    ///
+    /// This walks the node tree of record ([`Bvh::nodes`]) one box at a time: it is the simple
+    /// traversal, kept for debugging, and its hits equal [`Bvh::intersect`]'s (a test checks).
     pub fn intersect_visit(
         &self,
         ray: &Ray,
         t_max: f32,
-        visit: impl FnMut(Visit),
+        mut visit: impl FnMut(Visit),
     ) -> Option<Hit> {
-        self.closest(&PreparedRay::new(ray), t_max, &mut Report(visit))
-    }
-
-    #[inline(always)]
-    fn closest<O: Observer>(&self, ray: &PreparedRay, t_max: f32, obs: &mut O) -> Option<Hit> {
+        let ray = &PreparedRay::new(ray);
         if self.tris.is_empty() || !(t_max > 0.0) {
             return None;
         }
@@ -128,16 +133,18 @@ impl Bvh {
         let mut depth = 0u32;
         loop {
             let node = &nodes[current as usize];
-            if O::ACTIVE {
-                obs.node(current, depth);
-            }
+            visit(Visit::Node {
+                index: current,
+                depth,
+            });
             if node.is_leaf() {
                 let limit = best_t.next_up();
                 for slot in node.leaf_range() {
                     let t = intersect_triangle_t(ray, &self.tris[slot], limit);
-                    if O::ACTIVE {
-                        obs.triangle(self.prim_ids[slot], t <= best_t);
-                    }
+                    visit(Visit::Triangle {
+                        prim: self.prim_ids[slot],
+                        hit: t <= best_t,
+                    });
                     if t <= best_t {
                         let id = self.prim_ids[slot];
                         if t < best_t || id < best_id {
@@ -161,9 +168,7 @@ impl Bvh {
                     depth += 1;
                     if far_d != f32::INFINITY {
                         stack[sp] = (far, far_d);
-                        if O::ACTIVE {
-                            depths[sp] = depth;
-                        }
+                        depths[sp] = depth;
                         sp += 1;
                     }
                     current = near;
@@ -179,9 +184,7 @@ impl Bvh {
                 let (n, d) = stack[sp];
                 if d <= best_t * CULL_SLACK {
                     current = n;
-                    if O::ACTIVE {
-                        depth = depths[sp];
-                    }
+                    depth = depths[sp];
                     break;
                 }
             }
@@ -243,49 +246,138 @@ impl Bvh {
             return;
         }
         let ray = PreparedRay::new(ray);
-        let nodes = &self.nodes[..];
-        let mut stack = [0u32; MAX_DEPTH];
-        let mut sp = 0usize;
-        if enter(&nodes[0], &ray, t_max) == f32::INFINITY {
+        if enter(&self.nodes[0], &ray, t_max) == f32::INFINITY {
             return;
         }
-        let mut current = 0u32;
-        loop {
-            let node = &nodes[current as usize];
-            if node.is_leaf() {
-                for slot in node.leaf_range() {
-                    let t = intersect_triangle_t(&ray, &self.tris[slot], t_max);
-                    if t < t_max && !f(self.prim_ids[slot], t) {
-                        return;
-                    }
-                }
-            } else {
-                let first = node.first;
-                let hit0 = enter(&nodes[first as usize], &ray, t_max) != f32::INFINITY;
-                let hit1 = enter(&nodes[first as usize + 1], &ray, t_max) != f32::INFINITY;
-                match (hit0, hit1) {
-                    (true, true) => {
-                        stack[sp] = first + 1;
-                        sp += 1;
-                        current = first;
-                        continue;
-                    }
-                    (true, false) => {
-                        current = first;
-                        continue;
-                    }
-                    (false, true) => {
-                        current = first + 1;
-                        continue;
-                    }
-                    (false, false) => {}
-                }
+        if self.pairs.is_empty() {
+            self.hits_in_leaf(&ray, 0, self.tris.len() as u32, t_max, &mut f);
+        } else {
+            by_octant!(ray.neg_mask, all_hits_pairs, self, &ray, t_max, &mut f);
+        }
+    }
+
+    /// Reports a leaf's hits; false when `f` asked to stop.
+    #[inline(always)]
+    fn hits_in_leaf(
+        &self,
+        ray: &PreparedRay,
+        first: u32,
+        count: u32,
+        t_max: f32,
+        f: &mut impl FnMut(u32, f32) -> bool,
+    ) -> bool {
+        for slot in first as usize..(first + count) as usize {
+            let t = intersect_triangle_t(ray, &self.tris[slot], t_max);
+            if t < t_max && !f(self.prim_ids[slot], t) {
+                return false;
             }
+        }
+        true
+    }
+}
+
+/// The best hit so far of a closest-hit traversal.
+struct Best {
+    t: f32,
+    slot: usize,
+    id: u32,
+}
+
+/// Closest hit over the pair layout, nearer child first (the root box was already entered).
+#[inline(always)]
+fn closest_pairs<const NX: bool, const NY: bool, const NZ: bool>(
+    bvh: &Bvh,
+    ray: &PreparedRay,
+    best: &mut Best,
+) {
+    let lanes = RayLanes::new(ray);
+    let pairs = &bvh.pairs[..];
+    let mut stack = [(0u32, 0.0f32); MAX_DEPTH];
+    let mut sp = 0usize;
+    let mut current = 0u32;
+    loop {
+        let n = &pairs[current as usize];
+        let cull = best.t * CULL_SLACK;
+        let acc = test_pair::<NX, NY, NZ>(n, &lanes, cull);
+        let mask = hits(acc);
+        let d = [acc.x, acc.y];
+        let order = if d[1] < d[0] { [1, 0] } else { [0, 1] };
+        let mut next = u32::MAX;
+        for k in order {
+            if mask & (1 << k) == 0 {
+                continue;
+            }
+            if n.count[k] > 0 {
+                // A leaf child: test it now, unless an earlier leaf moved the best hit closer.
+                if d[k] <= best.t * CULL_SLACK {
+                    bvh.closest_in_leaf(ray, n.child[k], n.count[k], best);
+                }
+            } else if next == u32::MAX {
+                next = n.child[k];
+            } else {
+                stack[sp] = (n.child[k], d[k]);
+                sp += 1;
+            }
+        }
+        if next != u32::MAX {
+            current = next;
+            continue;
+        }
+        // Pop, skipping boxes that now start beyond the best hit.
+        loop {
             if sp == 0 {
                 return;
             }
             sp -= 1;
-            current = stack[sp];
+            let (c, dist) = stack[sp];
+            if dist <= best.t * CULL_SLACK {
+                current = c;
+                break;
+            }
         }
+    }
+}
+
+/// Every hit over the pair layout; stops when `f` returns false.
+#[inline(always)]
+fn all_hits_pairs<const NX: bool, const NY: bool, const NZ: bool>(
+    bvh: &Bvh,
+    ray: &PreparedRay,
+    t_max: f32,
+    f: &mut impl FnMut(u32, f32) -> bool,
+) {
+    let lanes = RayLanes::new(ray);
+    let pairs = &bvh.pairs[..];
+    let mut stack = [0u32; MAX_DEPTH];
+    let mut sp = 0usize;
+    let mut current = 0u32;
+    loop {
+        let n = &pairs[current as usize];
+        let mask = hits(test_pair::<NX, NY, NZ>(n, &lanes, t_max));
+        let mut next = u32::MAX;
+        for k in 0..2 {
+            if mask & (1 << k) == 0 {
+                continue;
+            }
+            if n.count[k] > 0 {
+                if !bvh.hits_in_leaf(ray, n.child[k], n.count[k], t_max, f) {
+                    return;
+                }
+            } else if next == u32::MAX {
+                next = n.child[k];
+            } else {
+                stack[sp] = n.child[k];
+                sp += 1;
+            }
+        }
+        if next != u32::MAX {
+            current = next;
+            continue;
+        }
+        if sp == 0 {
+            return;
+        }
+        sp -= 1;
+        current = stack[sp];
     }
 }
