@@ -284,6 +284,7 @@ struct Best {
 }
 
 /// Closest hit over the pair layout, nearer child first (the root box was already entered).
+/// Stack entries are children still to visit, inner or leaf, with their entry distance.
 #[inline(always)]
 fn closest_pairs<const NX: bool, const NY: bool, const NZ: bool>(
     bvh: &Bvh,
@@ -292,50 +293,55 @@ fn closest_pairs<const NX: bool, const NY: bool, const NZ: bool>(
 ) {
     let lanes = RayLanes::new(ray);
     let pairs = &bvh.pairs[..];
-    let mut stack = [(0u32, 0.0f32); MAX_DEPTH];
+    // (child, count) packed as `child << 8 | count`, and the entry distance.
+    let mut stack = [(0u64, 0.0f32); MAX_DEPTH];
     let mut sp = 0usize;
     let mut current = 0u32;
-    loop {
+    'descend: loop {
         let n = &pairs[current as usize];
-        let cull = best.t * CULL_SLACK;
-        let acc = test_pair::<NX, NY, NZ>(n, &lanes, cull);
-        let mask = hits(acc);
-        let d = [acc.x, acc.y];
-        let order = if d[1] < d[0] { [1, 0] } else { [0, 1] };
-        let mut next = u32::MAX;
-        for k in order {
-            if mask & (1 << k) == 0 {
-                continue;
-            }
-            if n.count[k] > 0 {
-                // A leaf child: test it now, unless an earlier leaf moved the best hit closer.
-                if d[k] <= best.t * CULL_SLACK {
-                    bvh.closest_in_leaf(ray, n.child[k], n.count[k], best);
-                }
-            } else if next == u32::MAX {
-                next = n.child[k];
-            } else {
-                stack[sp] = (n.child[k], d[k]);
+        let acc = test_pair::<NX, NY, NZ>(n, &lanes, best.t * CULL_SLACK);
+        let (d0, d1) = (acc.x, acc.y);
+        let pick = match hits(acc) {
+            0 => None,
+            1 => Some(0),
+            2 => Some(1),
+            _ => {
+                let (near, far, far_d) = if d1 < d0 { (1, 0, d0) } else { (0, 1, d1) };
+                stack[sp] = (pack(n.child[far], n.count[far]), far_d);
                 sp += 1;
+                Some(near)
             }
+        };
+        if let Some(k) = pick {
+            if n.count[k] == 0 {
+                current = n.child[k];
+                continue 'descend;
+            }
+            bvh.closest_in_leaf(ray, n.child[k], n.count[k], best);
         }
-        if next != u32::MAX {
-            current = next;
-            continue;
-        }
-        // Pop, skipping boxes that now start beyond the best hit.
+        // Pop, skipping entries that now start beyond the best hit; leaves are tested here.
         loop {
             if sp == 0 {
                 return;
             }
             sp -= 1;
-            let (c, dist) = stack[sp];
-            if dist <= best.t * CULL_SLACK {
-                current = c;
-                break;
+            let (packed, dist) = stack[sp];
+            if dist > best.t * CULL_SLACK {
+                continue;
             }
+            let (child, count) = ((packed >> 8) as u32, (packed & 0xff) as u32);
+            if count == 0 {
+                current = child;
+                continue 'descend;
+            }
+            bvh.closest_in_leaf(ray, child, count, best);
         }
     }
+}
+
+#[inline(always)]
+fn pack(child: u32, count: u32) -> u64 {
+    (child as u64) << 8 | count as u64
 }
 
 /// Every hit over the pair layout; stops when `f` returns false.
