@@ -45,7 +45,8 @@ impl HitRecord {
 /// little-endian.
 pub fn write_rays(path: &Path, rays: &[Ray]) -> Result<()> {
     let mut w = BufWriter::new(
-        std::fs::File::create(path).with_context(|| format!("{}: cannot create", path.display()))?,
+        std::fs::File::create(path)
+            .with_context(|| format!("{}: cannot create", path.display()))?,
     );
     w.write_all(&(rays.len() as u32).to_le_bytes())?;
     for r in rays {
@@ -88,7 +89,8 @@ pub fn read_rays(path: &Path) -> Result<Vec<Ray>> {
 /// Writes a hits file: `u32 count`, then `count` records of `f32 t`, `u32 prim`.
 pub fn write_hits(path: &Path, hits: &[HitRecord]) -> Result<()> {
     let mut w = BufWriter::new(
-        std::fs::File::create(path).with_context(|| format!("{}: cannot create", path.display()))?,
+        std::fs::File::create(path)
+            .with_context(|| format!("{}: cannot create", path.display()))?,
     );
     w.write_all(&(hits.len() as u32).to_le_bytes())?;
     for h in hits {
@@ -145,7 +147,10 @@ trait Engine: Sync {
 impl Engine for Bvh {
     fn closest(&self, ray: &Ray) -> HitRecord {
         match self.intersect(ray, f32::INFINITY) {
-            Some(h) => HitRecord { t: h.t, prim: h.prim },
+            Some(h) => HitRecord {
+                t: h.t,
+                prim: h.prim,
+            },
             None => HitRecord::MISS,
         }
     }
@@ -305,16 +310,19 @@ pub fn run(
     let mut reference: Option<Vec<HitRecord>> = None;
 
     let measure = |name: &str,
-                       build_ms: f64,
-                       stats: Option<BvhStats>,
-                       engine: &dyn Engine,
-                       results: &mut Vec<EngineResult>,
-                       reference: &mut Option<Vec<HitRecord>>,
-                       progress: &mut dyn FnMut(&str)| {
+                   build_ms: f64,
+                   stats: Option<BvhStats>,
+                   engine: &dyn Engine,
+                   results: &mut Vec<EngineResult>,
+                   reference: &mut Option<Vec<HitRecord>>,
+                   progress: &mut dyn FnMut(&str)| {
         for &threads in &config.threads {
-            progress(&format!("{mesh_name}: tracing {name} on {threads} thread(s)"));
+            progress(&format!(
+                "{mesh_name}: tracing {name} on {threads} thread(s)"
+            ));
             let p = pool(threads);
-            let (hits, closest) = p.install(|| best_of(config.repeat, || trace_closest(engine, rays)));
+            let (hits, closest) =
+                p.install(|| best_of(config.repeat, || trace_closest(engine, rays)));
             let (_, occluded) =
                 p.install(|| best_of(config.repeat, || trace_occluded(engine, rays)));
             let reference = reference.get_or_insert_with(|| hits.clone());
@@ -336,11 +344,20 @@ pub fn run(
         let name = format!("tracery-{split}");
         progress(&format!("{mesh_name}: building {name}"));
         let options = config.options.with_split(split);
-        let (bvh, took) = one.install(|| best_of(config.repeat, || Bvh::build(triangles, &options)));
+        let (bvh, took) =
+            one.install(|| best_of(config.repeat, || Bvh::build(triangles, &options)));
         let build_ms = took.as_secs_f64() * 1e3;
         let mut stats = bvh.stats;
         stats.build_ms = build_ms;
-        measure(&name, build_ms, Some(stats), &bvh, &mut results, &mut reference, progress);
+        measure(
+            &name,
+            build_ms,
+            Some(stats),
+            &bvh,
+            &mut results,
+            &mut reference,
+            progress,
+        );
     }
     let sah_hits = reference.clone().unwrap_or_default();
 
@@ -356,9 +373,21 @@ pub fn run(
                 )
             })
         });
-        let tris = bvh.primitive_indices.iter().map(|&i| otris[i as usize]).collect();
+        let tris = bvh
+            .primitive_indices
+            .iter()
+            .map(|&i| otris[i as usize])
+            .collect();
         let engine = peers::Bvh2 { bvh, tris };
-        measure("obvhs-bvh2", took.as_secs_f64() * 1e3, None, &engine, &mut results, &mut reference, progress);
+        measure(
+            "obvhs-bvh2",
+            took.as_secs_f64() * 1e3,
+            None,
+            &engine,
+            &mut results,
+            &mut reference,
+            progress,
+        );
 
         progress(&format!("{mesh_name}: building obvhs-cwbvh"));
         let (bvh, took) = one.install(|| {
@@ -370,9 +399,21 @@ pub fn run(
                 )
             })
         });
-        let tris = bvh.primitive_indices.iter().map(|&i| otris[i as usize]).collect();
+        let tris = bvh
+            .primitive_indices
+            .iter()
+            .map(|&i| otris[i as usize])
+            .collect();
         let engine = peers::Cwbvh { bvh, tris };
-        measure("obvhs-cwbvh", took.as_secs_f64() * 1e3, None, &engine, &mut results, &mut reference, progress);
+        measure(
+            "obvhs-cwbvh",
+            took.as_secs_f64() * 1e3,
+            None,
+            &engine,
+            &mut results,
+            &mut reference,
+            progress,
+        );
     }
     MeshBench { results, sah_hits }
 }

@@ -6,11 +6,11 @@
 //! - [`geometry`]: rays, boxes and the watertight triangle test.
 //! - [`bvh`]: median and binned-SAH builders, closest-hit, any-hit and transmittance queries.
 
+pub mod bench;
 pub mod bvh;
+pub mod camera;
+pub mod film;
 pub mod geometry;
+pub mod render;
 pub mod sampling;
 pub mod scene;
-pub mod camera;
-pub mod bench;
-pub mod film;
-pub mod render;

@@ -11,11 +11,24 @@ use tracery::scene::{Mesh, Scene, shapes};
 fn check_mesh(name: &str, tris: &[[Vec3; 3]], random: usize, canonical_step: usize) {
     let rays = common::random_rays(tris, random, 0xC0FFEE ^ tris.len() as u64);
     let bounds = Mesh::from_triangles(tris.to_vec(), 0).bounds();
-    let camera: Vec<_> = canonical_rays(&bounds).into_iter().step_by(canonical_step).collect();
+    let camera: Vec<_> = canonical_rays(&bounds)
+        .into_iter()
+        .step_by(canonical_step)
+        .collect();
     let bvhs = common::both_builders().map(|o| Bvh::build(tris, &o));
     let bvhs = [&bvhs[0], &bvhs[1]];
-    common::assert_matches_brute_force(&format!("{name}, sah and median, random rays"), tris, &bvhs, &rays);
-    common::assert_matches_brute_force(&format!("{name}, sah and median, canonical rays"), tris, &bvhs, &camera);
+    common::assert_matches_brute_force(
+        &format!("{name}, sah and median, random rays"),
+        tris,
+        &bvhs,
+        &rays,
+    );
+    common::assert_matches_brute_force(
+        &format!("{name}, sah and median, canonical rays"),
+        tris,
+        &bvhs,
+        &camera,
+    );
 }
 
 #[test]
@@ -50,7 +63,11 @@ fn other_leaf_sizes_and_bins_match_brute_force() {
     let rays = common::random_rays(&tris, 20_000, 5);
     for split in [SplitMethod::Sah, SplitMethod::Median] {
         for (bins, leaf) in [(2, 1), (4, 2), (32, 8), (64, 255)] {
-            let o = BuildOptions { split, bins, max_leaf_size: leaf };
+            let o = BuildOptions {
+                split,
+                bins,
+                max_leaf_size: leaf,
+            };
             let bvh = Bvh::build(&tris, &o);
             assert!(bvh.stats.max_leaf_size <= leaf);
             common::assert_matches_brute_force(&format!("{o:?}"), &tris, &[&bvh], &rays);
@@ -72,14 +89,21 @@ fn dragon_202k_matches_brute_force() {
 fn ties_in_t_go_to_the_lowest_index() {
     // The same triangle three times, far apart in the list, with others in between.
     let mut tris = shapes::random_soup(500, 0.05, 3);
-    let dup = [Vec3::new(-1.0, -1.0, 5.0), Vec3::new(1.0, -1.0, 5.0), Vec3::new(0.0, 1.0, 5.0)];
+    let dup = [
+        Vec3::new(-1.0, -1.0, 5.0),
+        Vec3::new(1.0, -1.0, 5.0),
+        Vec3::new(0.0, 1.0, 5.0),
+    ];
     tris.insert(17, dup);
     tris.insert(300, dup);
     tris.push(dup);
     for options in common::both_builders() {
         let bvh = Bvh::build(&tris, &options);
         let hit = bvh
-            .intersect(&tracery::geometry::Ray::new(Vec3::new(0.0, -0.2, 10.0), Vec3::NEG_Z), f32::INFINITY)
+            .intersect(
+                &tracery::geometry::Ray::new(Vec3::new(0.0, -0.2, 10.0), Vec3::NEG_Z),
+                f32::INFINITY,
+            )
             .expect("hits the duplicated triangle");
         assert_eq!(hit.prim, 17, "{:?}", options.split);
     }

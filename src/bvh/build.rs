@@ -6,7 +6,7 @@ use std::time::Instant;
 use glam::{Vec3, Vec3A, Vec4};
 
 use super::{BuildOptions, Bvh, BvhNode, BvhStats, MAX_DEPTH, SplitMethod, sah};
-use crate::geometry::Aabb;
+use crate::geometry::{Aabb, is_degenerate};
 
 /// Past this depth both builders split by count, which halves the range each time.
 const COUNT_SPLIT_DEPTH: u32 = (MAX_DEPTH - 32) as u32;
@@ -26,8 +26,13 @@ pub(super) fn build(triangles: &[[Vec3; 3]], options: &BuildOptions) -> Bvh {
     let mut refs: Vec<PrimRef> = Vec::with_capacity(triangles.len());
     let mut root_bounds = Aabb::EMPTY;
     let mut root_centroids = Aabb::EMPTY;
+    let mut degenerate = 0;
     for (i, t) in triangles.iter().enumerate() {
         if !(t[0].is_finite() && t[1].is_finite() && t[2].is_finite()) {
+            continue;
+        }
+        if is_degenerate(t) {
+            degenerate += 1;
             continue;
         }
         let mut b = Aabb::EMPTY;
@@ -38,7 +43,7 @@ pub(super) fn build(triangles: &[[Vec3; 3]], options: &BuildOptions) -> Bvh {
         root_centroids.grow_point(b.center());
         refs.push(PrimRef::new(&b, i as u32));
     }
-    let excluded = triangles.len() - refs.len();
+    let excluded = triangles.len() - refs.len() - degenerate;
 
     let mut nodes = vec![
         BvhNode {
@@ -79,7 +84,7 @@ pub(super) fn build(triangles: &[[Vec3; 3]], options: &BuildOptions) -> Bvh {
         options,
     };
     let build_time = start.elapsed();
-    bvh.stats = BvhStats::measure(&bvh, excluded, build_time);
+    bvh.stats = BvhStats::measure(&bvh, excluded, degenerate, build_time);
     bvh
 }
 
@@ -100,7 +105,6 @@ struct Builder<'a> {
     /// Per triangle reference, its bin in the current node.
     keys: std::cell::RefCell<Vec<u8>>,
 }
-
 
 /// A triangle's box with its index stored in the `w` lane of `min`.
 #[derive(Clone, Copy)]

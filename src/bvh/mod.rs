@@ -20,8 +20,8 @@ mod traverse;
 use glam::{Vec3, Vec3A};
 
 pub use pairs::PairNode;
-pub use stats::BvhStats;
 pub use reference::{BruteForce, closest_hit_brute_force};
+pub use stats::BvhStats;
 pub use traverse::{Hit, Visit};
 
 use crate::geometry::Aabb;
@@ -52,7 +52,9 @@ impl std::str::FromStr for SplitMethod {
         match s.to_ascii_lowercase().as_str() {
             "median" => Ok(SplitMethod::Median),
             "sah" => Ok(SplitMethod::Sah),
-            other => Err(format!("unknown split method `{other}` (expected median or sah)")),
+            other => Err(format!(
+                "unknown split method `{other}` (expected median or sah)"
+            )),
         }
     }
 }
@@ -195,8 +197,8 @@ pub struct Bvh {
 
 impl Bvh {
     /// Builds a BVH over `triangles` (three vertices each). Triangles with a NaN or infinite
-    /// vertex are left out and counted in [`BvhStats::excluded`]; everything else, zero-area
-    /// triangles included, is kept. Never panics or loops, whatever the input.
+    /// vertex are left out and counted in [`BvhStats::excluded`], zero-area ones likewise in
+    /// [`BvhStats::degenerate`]. Never panics or loops, whatever the input.
     pub fn build(triangles: &[[Vec3; 3]], options: &BuildOptions) -> Bvh {
         build::build(triangles, options)
     }

@@ -51,7 +51,11 @@ pub(super) fn pair_layout(nodes: &[BvhNode]) -> Vec<PairNode> {
                 p.z[k] = c.min[2];
                 p.z[k + 2] = c.max[2];
                 p.count[k] = c.count;
-                p.child[k] = if c.is_leaf() { c.first } else { c.first / 2 - 1 };
+                p.child[k] = if c.is_leaf() {
+                    c.first
+                } else {
+                    c.first / 2 - 1
+                };
             }
             p
         })

@@ -9,6 +9,8 @@ pub struct BvhStats {
     pub triangles: usize,
     /// Triangles left out because a vertex was NaN or infinite.
     pub excluded: usize,
+    /// Triangles left out because their area is exactly zero (nothing to hit).
+    pub degenerate: usize,
     /// Nodes in the tree, leaves included.
     pub nodes: usize,
     /// Leaf nodes.
@@ -29,10 +31,16 @@ pub struct BvhStats {
 }
 
 impl BvhStats {
-    pub(super) fn measure(bvh: &Bvh, excluded: usize, build_time: Duration) -> Self {
+    pub(super) fn measure(
+        bvh: &Bvh,
+        excluded: usize,
+        degenerate: usize,
+        build_time: Duration,
+    ) -> Self {
         let mut s = BvhStats {
             triangles: bvh.tris.len(),
             excluded,
+            degenerate,
             build_ms: build_time.as_secs_f64() * 1e3,
             min_leaf_size: u32::MAX,
             ..Default::default()

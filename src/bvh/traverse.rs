@@ -68,7 +68,7 @@ impl Bvh {
     /// against several structures).
     #[inline]
     pub fn intersect_prepared(&self, ray: &PreparedRay, t_max: f32) -> Option<Hit> {
-        if self.tris.is_empty() || !(t_max > 0.0) {
+        if self.tris.is_empty() || t_max.is_nan() || t_max <= 0.0 {
             return None;
         }
         if enter(&self.nodes[0], ray, t_max) == f32::INFINITY {
@@ -114,7 +114,7 @@ impl Bvh {
         mut visit: impl FnMut(Visit),
     ) -> Option<Hit> {
         let ray = &PreparedRay::new(ray);
-        if self.tris.is_empty() || !(t_max > 0.0) {
+        if self.tris.is_empty() || t_max.is_nan() || t_max <= 0.0 {
             return None;
         }
         let mut best_t = t_max;
@@ -191,15 +191,8 @@ impl Bvh {
         }
     }
 
-    fn finish(
-        &self,
-        ray: &PreparedRay,
-        slot: usize,
-        id: u32,
-        t: f32,
-        t_max: f32,
-    ) -> Option<Hit> {
-        if slot == usize::MAX || !(t < t_max) {
+    fn finish(&self, ray: &PreparedRay, slot: usize, id: u32, t: f32, t_max: f32) -> Option<Hit> {
+        if slot == usize::MAX || t.is_nan() || t >= t_max {
             return None;
         }
         let h = intersect_triangle(ray, &self.tris[slot], t.next_up())?;
@@ -242,7 +235,7 @@ impl Bvh {
     /// Calls `f(prim, t)` for every triangle hit at `0 < t < t_max`, in no particular order,
     /// until `f` returns false.
     pub fn for_each_hit(&self, ray: &Ray, t_max: f32, mut f: impl FnMut(u32, f32) -> bool) {
-        if self.tris.is_empty() || !(t_max > 0.0) {
+        if self.tris.is_empty() || t_max.is_nan() || t_max <= 0.0 {
             return;
         }
         let ray = PreparedRay::new(ray);

@@ -44,8 +44,14 @@ fn per_mesh(path: &Path, mesh: &str, several: bool) -> PathBuf {
     if !several {
         return path.to_path_buf();
     }
-    let stem = path.file_stem().map(|s| s.to_string_lossy()).unwrap_or_default();
-    let ext = path.extension().map(|e| format!(".{}", e.to_string_lossy())).unwrap_or_default();
+    let stem = path
+        .file_stem()
+        .map(|s| s.to_string_lossy())
+        .unwrap_or_default();
+    let ext = path
+        .extension()
+        .map(|e| format!(".{}", e.to_string_lossy()))
+        .unwrap_or_default();
     path.with_file_name(format!("{stem}-{mesh}{ext}"))
 }
 
@@ -117,16 +123,36 @@ fn print_table(mesh: &str, triangles: usize, rows: &[EngineResult]) {
     println!("\n{mesh} ({triangles} triangles), canonical camera 1024x1024, best of runs");
     println!(
         "{:<15} {:>7} {:>9} {:>7} {:>8} {:>9} {:>13} {:>14} {:>9}",
-        "engine", "threads", "build ms", "levels", "leaves", "SAH cost", "closest Mr/s", "occluded Mr/s", "agree %"
+        "engine",
+        "threads",
+        "build ms",
+        "levels",
+        "leaves",
+        "SAH cost",
+        "closest Mr/s",
+        "occluded Mr/s",
+        "agree %"
     );
     for r in rows {
         let (levels, leaves, sah) = match &r.stats {
-            Some(s) => (s.levels.to_string(), s.leaves.to_string(), format!("{:.2}", s.sah_cost)),
+            Some(s) => (
+                s.levels.to_string(),
+                s.leaves.to_string(),
+                format!("{:.2}", s.sah_cost),
+            ),
             None => ("-".into(), "-".into(), "-".into()),
         };
         println!(
             "{:<15} {:>7} {:>9.1} {:>7} {:>8} {:>9} {:>13.2} {:>14.2} {:>9.3}",
-            r.engine, r.threads, r.build_ms, levels, leaves, sah, r.closest_mrays, r.occluded_mrays, r.agreement * 100.0
+            r.engine,
+            r.threads,
+            r.build_ms,
+            levels,
+            leaves,
+            sah,
+            r.closest_mrays,
+            r.occluded_mrays,
+            r.agreement * 100.0
         );
     }
     let find = |e: &str, t: usize| rows.iter().find(|r| r.engine == e && r.threads == t);

@@ -2,6 +2,7 @@
 
 mod bench;
 mod render;
+mod report;
 mod stats;
 
 use std::path::{Path, PathBuf};
@@ -27,6 +28,8 @@ enum Command {
     Stats(stats::StatsArgs),
     /// Benchmark the builders and traversal on the canonical camera rays, against obvhs.
     Bench(bench::BenchArgs),
+    /// Print the README's measurement tables (Markdown).
+    Report(report::ReportArgs),
 }
 
 /// BVH settings shared by the commands.
@@ -61,6 +64,7 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::Render(a) => render::run(a),
         Command::Stats(a) => stats::run(a),
         Command::Bench(a) => bench::run(a),
+        Command::Report(a) => report::run(a),
     }
 }
 

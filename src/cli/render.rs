@@ -64,15 +64,20 @@ pub fn run(a: RenderArgs) -> Result<()> {
         s.levels,
         s.leaves,
         s.sah_cost,
-        if s.excluded > 0 {
-            format!(", {} triangles left out (non-finite vertices)", s.excluded)
+        if s.excluded + s.degenerate > 0 {
+            format!(
+                "; left out: {} with non-finite vertices, {} with zero area",
+                s.excluded, s.degenerate
+            )
         } else {
             String::new()
         }
     );
     let bar = ProgressBar::new(settings.height as u64).with_style(
-        ProgressStyle::with_template("rendering {bar:40} {pos}/{len} rows, {elapsed} elapsed, eta {eta}")
-            .expect("valid template"),
+        ProgressStyle::with_template(
+            "rendering {bar:40} {pos}/{len} rows, {elapsed} elapsed, eta {eta}",
+        )
+        .expect("valid template"),
     );
     let start = Instant::now();
     let out = render(&scene, &bvh, &settings, &|_| bar.inc(1));

@@ -64,22 +64,40 @@ pub fn run(a: StatsArgs) -> Result<()> {
         tracery::bvh::sah::C_INTERSECT
     );
     println!(
-        "{:<8} {:>5} {:>5} {:>10} {:>9} {:>7} {:>16} {:>9} {:>9} {:>10}",
-        "split", "bins", "leaf", "nodes", "leaves", "levels", "leaf min/mean/max", "SAH cost", "excluded", "build ms"
+        "{:<8} {:>5} {:>5} {:>10} {:>9} {:>7} {:>16} {:>9} {:>10} {:>9} {:>10}",
+        "split",
+        "bins",
+        "leaf",
+        "nodes",
+        "leaves",
+        "levels",
+        "leaf min/mean/max",
+        "SAH cost",
+        "non-finite",
+        "zero-area",
+        "build ms"
     );
     for r in &rows {
         let s = &r.stats;
         println!(
-            "{:<8} {:>5} {:>5} {:>10} {:>9} {:>7} {:>16} {:>9.2} {:>9} {:>10.2}",
+            "{:<8} {:>5} {:>5} {:>10} {:>9} {:>7} {:>16} {:>9.2} {:>10} {:>9} {:>10.2}",
             r.split.to_string(),
-            if r.split == SplitMethod::Sah { r.bins.to_string() } else { "-".into() },
+            if r.split == SplitMethod::Sah {
+                r.bins.to_string()
+            } else {
+                "-".into()
+            },
             r.leaf_size,
             s.nodes,
             s.leaves,
             s.levels,
-            format!("{}/{:.2}/{}", s.min_leaf_size, s.mean_leaf_size, s.max_leaf_size),
+            format!(
+                "{}/{:.2}/{}",
+                s.min_leaf_size, s.mean_leaf_size, s.max_leaf_size
+            ),
             s.sah_cost,
             s.excluded,
+            s.degenerate,
             s.build_ms
         );
     }

@@ -15,7 +15,7 @@ mod triangle;
 
 pub use aabb::Aabb;
 pub use ray::{PreparedRay, Ray, offset_ray_origin};
-pub use triangle::{TriangleHit, intersect_triangle, intersect_triangle_t};
+pub use triangle::{TriangleHit, intersect_triangle, intersect_triangle_t, is_degenerate};
 
 /// `gamma(n)` of Higham / pbrt: a bound on the relative error of `n` chained f32 roundings.
 pub const fn gamma(n: u32) -> f32 {

@@ -1,4 +1,4 @@
-use glam::Vec3A;
+use glam::{DVec3, Vec3, Vec3A};
 
 use super::PreparedRay;
 
@@ -158,4 +158,13 @@ fn owns_edge(q: (f32, f32), r: (f32, f32), opposite: (f32, f32)) -> bool {
         return false; // degenerate in the ray plane: no area to hit
     }
     nx > 0.0 || (nx == 0.0 && ny > 0.0)
+}
+
+/// True when the triangle has exactly zero area: its vertices are collinear or coincide. The
+/// edge cross product is taken in f64, where differences of f32 coordinates are exact, so
+/// only truly flat triangles count. Such a triangle has no surface to hit, and the BVH leaves
+/// it out (a ray could otherwise "hit" it through rounding in the sheared ray space).
+pub fn is_degenerate(t: &[Vec3; 3]) -> bool {
+    let [a, b, c] = t.map(|v| v.as_dvec3());
+    (b - a).cross(c - a) == DVec3::ZERO
 }

@@ -135,10 +135,7 @@ pub fn render(
             progress(rows_done.fetch_add(1, Ordering::Relaxed) + 1);
             (rays, rejected)
         })
-        .reduce(
-            || (RayCounts::default(), 0),
-            |a, b| (a.0 + b.0, a.1 + b.1),
-        );
+        .reduce(|| (RayCounts::default(), 0), |a, b| (a.0 + b.0, a.1 + b.1));
     film.samples = settings.spp;
     film.rejected = rejected;
     RenderOutput { film, rays }

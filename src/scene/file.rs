@@ -157,8 +157,8 @@ type ReadFn<'a> = &'a dyn Fn(&Path) -> Result<Vec<u8>>;
 /// Loads a scene file from disk.
 pub fn load(path: &Path) -> Result<Scene> {
     let bytes = read_file(path)?;
-    let text = String::from_utf8(bytes)
-        .map_err(|_| anyhow!("{}: not UTF-8 text", path.display()))?;
+    let text =
+        String::from_utf8(bytes).map_err(|_| anyhow!("{}: not UTF-8 text", path.display()))?;
     parse(path, &text, &|p: &Path| read_file(p), true)
 }
 
@@ -288,7 +288,10 @@ pub fn parse(path: &Path, text: &str, read: ReadFn, check_files: bool) -> Result
             let pos = e.span().start;
             let check = |p: PathBuf| -> Result<PathBuf> {
                 if check_files && !p.is_file() {
-                    return Err(at(pos, format!("environment image {} not found", p.display())));
+                    return Err(at(
+                        pos,
+                        format!("environment image {} not found", p.display()),
+                    ));
                 }
                 Ok(p)
             };

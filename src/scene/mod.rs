@@ -320,7 +320,11 @@ impl Scene {
             }
             Some("ply") => {
                 let mesh = ply::load(path)?;
-                Ok(Scene::from_mesh(name_of(path), mesh, vec![Material::default()]))
+                Ok(Scene::from_mesh(
+                    name_of(path),
+                    mesh,
+                    vec![Material::default()],
+                ))
             }
             _ => bail!(
                 "{}: unknown file type (expected .toml, .obj or .ply)",

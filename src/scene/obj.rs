@@ -43,7 +43,6 @@ pub fn load_from(
         triangulate: false,
         ignore_points: true,
         ignore_lines: true,
-        ..Default::default()
     };
     let mtl_error = std::cell::RefCell::new(None::<String>);
     let result = tobj::load_obj_buf(&mut BufReader::new(bytes), &options, |mtl_path| {
@@ -51,9 +50,8 @@ pub fn load_from(
             *mtl_error.borrow_mut() = Some(format!("{e:#}"));
             tobj::LoadError::OpenFileFailed
         })?;
-        tobj::load_mtl_buf(&mut BufReader::new(&text[..])).map_err(|e| {
+        tobj::load_mtl_buf(&mut BufReader::new(&text[..])).inspect_err(|e| {
             *mtl_error.borrow_mut() = Some(format!("{}: {e}", mtl_path.display()));
-            e
         })
     });
     let (models, materials) = match result {
@@ -150,7 +148,11 @@ pub fn load_from(
 
 fn convert_material(m: &tobj::Material) -> Material {
     let v = |a: Option<[f32; 3]>, d: Vec3| a.map(Vec3::from).unwrap_or(d);
-    let param = |k: &str| m.unknown_param.get(k).and_then(|s| s.trim().parse::<f32>().ok());
+    let param = |k: &str| {
+        m.unknown_param
+            .get(k)
+            .and_then(|s| s.trim().parse::<f32>().ok())
+    };
     let illum = m.illumination_model.unwrap_or(2) as u32;
     let specular = v(m.specular, Vec3::ZERO);
     let opacity = m
@@ -163,7 +165,10 @@ fn convert_material(m: &tobj::Material) -> Material {
         .map(Vec3::from)
         .or_else(|| {
             m.unknown_param.get("Ke").and_then(|s| {
-                let v: Vec<f32> = s.split_whitespace().filter_map(|x| x.parse().ok()).collect();
+                let v: Vec<f32> = s
+                    .split_whitespace()
+                    .filter_map(|x| x.parse().ok())
+                    .collect();
                 (v.len() == 3).then(|| Vec3::new(v[0], v[1], v[2]))
             })
         })
@@ -248,7 +253,9 @@ fn locate_error(text: &str, err: tobj::LoadError) -> Option<(usize, String)> {
                             let what = ["vertex", "texture coordinate", "normal"][slot];
                             return Some((
                                 line,
-                                format!("{what} index {idx} is out of range ({count} defined so far)"),
+                                format!(
+                                    "{what} index {idx} is out of range ({count} defined so far)"
+                                ),
                             ));
                         }
                     }

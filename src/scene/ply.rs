@@ -136,13 +136,12 @@ pub fn load_from(path: &Path, data: impl std::io::BufRead) -> Result<Mesh> {
     if let Some(v) = vertices.first()
         && v.has & 0b111 != 0b111
     {
-        bail!(
-            "{}: vertices need x, y and z properties",
-            path.display()
-        );
+        bail!("{}: vertices need x, y and z properties", path.display());
     }
     let positions: Vec<Vec3> = vertices.iter().map(|v| Vec3::from(v.p)).collect();
-    let has_normals = vertices.first().is_some_and(|v| v.has & 0b111000 == 0b111000);
+    let has_normals = vertices
+        .first()
+        .is_some_and(|v| v.has & 0b111000 == 0b111000);
 
     let mut tris: Vec<[u32; 3]> = Vec::with_capacity(faces.len());
     for (fi, f) in faces.iter().enumerate() {

@@ -142,7 +142,12 @@ pub fn random_soup(count: u32, size: f32, seed: u64) -> Vec<[Vec3; 3]> {
         .map(|_| {
             let c = Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32());
             let mut v = || {
-                c + size * Vec3::new(rng.next_f32() - 0.5, rng.next_f32() - 0.5, rng.next_f32() - 0.5)
+                c + size
+                    * Vec3::new(
+                        rng.next_f32() - 0.5,
+                        rng.next_f32() - 0.5,
+                        rng.next_f32() - 0.5,
+                    )
             };
             [v(), v(), v()]
         })

@@ -12,14 +12,22 @@ use tracery::sampling::SplitMix64;
 /// A fetched third-party asset, or `None` (with a note) when `scripts/fetch-assets` has not
 /// run. In CI (`CI` set) a missing asset fails the test instead.
 pub fn external(rel: &str) -> Option<PathBuf> {
-    let p = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("assets/external").join(rel);
+    let p = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("assets/external")
+        .join(rel);
     if p.is_file() {
         return Some(p);
     }
     if std::env::var_os("CI").is_some() {
-        panic!("{} is missing: CI must run scripts/fetch-assets first", p.display());
+        panic!(
+            "{} is missing: CI must run scripts/fetch-assets first",
+            p.display()
+        );
     }
-    eprintln!("skipped: {} not fetched (run scripts/fetch-assets)", p.display());
+    eprintln!(
+        "skipped: {} not fetched (run scripts/fetch-assets)",
+        p.display()
+    );
     None
 }
 

@@ -1,0 +1,165 @@
+//! `tracery report`: the README's tables, printed as Markdown by the command they cite.
+
+use std::path::PathBuf;
+use std::time::Instant;
+
+use anyhow::Result;
+use clap::{Args, Subcommand};
+use tracery::bench::{self, BenchConfig};
+use tracery::bvh::{BuildOptions, Bvh, SplitMethod};
+use tracery::render::{RenderSettings, render};
+
+use super::load_scene;
+
+#[derive(Args, Debug)]
+pub struct ReportArgs {
+    #[command(subcommand)]
+    kind: ReportKind,
+}
+
+#[derive(Subcommand, Debug)]
+enum ReportKind {
+    /// Median vs SAH per mesh: build ms, levels, leaves, SAH cost, closest-hit Mrays/s (one
+    /// thread and all threads, canonical camera) and render ms at 512x512 (1 spp, all threads).
+    Splits {
+        /// Meshes or scene files (the built-in Cornell box when left out).
+        meshes: Vec<PathBuf>,
+        /// Repeat each measurement and keep the best.
+        #[arg(long, default_value_t = 3)]
+        repeat: usize,
+    },
+    /// SAH bin counts against build ms, SAH cost and closest-hit Mrays/s (one thread).
+    Bins {
+        /// Mesh or scene file.
+        mesh: PathBuf,
+        /// Bin counts to compare.
+        #[arg(long, value_delimiter = ',', default_value = "4,8,12,16,32")]
+        bins: Vec<u32>,
+        /// Repeat each measurement and keep the best.
+        #[arg(long, default_value_t = 5)]
+        repeat: usize,
+    },
+}
+
+pub fn run(a: ReportArgs) -> Result<()> {
+    match a.kind {
+        ReportKind::Splits { meshes, repeat } => splits(meshes, repeat),
+        ReportKind::Bins { mesh, bins, repeat } => bins_table(mesh, bins, repeat),
+    }
+}
+
+fn all_threads() -> usize {
+    std::thread::available_parallelism().map_or(1, |n| n.get())
+}
+
+fn splits(meshes: Vec<PathBuf>, repeat: usize) -> Result<()> {
+    let sources: Vec<Option<PathBuf>> = if meshes.is_empty() {
+        vec![None]
+    } else {
+        meshes.into_iter().map(Some).collect()
+    };
+    let cores = all_threads();
+    println!(
+        "| scene | triangles | split | build ms | levels | leaves | SAH cost | Mrays/s 1 thread | Mrays/s {cores} threads | render ms 512x512 |"
+    );
+    println!("|---|---:|---|---:|---:|---:|---:|---:|---:|---:|");
+    for src in &sources {
+        let scene = load_scene(src.as_deref())?;
+        let rays = bench::canonical_rays(&scene.mesh.bounds());
+        let config = BenchConfig {
+            threads: vec![1, cores],
+            repeat,
+            options: BuildOptions::sah(),
+            peers: false,
+        };
+        eprintln!("{}: measuring", scene.name);
+        let out = bench::run(
+            &scene.name,
+            &scene.mesh.triangles,
+            &rays,
+            &config,
+            &mut |l| eprintln!("  {l}"),
+        );
+        for split in [SplitMethod::Median, SplitMethod::Sah] {
+            let engine = format!("tracery-{split}");
+            let row = |t: usize| {
+                out.results
+                    .iter()
+                    .find(|r| r.engine == engine && r.threads == t)
+            };
+            let (Some(one), Some(all)) = (row(1), row(cores)) else {
+                continue;
+            };
+            let stats = one.stats.expect("our engines report stats");
+            let bvh = Bvh::build(
+                &scene.mesh.triangles,
+                &BuildOptions::sah().with_split(split),
+            );
+            let settings = RenderSettings {
+                width: 512,
+                height: 512,
+                spp: 1,
+                seed: 0,
+            };
+            let mut best = f64::INFINITY;
+            for _ in 0..repeat.max(1) {
+                let start = Instant::now();
+                render(&scene, &bvh, &settings, &|_| {});
+                best = best.min(start.elapsed().as_secs_f64() * 1e3);
+            }
+            println!(
+                "| {} | {} | {} | {:.1} | {} | {} | {:.2} | {:.2} | {:.2} | {:.1} |",
+                scene.name,
+                scene.triangle_count(),
+                split,
+                stats.build_ms,
+                stats.levels,
+                stats.leaves,
+                stats.sah_cost,
+                one.closest_mrays,
+                all.closest_mrays,
+                best
+            );
+        }
+    }
+    Ok(())
+}
+
+fn bins_table(mesh: PathBuf, bins: Vec<u32>, repeat: usize) -> Result<()> {
+    let scene = load_scene(Some(&mesh))?;
+    let rays = bench::canonical_rays(&scene.mesh.bounds());
+    println!("| bins | build ms | SAH cost | levels | leaves | closest Mrays/s (1 thread) |");
+    println!("|---:|---:|---:|---:|---:|---:|");
+    for b in bins {
+        let options = BuildOptions {
+            bins: b,
+            ..BuildOptions::sah()
+        };
+        options.validate().map_err(anyhow::Error::msg)?;
+        let config = BenchConfig {
+            threads: vec![1],
+            repeat,
+            options,
+            peers: false,
+        };
+        eprintln!("{}: {b} bins", scene.name);
+        let out = bench::run(
+            &scene.name,
+            &scene.mesh.triangles,
+            &rays,
+            &config,
+            &mut |_| {},
+        );
+        let r = out
+            .results
+            .iter()
+            .find(|r| r.engine == "tracery-sah")
+            .expect("the SAH engine ran");
+        let s = r.stats.expect("our engines report stats");
+        println!(
+            "| {b} | {:.1} | {:.2} | {} | {} | {:.2} |",
+            r.build_ms, s.sah_cost, s.levels, s.leaves, r.closest_mrays
+        );
+    }
+    Ok(())
+}

@@ -1,0 +1,147 @@
+//! The `tracery` command line, run as a user would.
+
+use std::path::Path;
+use std::process::{Command, Output};
+
+use tracery::bench::canonical_rays;
+use tracery::bvh::BruteForce;
+use tracery::scene::Scene;
+
+fn tracery(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_tracery"))
+        .args(args)
+        .output()
+        .expect("the binary runs")
+}
+
+fn text(b: &[u8]) -> String {
+    String::from_utf8_lossy(b).into_owned()
+}
+
+#[test]
+fn render_writes_the_png_it_names() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("sub/cb.png");
+    let o = tracery(&[
+        "render",
+        "-o",
+        out.to_str().unwrap(),
+        "--width",
+        "40",
+        "--height",
+        "30",
+        "--spp",
+        "2",
+    ]);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    assert!(text(&o.stdout).contains("cb.png"), "{}", text(&o.stdout));
+    let img = image::open(&out).unwrap();
+    assert_eq!((img.width(), img.height()), (40, 30));
+}
+
+#[test]
+fn stats_json_has_both_builders() {
+    let o = tracery(&["stats", "--json"]);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let rows = v.as_array().unwrap();
+    assert_eq!(rows.len(), 2);
+    for (row, split) in rows.iter().zip(["median", "sah"]) {
+        assert_eq!(row["split"], split);
+        assert_eq!(row["triangles"], 32);
+        for key in [
+            "nodes", "leaves", "levels", "sah_cost", "build_ms", "excluded",
+        ] {
+            assert!(row.get(key).is_some(), "{key} missing in {row}");
+        }
+    }
+}
+
+#[test]
+fn bench_json_and_output_files_follow_the_formats() {
+    let dir = tempfile::tempdir().unwrap();
+    let rays = dir.path().join("rays.bin");
+    let hits = dir.path().join("hits.bin");
+    let o = tracery(&[
+        "bench",
+        "--json",
+        "--repeat",
+        "1",
+        "--threads",
+        "2",
+        "--rays-out",
+        rays.to_str().unwrap(),
+        "--hits-out",
+        hits.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let rows = v.as_array().unwrap();
+    let engines: Vec<&str> = rows.iter().map(|r| r["engine"].as_str().unwrap()).collect();
+    for e in ["tracery-sah", "tracery-median", "obvhs-bvh2", "obvhs-cwbvh"] {
+        assert_eq!(
+            engines.iter().filter(|x| **x == e).count(),
+            2,
+            "{e}: one and two threads"
+        );
+    }
+    for r in rows {
+        for key in [
+            "mesh",
+            "triangles",
+            "threads",
+            "build_ms",
+            "closest_mrays",
+            "occluded_mrays",
+        ] {
+            assert!(r.get(key).is_some(), "{key} missing in {r}");
+        }
+        assert!(r["closest_mrays"].as_f64().unwrap() > 0.0);
+    }
+
+    // Rays: u32 count then 6 f32 each; hits: u32 count then (f32 t, u32 prim).
+    let rb = std::fs::read(&rays).unwrap();
+    let hb = std::fs::read(&hits).unwrap();
+    let n = u32::from_le_bytes(rb[..4].try_into().unwrap()) as usize;
+    assert_eq!(n, 1024 * 1024);
+    assert_eq!(rb.len(), 4 + 24 * n);
+    assert_eq!(hb.len(), 4 + 8 * n);
+    // The rays are the canonical camera's, and the hits are brute force's answers.
+    let scene = Scene::cornell_box();
+    let expected = canonical_rays(&scene.mesh.bounds());
+    let read_back = tracery::bench::read_rays(&rays).unwrap();
+    assert_eq!(read_back, expected);
+    let bf = BruteForce::new(&scene.mesh.triangles);
+    for i in (0..n).step_by(997) {
+        let rec = &hb[4 + 8 * i..12 + 8 * i];
+        let t = f32::from_le_bytes(rec[..4].try_into().unwrap());
+        let prim = u32::from_le_bytes(rec[4..].try_into().unwrap());
+        match bf.closest(&expected[i], f32::INFINITY) {
+            Some(h) => assert_eq!((t, prim), (h.t, h.prim), "ray {i}"),
+            None => assert_eq!((t, prim), (f32::INFINITY, u32::MAX), "ray {i}"),
+        }
+    }
+}
+
+#[test]
+fn bad_input_fails_with_a_message_naming_the_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let bad = dir.path().join("broken.obj");
+    std::fs::write(&bad, "v 0 0 0\nv 1 0\nf 1 2 3\n").unwrap();
+    for args in [
+        vec!["render", bad.to_str().unwrap(), "-o", "/dev/null"],
+        vec!["stats", "/nonexistent/mesh.ply"],
+        vec!["render", "--width", "0"],
+        vec!["stats", "--bins", "1"],
+    ] {
+        let o = tracery(&args);
+        assert!(!o.status.success(), "{args:?} should fail");
+        let e = text(&o.stderr);
+        assert!(e.starts_with("error: "), "{args:?}: {e}");
+        assert!(!e.contains("panicked"), "{args:?}: {e}");
+        if let Some(file) = args.iter().find(|a| a.contains('/')) {
+            let name = Path::new(file).file_name().unwrap().to_str().unwrap();
+            assert!(e.contains(name), "{args:?}: {e}");
+        }
+    }
+}

@@ -1,0 +1,247 @@
+//! Rays, boxes and triangles: the slab-test cases and the watertight triangle test, by name.
+
+mod common;
+
+use glam::{Vec3, Vec3A};
+use tracery::bvh::{BruteForce, BuildOptions, Bvh};
+use tracery::geometry::{Aabb, PreparedRay, Ray, intersect_triangle_t, offset_ray_origin};
+use tracery::scene::shapes;
+
+fn unit_box() -> Aabb {
+    Aabb::new(Vec3::ZERO, Vec3::ONE)
+}
+
+fn slab_hit(b: &Aabb, o: Vec3, d: Vec3) -> Option<f32> {
+    b.intersect(&PreparedRay::new(&Ray::new(o, d)), f32::INFINITY)
+}
+
+/// The same question through the BVH's own box test: a BVH over one triangle spanning the
+/// box's diagonal face, so the root box is `b`... reported as whether the root is entered.
+fn bvh_enters(tris: &[[Vec3; 3]], o: Vec3, d: Vec3) -> bool {
+    let bvh = Bvh::build(tris, &BuildOptions::sah());
+    let mut entered = false;
+    bvh.intersect_visit(&Ray::new(o, d), f32::INFINITY, |_| entered = true);
+    entered
+}
+
+#[test]
+fn slab_plus_and_minus_zero_components_give_the_same_answer() {
+    let b = unit_box();
+    let origins = [
+        Vec3::new(0.5, 0.5, -1.0),
+        Vec3::new(0.0, 0.5, -1.0),
+        Vec3::new(1.0, 0.5, -1.0),
+        Vec3::new(1.5, 0.5, -1.0),
+        Vec3::new(-0.5, 0.5, -1.0),
+        Vec3::new(0.5, 1.0, -1.0),
+    ];
+    for o in origins {
+        for d in [Vec3::new(0.0, 0.0, 1.0), Vec3::new(0.0, -0.0, 1.0)] {
+            let plus = slab_hit(&b, o, d);
+            let minus = slab_hit(&b, o, Vec3::new(-0.0, d.y, d.z));
+            assert_eq!(plus, minus, "origin {o}");
+            assert!(plus.is_none_or(|t| t.is_finite()));
+        }
+    }
+}
+
+#[test]
+fn slab_origin_on_a_slab_plane_with_a_zero_component_is_inside() {
+    let b = unit_box();
+    // The ray runs in the plane x = 0 (and x = 1): a closed box is met.
+    for x in [0.0f32, 1.0] {
+        for sign in [0.0f32, -0.0] {
+            let t = slab_hit(&b, Vec3::new(x, 0.5, -1.0), Vec3::new(sign, 0.0, 1.0));
+            assert_eq!(t, Some(1.0), "x = {x}, sign {sign:?}");
+        }
+    }
+    // Just outside the plane: missed.
+    let t = slab_hit(
+        &b,
+        Vec3::new(1.0 + 1e-6, 0.5, -1.0),
+        Vec3::new(0.0, 0.0, 1.0),
+    );
+    assert_eq!(t, None);
+}
+
+#[test]
+fn slab_flat_box_is_hit_head_on() {
+    let flat = Aabb::new(Vec3::new(0.0, 0.0, 2.0), Vec3::new(1.0, 1.0, 2.0));
+    assert_eq!(
+        slab_hit(&flat, Vec3::new(0.5, 0.5, 0.0), Vec3::Z),
+        Some(2.0)
+    );
+    assert_eq!(
+        slab_hit(&flat, Vec3::new(0.5, 0.5, 4.0), -Vec3::Z),
+        Some(2.0)
+    );
+    assert_eq!(slab_hit(&flat, Vec3::new(1.5, 0.5, 0.0), Vec3::Z), None);
+}
+
+#[test]
+fn slab_flat_box_is_hit_grazing() {
+    // The ray runs inside the plane of a zero-thickness box.
+    let flat = Aabb::new(Vec3::new(0.0, 0.0, 2.0), Vec3::new(1.0, 1.0, 2.0));
+    let t = slab_hit(&flat, Vec3::new(-1.0, 0.5, 2.0), Vec3::X);
+    assert_eq!(t, Some(1.0));
+    let t = slab_hit(&flat, Vec3::new(-1.0, 0.5, 2.0), Vec3::new(1.0, 0.0, -0.0));
+    assert_eq!(t, Some(1.0));
+    // The BVH agrees: a flat triangle in z = 2 is entered by a grazing ray.
+    let tri = [
+        Vec3::new(0.0, 0.0, 2.0),
+        Vec3::new(1.0, 0.0, 2.0),
+        Vec3::new(0.0, 1.0, 2.0),
+    ];
+    assert!(bvh_enters(&[tri], Vec3::new(-1.0, 0.25, 2.0), Vec3::X));
+    assert!(bvh_enters(
+        &[tri],
+        Vec3::new(-1.0, 0.25, 2.0),
+        Vec3::new(1.0, -0.0, 0.0)
+    ));
+}
+
+#[test]
+fn slab_direction_components_of_1e30_do_not_miss() {
+    let b = unit_box();
+    for d in [
+        Vec3::new(1e-30, 1e-30, 1.0),
+        Vec3::new(-1e-30, 1e-30, 1.0),
+        Vec3::new(1e-30, -1e-30, -1.0),
+        Vec3::new(1e-45, -1e-40, 1.0), // subnormals
+    ] {
+        let o = Vec3::new(0.5, 0.5, if d.z > 0.0 { -1.0 } else { 2.0 });
+        let t = slab_hit(&b, o, d).expect("hits");
+        assert!((t - 1.0).abs() < 1e-6, "d = {d}: t = {t}");
+    }
+}
+
+#[test]
+fn slab_entry_is_clamped_to_zero_inside_the_box() {
+    assert_eq!(slab_hit(&unit_box(), Vec3::splat(0.5), Vec3::X), Some(0.0));
+    assert_eq!(
+        slab_hit(&unit_box(), Vec3::new(2.0, 0.5, 0.5), Vec3::X),
+        None
+    );
+}
+
+fn tri(a: [f32; 3], b: [f32; 3], c: [f32; 3]) -> [Vec3; 3] {
+    [Vec3::from(a), Vec3::from(b), Vec3::from(c)]
+}
+
+#[test]
+fn ray_through_a_shared_edge_hits_exactly_one_triangle() {
+    // A unit square as two triangles, both windings of the second one.
+    for flip in [false, true] {
+        let a = tri([0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1.0, 0.0]);
+        let mut b = tri([0.0, 0.0, 0.0], [1.0, 1.0, 0.0], [0.0, 1.0, 0.0]);
+        if flip {
+            b.swap(1, 2);
+        }
+        let bf = BruteForce::new(&[a, b]);
+        for i in 1..64 {
+            let s = i as f32 / 64.0; // exactly on the diagonal x = y
+            for d in [Vec3::Z, -Vec3::Z, Vec3::new(0.3, -0.2, 1.0)] {
+                let o = Vec3::new(s, s, 0.0) - d * 2.0;
+                let hits = bf.all_hits(&Ray::new(o, d), f32::INFINITY);
+                assert_eq!(hits.len(), 1, "s = {s}, d = {d}, flip {flip}: {hits:?}");
+            }
+        }
+    }
+}
+
+#[test]
+fn ray_through_a_fan_vertex_hits_exactly_one_triangle() {
+    let n = 7;
+    let c = Vec3::new(0.25, 0.5, 0.0);
+    // The ring points are computed once and shared, so neighbours meet exactly.
+    let ring: Vec<Vec3> = (0..n)
+        .map(|i| {
+            let a = i as f32 / n as f32 * std::f32::consts::TAU;
+            c + Vec3::new(a.cos(), a.sin(), 0.0)
+        })
+        .collect();
+    let fan: Vec<[Vec3; 3]> = (0..n).map(|i| [c, ring[i], ring[(i + 1) % n]]).collect();
+    let bf = BruteForce::new(&fan);
+    for d in [
+        Vec3::Z,
+        -Vec3::Z,
+        Vec3::new(0.1, 0.7, 1.0),
+        Vec3::new(-0.4, 0.0, -1.0),
+    ] {
+        let hits = bf.all_hits(&Ray::new(c - d * 3.0, d), f32::INFINITY);
+        assert_eq!(hits.len(), 1, "d = {d}: {hits:?}");
+    }
+}
+
+#[test]
+fn rays_from_inside_a_closed_icosphere_never_escape() {
+    let sphere = shapes::icosphere(3);
+    let bvh = Bvh::build(&sphere, &BuildOptions::sah());
+    let rays = common::random_rays(&sphere, 100_000, 99);
+    let mut rng = tracery::sampling::SplitMix64::new(1);
+    for r in &rays {
+        let o = Vec3::new(
+            rng.next_f32() - 0.5,
+            rng.next_f32() - 0.5,
+            rng.next_f32() - 0.5,
+        ) * 0.5;
+        let ray = Ray::new(o, r.dir);
+        assert!(
+            bvh.intersect(&ray, f32::INFINITY).is_some(),
+            "escaped: {ray:?}"
+        );
+    }
+}
+
+#[test]
+fn ray_in_the_plane_of_a_triangle_misses_without_nan() {
+    let t = tri([0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]).map(Vec3A::from);
+    for d in [Vec3::X, Vec3::new(1.0, 1.0, 0.0), Vec3::new(1.0, 1.0, 1e-7)] {
+        let r = PreparedRay::new(&Ray::new(Vec3::new(-1.0, 0.25, 0.0), d));
+        let hit = intersect_triangle_t(&r, &t, f32::INFINITY);
+        assert!(!hit.is_nan());
+        assert!(hit == f32::INFINITY || hit.is_finite());
+    }
+}
+
+#[test]
+fn zero_area_triangles_are_never_hit() {
+    let point = tri([1.0, 1.0, 0.0], [1.0, 1.0, 0.0], [1.0, 1.0, 0.0]);
+    let line = tri([0.0, 0.0, 0.0], [1.0, 1.0, 0.0], [2.0, 2.0, 0.0]);
+    let bf = BruteForce::new(&[point, line]);
+    for d in [Vec3::Z, Vec3::new(0.2, 0.1, 1.0)] {
+        assert!(
+            bf.all_hits(&Ray::new(Vec3::new(1.0, 1.0, -1.0), d), f32::INFINITY)
+                .is_empty()
+        );
+    }
+}
+
+#[test]
+fn origin_on_the_triangle_gives_no_hit_at_t_zero() {
+    let t = tri([0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]);
+    let bf = BruteForce::new(&[t]);
+    for d in [Vec3::Z, -Vec3::Z, Vec3::new(0.3, 0.3, 1.0)] {
+        let hits = bf.all_hits(&Ray::new(Vec3::new(0.25, 0.25, 0.0), d), f32::INFINITY);
+        assert!(hits.iter().all(|(_, t)| *t > 0.0), "{hits:?}");
+    }
+}
+
+#[test]
+fn offset_origin_leaves_the_surface_at_every_magnitude() {
+    for scale in [1e-3f32, 1.0, 1e3, 1e5, 1e6] {
+        let c = Vec3::new(0.37, 0.61, 0.2) * scale;
+        let quad = tri([-1.0, -1.0, 0.0], [1.0, -1.0, 0.0], [0.0, 1.0, 0.0]).map(|v| c + v * scale);
+        let bf = BruteForce::new(&[quad]);
+        let n = Vec3::Z;
+        for p in [c, c + Vec3::new(0.1, -0.2, 0.0) * scale] {
+            let o = offset_ray_origin(p, n);
+            assert!(o.z > p.z, "scale {scale}: not moved off the plane");
+            // Leaving the surface upward must not hit the surface itself.
+            let hits = bf.all_hits(&Ray::new(o, Vec3::new(0.3, 0.2, 1.0)), f32::INFINITY);
+            assert!(hits.is_empty(), "scale {scale}: self-hit {hits:?}");
+            // And the offset stays small relative to the magnitude.
+            assert!((o - p).length() <= 1e-3 * scale.max(1.0));
+        }
+    }
+}

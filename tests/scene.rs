@@ -1,0 +1,270 @@
+//! Scene loading: OBJ with MTL, PLY (ASCII and binary), scene files, the Cornell box, and the
+//! errors bad files give.
+
+mod common;
+
+use std::path::{Path, PathBuf};
+
+use glam::Vec3;
+use tracery::scene::{Environment, Light, Scene};
+
+fn write(dir: &Path, name: &str, text: &[u8]) -> PathBuf {
+    let p = dir.join(name);
+    std::fs::write(&p, text).unwrap();
+    p
+}
+
+fn err(r: anyhow::Result<Scene>) -> String {
+    format!("{:#}", r.expect_err("an error"))
+}
+
+#[test]
+fn cornell_box_has_32_triangles_its_materials_and_light() {
+    let s = Scene::cornell_box();
+    assert_eq!(s.triangle_count(), 32);
+    let names: Vec<&str> = s.materials.iter().map(|m| m.name.as_str()).collect();
+    for m in ["white", "red", "green", "light"] {
+        assert!(names.contains(&m), "{names:?}");
+    }
+    assert!(s.materials.iter().any(|m| m.is_emissive()));
+    assert!(matches!(s.lights.as_slice(), [Light::Rect { .. }]));
+    // The on-disk scene file is the same scene.
+    let disk = Scene::load(Path::new(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/assets/scenes/cornell_box.toml"
+    )))
+    .unwrap();
+    assert_eq!(disk.mesh, s.mesh);
+    assert_eq!(disk.lights, s.lights);
+}
+
+#[test]
+fn obj_polygons_are_fan_triangulated_with_negative_indices_and_computed_normals() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = write(
+        dir.path(),
+        "quad.obj",
+        b"v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 0 0 1\n# a pentagon-ish polygon with relative indices\nf -5 -4 -3 -2\nf 1 2 5\n",
+    );
+    let s = Scene::load(&p).unwrap();
+    assert_eq!(s.triangle_count(), 3);
+    let t = &s.mesh.triangles;
+    assert_eq!(t[0], [Vec3::ZERO, Vec3::X, Vec3::new(1.0, 1.0, 0.0)]);
+    assert_eq!(t[1], [Vec3::ZERO, Vec3::new(1.0, 1.0, 0.0), Vec3::Y]);
+    // Missing normals are computed, unit length, shared vertices averaged.
+    for n in s.mesh.normals.iter().flatten() {
+        assert!((n.length() - 1.0).abs() < 1e-5);
+    }
+    assert_eq!(s.mesh.normals[0][2], Vec3::Z);
+    assert!(
+        s.mesh.normals[0][0].z < 1.0 && s.mesh.normals[0][0].y < 0.0,
+        "averaged with the side face"
+    );
+}
+
+#[test]
+fn obj_mtl_fields_become_materials() {
+    let dir = tempfile::tempdir().unwrap();
+    write(
+        dir.path(),
+        "m.mtl",
+        b"newmtl glass\nKd 0.1 0.2 0.3\nKs 0.5 0.5 0.5\nNs 64\nTr 0.75\nNi 1.5\nillum 7\nnewmtl lamp\nKe 4 3 2\nd 1\nillum 2\n",
+    );
+    let p = write(
+        dir.path(),
+        "m.obj",
+        b"mtllib m.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nusemtl glass\nf 1 2 3\nusemtl lamp\nf 1 3 2\n",
+    );
+    let s = Scene::load(&p).unwrap();
+    assert!(s.warnings.is_empty(), "{:?}", s.warnings);
+    let glass = s.material_of(0);
+    assert_eq!(glass.name, "glass");
+    assert_eq!(glass.diffuse, Vec3::new(0.1, 0.2, 0.3));
+    assert_eq!(glass.specular, Vec3::splat(0.5));
+    assert_eq!(glass.shininess, 64.0);
+    assert!((glass.opacity - 0.25).abs() < 1e-6);
+    assert_eq!(glass.ior, 1.5);
+    assert_eq!(glass.illum, 7);
+    assert_eq!(glass.mirror, Vec3::splat(0.5), "illum 7 reflects with Ks");
+    let lamp = s.material_of(1);
+    assert_eq!(lamp.emission, Vec3::new(4.0, 3.0, 2.0));
+    assert!(!lamp.is_mirror() && !lamp.is_transparent());
+}
+
+#[test]
+fn obj_with_a_missing_mtl_loads_with_a_warning() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = write(
+        dir.path(),
+        "a.obj",
+        b"mtllib nowhere.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n",
+    );
+    let s = Scene::load(&p).unwrap();
+    assert_eq!(s.triangle_count(), 1);
+    assert!(s.warnings[0].contains("nowhere.mtl"), "{:?}", s.warnings);
+}
+
+#[test]
+fn obj_errors_name_the_file_and_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = write(
+        dir.path(),
+        "bad.obj",
+        b"v 0 0 0\nv 1 0 0\nv 0 one 0\nf 1 2 3\n",
+    );
+    let e = err(Scene::load(&p));
+    assert!(e.contains("bad.obj:3"), "{e}");
+    let p = write(
+        dir.path(),
+        "range.obj",
+        b"v 0 0 0\nv 1 0 0\nv 0 1 0\n\nf 1 2 9\n",
+    );
+    let e = err(Scene::load(&p));
+    assert!(e.contains("range.obj:5") && e.contains("9"), "{e}");
+    let e = err(Scene::load(&dir.path().join("missing.obj")));
+    assert!(e.contains("missing.obj"), "{e}");
+}
+
+const PLY_ASCII: &str = "ply\nformat ascii 1.0\nelement vertex 4\nproperty float x\nproperty float y\nproperty float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0\n1 1 0\n0 1 0\n4 0 1 2 3\n";
+
+#[test]
+fn ply_ascii_loads_and_fan_triangulates() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = write(dir.path(), "q.ply", PLY_ASCII.as_bytes());
+    let s = Scene::load(&p).unwrap();
+    assert_eq!(s.triangle_count(), 2);
+    assert_eq!(
+        s.mesh.triangles[1],
+        [Vec3::ZERO, Vec3::new(1.0, 1.0, 0.0), Vec3::Y]
+    );
+}
+
+#[test]
+fn ply_binary_little_endian_with_doubles_and_normals_loads() {
+    let mut data = b"ply\nformat binary_little_endian 1.0\nelement vertex 3\nproperty double x\nproperty double y\nproperty double z\nproperty float nx\nproperty float ny\nproperty float nz\nelement face 1\nproperty list uchar uint vertex_indices\nend_header\n".to_vec();
+    for v in [[0.0f64, 0.0, 0.0], [2.0, 0.0, 0.0], [0.0, 2.0, 0.0]] {
+        for c in v {
+            data.extend(c.to_le_bytes());
+        }
+        for c in [0.0f32, 0.0, 1.0] {
+            data.extend(c.to_le_bytes());
+        }
+    }
+    data.push(3);
+    for i in [0u32, 1, 2] {
+        data.extend(i.to_le_bytes());
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let p = write(dir.path(), "b.ply", &data);
+    let s = Scene::load(&p).unwrap();
+    assert_eq!(
+        s.mesh.triangles,
+        vec![[
+            Vec3::ZERO,
+            Vec3::new(2.0, 0.0, 0.0),
+            Vec3::new(0.0, 2.0, 0.0)
+        ]]
+    );
+    assert_eq!(s.mesh.normals[0], [Vec3::Z; 3]);
+}
+
+#[test]
+fn ply_errors_name_the_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let bad = PLY_ASCII.replace("4 0 1 2 3", "3 0 1 7");
+    let e = err(Scene::load(&write(dir.path(), "r.ply", bad.as_bytes())));
+    assert!(e.contains("r.ply") && e.contains("7"), "{e}");
+    let bad = PLY_ASCII.replace("1 1 0\n", "1 x 0\n");
+    let e = err(Scene::load(&write(dir.path(), "p.ply", bad.as_bytes())));
+    assert!(e.contains("p.ply:12"), "{e}");
+}
+
+#[test]
+fn fetched_meshes_load_as_fetched() {
+    if let Some(p) = common::external("bunny/bunny.obj") {
+        let s = Scene::load(&p).unwrap();
+        assert!(s.triangle_count() > 69_000, "{}", s.triangle_count());
+    }
+    for (file, tris) in [
+        ("dragon_vrip_res4.ply", 11_102),
+        ("dragon_vrip_res3.ply", 47_794),
+    ] {
+        if let Some(p) = common::external(&format!("dragon/{file}")) {
+            assert_eq!(Scene::load(&p).unwrap().triangle_count(), tris);
+        }
+    }
+}
+
+const SCENE: &str = r#"
+[camera]
+position = [0.0, 1.0, 5.0]
+look_at = [0.0, 1.0, 0.0]
+fov = 50.0
+
+[materials.gold]
+diffuse = [0.8, 0.6, 0.2]
+mirror = [0.5, 0.5, 0.5]
+
+[[meshes]]
+path = "q.ply"
+translate = [10.0, 0.0, 0.0]
+scale = 2.0
+material = "gold"
+
+[[meshes]]
+shape = "cube"
+
+[[lights]]
+kind = "point"
+position = [0.0, 5.0, 0.0]
+intensity = 20.0
+
+[environment]
+kind = "color"
+color = [0.1, 0.2, 0.3]
+"#;
+
+#[test]
+fn scene_file_resolves_paths_transforms_and_overrides() {
+    let dir = tempfile::tempdir().unwrap();
+    write(dir.path(), "q.ply", PLY_ASCII.as_bytes());
+    let p = write(dir.path(), "s.toml", SCENE.as_bytes());
+    let s = Scene::load(&p).unwrap();
+    assert_eq!(s.triangle_count(), 2 + 12);
+    assert_eq!(s.mesh.triangles[0][1], Vec3::new(12.0, 0.0, 0.0));
+    assert_eq!(s.material_of(0).name, "gold");
+    assert_eq!(s.camera.vfov_deg, 50.0);
+    assert_eq!(s.environment, Environment::Color(Vec3::new(0.1, 0.2, 0.3)));
+    assert!(matches!(
+        s.lights[0],
+        Light::Point {
+            intensity: 20.0,
+            ..
+        }
+    ));
+}
+
+#[test]
+fn scene_file_errors_name_the_file_and_line() {
+    let dir = tempfile::tempdir().unwrap();
+    write(dir.path(), "q.ply", PLY_ASCII.as_bytes());
+    let cases = [
+        ("fov = 50.0", "fov = 50.0\nzoom = 2.0", "unknown field", 6),
+        ("scale = 2.0", "scale = \"big\"", "", 14),
+        (
+            "path = \"q.ply\"",
+            "path = \"nowhere.ply\"",
+            "nowhere.ply",
+            12,
+        ),
+        ("material = \"gold\"", "material = \"silver\"", "silver", 15),
+        ("intensity = 20.0", "intensity = 2x", "", 23),
+    ];
+    for (from, to, what, line) in cases {
+        let text = SCENE.replace(from, to);
+        let p = write(dir.path(), "bad.toml", text.as_bytes());
+        let e = err(Scene::load(&p));
+        assert!(e.contains(&format!("bad.toml:{line}")), "{to}: {e}");
+        assert!(e.contains(what), "{to}: {e}");
+    }
+}
