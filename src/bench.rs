@@ -139,7 +139,7 @@ pub struct BenchConfig {
 }
 
 /// A ray tracing engine under test: built once, traced many times.
-trait Engine: Sync {
+trait Engine: Sync + Send {
     fn closest(&self, ray: &Ray) -> HitRecord;
     fn occluded(&self, ray: &Ray) -> bool;
 }
@@ -186,59 +186,41 @@ mod peers {
         )
     }
 
-    pub(super) struct Bvh2 {
-        pub bvh: obvhs::bvh2::Bvh2,
-        pub tris: Vec<OTri>,
-    }
-
-    impl Engine for Bvh2 {
-        fn closest(&self, ray: &Ray) -> HitRecord {
-            let mut hit = RayHit::none();
-            if self
-                .bvh
-                .ray_traverse(oray(ray), &mut hit, |r, id| self.tris[id].intersect(r))
-            {
-                HitRecord {
-                    t: hit.t,
-                    prim: self.bvh.primitive_indices[hit.primitive_id as usize],
-                }
-            } else {
-                HitRecord::MISS
+    /// An obvhs BVH with its triangles in leaf order. Both kinds have the same traversal
+    /// methods but no shared trait, hence the macro.
+    macro_rules! obvhs_engine {
+        ($name:ident, $bvh:ty) => {
+            pub(super) struct $name {
+                pub bvh: $bvh,
+                pub tris: Vec<OTri>,
             }
-        }
-        fn occluded(&self, ray: &Ray) -> bool {
-            !self
-                .bvh
-                .ray_traverse_miss(oray(ray), |r, id| self.tris[id].intersect(r))
-        }
-    }
 
-    pub(super) struct Cwbvh {
-        pub bvh: obvhs::cwbvh::CwBvh,
-        pub tris: Vec<OTri>,
-    }
-
-    impl Engine for Cwbvh {
-        fn closest(&self, ray: &Ray) -> HitRecord {
-            let mut hit = RayHit::none();
-            if self
-                .bvh
-                .ray_traverse(oray(ray), &mut hit, |r, id| self.tris[id].intersect(r))
-            {
-                HitRecord {
-                    t: hit.t,
-                    prim: self.bvh.primitive_indices[hit.primitive_id as usize],
+            impl Engine for $name {
+                fn closest(&self, ray: &Ray) -> HitRecord {
+                    let mut hit = RayHit::none();
+                    if self
+                        .bvh
+                        .ray_traverse(oray(ray), &mut hit, |r, id| self.tris[id].intersect(r))
+                    {
+                        HitRecord {
+                            t: hit.t,
+                            prim: self.bvh.primitive_indices[hit.primitive_id as usize],
+                        }
+                    } else {
+                        HitRecord::MISS
+                    }
                 }
-            } else {
-                HitRecord::MISS
+                fn occluded(&self, ray: &Ray) -> bool {
+                    !self
+                        .bvh
+                        .ray_traverse_miss(oray(ray), |r, id| self.tris[id].intersect(r))
+                }
             }
-        }
-        fn occluded(&self, ray: &Ray) -> bool {
-            !self
-                .bvh
-                .ray_traverse_miss(oray(ray), |r, id| self.tris[id].intersect(r))
-        }
+        };
     }
+
+    obvhs_engine!(Bvh2, obvhs::bvh2::Bvh2);
+    obvhs_engine!(Cwbvh, obvhs::cwbvh::CwBvh);
 }
 
 fn pool(threads: usize) -> rayon::ThreadPool {
@@ -246,20 +228,6 @@ fn pool(threads: usize) -> rayon::ThreadPool {
         .num_threads(threads)
         .build()
         .expect("a thread pool can be made")
-}
-
-/// Runs `f` `repeat` times and keeps the fastest run's result and time.
-fn best_of<T>(repeat: usize, mut f: impl FnMut() -> T) -> (T, Duration) {
-    let mut best: Option<(T, Duration)> = None;
-    for _ in 0..repeat.max(1) {
-        let start = Instant::now();
-        let out = f();
-        let took = start.elapsed();
-        if best.as_ref().is_none_or(|(_, d)| took < *d) {
-            best = Some((out, took));
-        }
-    }
-    best.expect("at least one run")
 }
 
 /// Closest hits of all rays on the current rayon pool.
@@ -296,8 +264,24 @@ pub struct MeshBench {
     pub sah_hits: Vec<HitRecord>,
 }
 
+/// A built engine under test and its best build time.
+struct Entry {
+    name: String,
+    build_ms: f64,
+    stats: Option<BvhStats>,
+    engine: Box<dyn Engine>,
+}
+
+/// Builds one engine: its name, the engine, its stats (ours only).
+type Builder<'a> = Box<dyn Fn() -> (Box<dyn Engine>, Option<BvhStats>) + Send + Sync + 'a>;
+
 /// Builds every engine over `triangles` and traces `rays` with each thread count.
 /// `progress` receives a line per step.
+///
+/// Measurements are interleaved: each round builds every engine once, then traces with every
+/// engine and thread count once, and each figure keeps its best round. A burst of load from
+/// another tenant of a shared machine then costs every engine a round, not one engine all of
+/// its runs, so the ratios between engines stay fair.
 pub fn run(
     mesh_name: &str,
     triangles: &[[Vec3; 3]],
@@ -306,114 +290,134 @@ pub fn run(
     progress: &mut dyn FnMut(&str),
 ) -> MeshBench {
     let one = pool(1);
-    let mut results = Vec::new();
-    let mut reference: Option<Vec<HitRecord>> = None;
+    let mut builders: Vec<(String, Builder)> = Vec::new();
+    for split in [SplitMethod::Sah, SplitMethod::Median] {
+        let options = config.options.with_split(split);
+        builders.push((
+            format!("tracery-{split}"),
+            Box::new(move || {
+                let bvh = Bvh::build(triangles, &options);
+                let stats = bvh.stats;
+                (Box::new(bvh) as Box<dyn Engine>, Some(stats))
+            }),
+        ));
+    }
+    if config.peers {
+        let otris = std::sync::Arc::new(peers::to_otris(triangles));
+        let o = otris.clone();
+        builders.push((
+            "obvhs-bvh2".into(),
+            Box::new(move || {
+                let bvh = obvhs::bvh2::builder::build_bvh2_from_tris(
+                    &o,
+                    obvhs::BvhBuildParams::medium_build(),
+                    &mut Duration::default(),
+                );
+                let tris = bvh
+                    .primitive_indices
+                    .iter()
+                    .map(|&i| o[i as usize])
+                    .collect();
+                (Box::new(peers::Bvh2 { bvh, tris }) as Box<dyn Engine>, None)
+            }),
+        ));
+        let o = otris;
+        builders.push((
+            "obvhs-cwbvh".into(),
+            Box::new(move || {
+                let bvh = obvhs::cwbvh::builder::build_cwbvh_from_tris(
+                    &o,
+                    obvhs::BvhBuildParams::medium_build(),
+                    &mut Duration::default(),
+                );
+                let tris = bvh
+                    .primitive_indices
+                    .iter()
+                    .map(|&i| o[i as usize])
+                    .collect();
+                (
+                    Box::new(peers::Cwbvh { bvh, tris }) as Box<dyn Engine>,
+                    None,
+                )
+            }),
+        ));
+    }
 
-    let measure = |name: &str,
-                   build_ms: f64,
-                   stats: Option<BvhStats>,
-                   engine: &dyn Engine,
-                   results: &mut Vec<EngineResult>,
-                   reference: &mut Option<Vec<HitRecord>>,
-                   progress: &mut dyn FnMut(&str)| {
-        for &threads in &config.threads {
+    // Builds, on one thread, interleaved. The obvhs build time is the builder call alone;
+    // ours includes copying the triangles into leaf order.
+    let mut entries: Vec<Entry> = Vec::new();
+    for round in 0..config.repeat.max(1) {
+        for (k, (name, build)) in builders.iter().enumerate() {
             progress(&format!(
-                "{mesh_name}: tracing {name} on {threads} thread(s)"
+                "{mesh_name}: building {name} (round {})",
+                round + 1
             ));
-            let p = pool(threads);
-            let (hits, closest) =
-                p.install(|| best_of(config.repeat, || trace_closest(engine, rays)));
-            let (_, occluded) =
-                p.install(|| best_of(config.repeat, || trace_occluded(engine, rays)));
-            let reference = reference.get_or_insert_with(|| hits.clone());
+            let start = Instant::now();
+            let (engine, stats) = one.install(build);
+            let ms = start.elapsed().as_secs_f64() * 1e3;
+            match entries.get_mut(k) {
+                Some(e) => {
+                    e.build_ms = e.build_ms.min(ms);
+                    e.engine = engine;
+                }
+                None => entries.push(Entry {
+                    name: name.clone(),
+                    build_ms: ms,
+                    stats,
+                    engine,
+                }),
+            }
+        }
+    }
+
+    // Traces, interleaved over engines and thread counts.
+    let pools: Vec<(usize, rayon::ThreadPool)> =
+        config.threads.iter().map(|&t| (t, pool(t))).collect();
+    let n = entries.len() * pools.len();
+    let mut closest = vec![Duration::MAX; n];
+    let mut occluded = vec![Duration::MAX; n];
+    let mut hits: Vec<Option<Vec<HitRecord>>> = vec![None; n];
+    for round in 0..config.repeat.max(1) {
+        progress(&format!("{mesh_name}: tracing, round {}", round + 1));
+        for (e, entry) in entries.iter().enumerate() {
+            for (p, (_, pool)) in pools.iter().enumerate() {
+                let k = e * pools.len() + p;
+                let engine = &*entry.engine;
+                let start = Instant::now();
+                let h = pool.install(|| trace_closest(engine, rays));
+                closest[k] = closest[k].min(start.elapsed());
+                hits[k] = Some(h);
+                let start = Instant::now();
+                pool.install(|| trace_occluded(engine, rays));
+                occluded[k] = occluded[k].min(start.elapsed());
+            }
+        }
+    }
+
+    let reference = hits[0].clone().unwrap_or_default();
+    let mut results = Vec::new();
+    for (e, entry) in entries.iter().enumerate() {
+        for (p, (threads, _)) in pools.iter().enumerate() {
+            let k = e * pools.len() + p;
+            let mut stats = entry.stats;
+            if let Some(s) = &mut stats {
+                s.build_ms = entry.build_ms;
+            }
             results.push(EngineResult {
-                engine: name.to_string(),
+                engine: entry.name.clone(),
                 mesh: mesh_name.to_string(),
                 triangles: triangles.len(),
-                threads,
-                build_ms,
-                closest_mrays: rays.len() as f64 / closest.as_secs_f64() / 1e6,
-                occluded_mrays: rays.len() as f64 / occluded.as_secs_f64() / 1e6,
-                agreement: agreement(reference, &hits),
+                threads: *threads,
+                build_ms: entry.build_ms,
+                closest_mrays: rays.len() as f64 / closest[k].as_secs_f64() / 1e6,
+                occluded_mrays: rays.len() as f64 / occluded[k].as_secs_f64() / 1e6,
+                agreement: agreement(&reference, hits[k].as_deref().unwrap_or_default()),
                 stats,
             });
         }
-    };
-
-    for split in [SplitMethod::Sah, SplitMethod::Median] {
-        let name = format!("tracery-{split}");
-        progress(&format!("{mesh_name}: building {name}"));
-        let options = config.options.with_split(split);
-        let (bvh, took) =
-            one.install(|| best_of(config.repeat, || Bvh::build(triangles, &options)));
-        let build_ms = took.as_secs_f64() * 1e3;
-        let mut stats = bvh.stats;
-        stats.build_ms = build_ms;
-        measure(
-            &name,
-            build_ms,
-            Some(stats),
-            &bvh,
-            &mut results,
-            &mut reference,
-            progress,
-        );
     }
-    let sah_hits = reference.clone().unwrap_or_default();
-
-    if config.peers {
-        let otris = peers::to_otris(triangles);
-        progress(&format!("{mesh_name}: building obvhs-bvh2"));
-        let (bvh, took) = one.install(|| {
-            best_of(config.repeat, || {
-                obvhs::bvh2::builder::build_bvh2_from_tris(
-                    &otris,
-                    obvhs::BvhBuildParams::medium_build(),
-                    &mut Duration::default(),
-                )
-            })
-        });
-        let tris = bvh
-            .primitive_indices
-            .iter()
-            .map(|&i| otris[i as usize])
-            .collect();
-        let engine = peers::Bvh2 { bvh, tris };
-        measure(
-            "obvhs-bvh2",
-            took.as_secs_f64() * 1e3,
-            None,
-            &engine,
-            &mut results,
-            &mut reference,
-            progress,
-        );
-
-        progress(&format!("{mesh_name}: building obvhs-cwbvh"));
-        let (bvh, took) = one.install(|| {
-            best_of(config.repeat, || {
-                obvhs::cwbvh::builder::build_cwbvh_from_tris(
-                    &otris,
-                    obvhs::BvhBuildParams::medium_build(),
-                    &mut Duration::default(),
-                )
-            })
-        });
-        let tris = bvh
-            .primitive_indices
-            .iter()
-            .map(|&i| otris[i as usize])
-            .collect();
-        let engine = peers::Cwbvh { bvh, tris };
-        measure(
-            "obvhs-cwbvh",
-            took.as_secs_f64() * 1e3,
-            None,
-            &engine,
-            &mut results,
-            &mut reference,
-            progress,
-        );
+    MeshBench {
+        results,
+        sah_hits: reference,
     }
-    MeshBench { results, sah_hits }
 }
