@@ -84,15 +84,29 @@ impl Bvh {
         } else {
             by_octant!(ray.neg_mask, closest_pairs, self, ray, &mut best);
         }
-        self.finish(ray, best.slot, best.id, best.t, t_max)
+        self.finish(ray, &best, t_max)
     }
 
     /// Tests a leaf's triangles, keeping the closest (lowest index on ties).
     #[inline(always)]
     fn closest_in_leaf(&self, ray: &PreparedRay, first: u32, count: u32, best: &mut Best) {
+        self.closest_in_leaf_seen(ray, first, count, best, &mut |_, _| {});
+    }
+
+    /// [`Bvh::closest_in_leaf`], telling `seen(prim, hit)` about every triangle tested.
+    #[inline(always)]
+    fn closest_in_leaf_seen(
+        &self,
+        ray: &PreparedRay,
+        first: u32,
+        count: u32,
+        best: &mut Best,
+        seen: &mut impl FnMut(u32, bool),
+    ) {
         let limit = best.t.next_up();
         for slot in first as usize..(first + count) as usize {
             let t = intersect_triangle_t(ray, &self.tris[slot], limit);
+            seen(self.prim_ids[slot], t <= best.t);
             if t <= best.t {
                 let id = self.prim_ids[slot];
                 if t < best.t || id < best.id {
@@ -117,9 +131,11 @@ impl Bvh {
         if self.tris.is_empty() || t_max.is_nan() || t_max <= 0.0 {
             return None;
         }
-        let mut best_t = t_max;
-        let mut best_slot = usize::MAX;
-        let mut best_id = u32::MAX;
+        let mut best = Best {
+            t: t_max,
+            slot: usize::MAX,
+            id: u32::MAX,
+        };
         let nodes = &self.nodes[..];
         if enter(&nodes[0], ray, t_max) == f32::INFINITY {
             return None;
@@ -138,24 +154,15 @@ impl Bvh {
                 depth,
             });
             if node.is_leaf() {
-                let limit = best_t.next_up();
-                for slot in node.leaf_range() {
-                    let t = intersect_triangle_t(ray, &self.tris[slot], limit);
-                    visit(Visit::Triangle {
-                        prim: self.prim_ids[slot],
-                        hit: t <= best_t,
-                    });
-                    if t <= best_t {
-                        let id = self.prim_ids[slot];
-                        if t < best_t || id < best_id {
-                            best_t = t;
-                            best_slot = slot;
-                            best_id = id;
-                        }
-                    }
-                }
+                self.closest_in_leaf_seen(
+                    ray,
+                    node.first,
+                    node.count,
+                    &mut best,
+                    &mut |prim, hit| visit(Visit::Triangle { prim, hit }),
+                );
             } else {
-                let cull = best_t * CULL_SLACK;
+                let cull = best.t * CULL_SLACK;
                 let first = node.first;
                 let d0 = enter(&nodes[first as usize], ray, cull);
                 let d1 = enter(&nodes[first as usize + 1], ray, cull);
@@ -178,11 +185,11 @@ impl Bvh {
             // Pop, skipping boxes that now start beyond the best hit.
             loop {
                 if sp == 0 {
-                    return self.finish(ray, best_slot, best_id, best_t, t_max);
+                    return self.finish(ray, &best, t_max);
                 }
                 sp -= 1;
                 let (n, d) = stack[sp];
-                if d <= best_t * CULL_SLACK {
+                if d <= best.t * CULL_SLACK {
                     current = n;
                     depth = depths[sp];
                     break;
@@ -191,14 +198,15 @@ impl Bvh {
         }
     }
 
-    fn finish(&self, ray: &PreparedRay, slot: usize, id: u32, t: f32, t_max: f32) -> Option<Hit> {
-        if slot == usize::MAX || t.is_nan() || t >= t_max {
+    /// The hit record of the best triangle, with its barycentric coordinates.
+    fn finish(&self, ray: &PreparedRay, best: &Best, t_max: f32) -> Option<Hit> {
+        if best.slot == usize::MAX || best.t.is_nan() || best.t >= t_max {
             return None;
         }
-        let h = intersect_triangle(ray, &self.tris[slot], t.next_up())?;
+        let h = intersect_triangle(ray, &self.tris[best.slot], best.t.next_up())?;
         Some(Hit {
             t: h.t,
-            prim: id,
+            prim: best.id,
             u: h.u,
             v: h.v,
         })
