@@ -294,8 +294,9 @@ fn closest_pairs<const NX: bool, const NY: bool, const NZ: bool>(
 ) {
     let lanes = RayLanes::new(ray);
     let pairs = &bvh.pairs[..];
-    // (child, count) packed as `child << 8 | count`, and the entry distance.
-    let mut stack = [(0u64, 0.0f32); MAX_DEPTH];
+    // Entries name a child by its parent pair and slot (`pair * 2 + slot`), with its entry
+    // distance: 8 bytes, so the stack a ray starts with is small to set up.
+    let mut stack = [(0u32, 0.0f32); MAX_DEPTH];
     let mut sp = 0usize;
     let mut current = 0u32;
     'descend: loop {
@@ -308,9 +309,9 @@ fn closest_pairs<const NX: bool, const NY: bool, const NZ: bool>(
             2 => Some(1),
             _ => {
                 let (near, far, far_d) = if d1 < d0 { (1, 0, d0) } else { (0, 1, d1) };
-                stack[sp] = (pack(n.child[far], n.count[far]), far_d);
+                stack[sp] = (current * 2 + far, far_d);
                 sp += 1;
-                Some(near)
+                Some(near as usize)
             }
         };
         if let Some(k) = pick {
@@ -326,23 +327,19 @@ fn closest_pairs<const NX: bool, const NY: bool, const NZ: bool>(
                 return;
             }
             sp -= 1;
-            let (packed, dist) = stack[sp];
+            let (entry, dist) = stack[sp];
             if dist > best.t * CULL_SLACK {
                 continue;
             }
-            let (child, count) = ((packed >> 8) as u32, (packed & 0xff) as u32);
-            if count == 0 {
-                current = child;
+            let parent = &pairs[(entry / 2) as usize];
+            let k = (entry & 1) as usize;
+            if parent.count[k] == 0 {
+                current = parent.child[k];
                 continue 'descend;
             }
-            bvh.closest_in_leaf(ray, child, count, best);
+            bvh.closest_in_leaf(ray, parent.child[k], parent.count[k], best);
         }
     }
-}
-
-#[inline(always)]
-fn pack(child: u32, count: u32) -> u64 {
-    (child as u64) << 8 | count as u64
 }
 
 /// Every hit over the pair layout; stops when `f` returns false.

@@ -4,19 +4,23 @@ use std::path::PathBuf;
 
 use anyhow::Result;
 use clap::Args;
-use tracery::bvh::{Bvh, BvhStats, SplitMethod};
+use tracery::bvh::{BuildOptions, Bvh, BvhStats, SplitMethod};
 
-use super::{BvhArgs, load_scene};
+use super::load_scene;
 
 #[derive(Args, Debug)]
 pub struct StatsArgs {
     /// Mesh (OBJ, PLY) or scene file (TOML); the built-in Cornell box when left out.
     path: Option<PathBuf>,
-    #[command(flatten)]
-    bvh: BvhArgs,
-    /// Only the split method given by --split (default: median and SAH side by side).
+    /// Only this split method (median or sah); both side by side when left out.
     #[arg(long)]
-    only: bool,
+    split: Option<SplitMethod>,
+    /// SAH bins per axis (2 to 64).
+    #[arg(long, default_value_t = BuildOptions::DEFAULT_BINS)]
+    bins: u32,
+    /// Largest number of triangles in a leaf (1 to 255).
+    #[arg(long, default_value_t = BuildOptions::DEFAULT_LEAF_SIZE)]
+    leaf_size: u32,
     /// Print JSON instead of a table.
     #[arg(long)]
     json: bool,
@@ -34,11 +38,15 @@ struct Row {
 
 pub fn run(a: StatsArgs) -> Result<()> {
     let scene = load_scene(a.path.as_deref())?;
-    let base = a.bvh.options()?;
-    let splits = if a.only {
-        vec![base.split]
-    } else {
-        vec![SplitMethod::Median, SplitMethod::Sah]
+    let base = BuildOptions {
+        split: a.split.unwrap_or(SplitMethod::Sah),
+        bins: a.bins,
+        max_leaf_size: a.leaf_size,
+    };
+    base.validate().map_err(anyhow::Error::msg)?;
+    let splits = match a.split {
+        Some(s) => vec![s],
+        None => vec![SplitMethod::Median, SplitMethod::Sah],
     };
     let mut rows = Vec::new();
     for split in splits {

@@ -66,7 +66,10 @@ impl PreparedRay {
         if d[kz] < 0.0 {
             std::mem::swap(&mut kx, &mut ky);
         }
-        let shear = [d[kx] / d[kz], d[ky] / d[kz], 1.0 / d[kz]];
+        // One reciprocal (already computed) and two products instead of three divisions: the
+        // shear only has to be the same for every triangle the ray meets.
+        let sz = inv_dir[kz];
+        let shear = [d[kx] * sz, d[ky] * sz, sz];
         Self {
             origin: ray.origin.into(),
             inv_dir,
