@@ -118,7 +118,8 @@ pub struct EngineResult {
     pub closest_mrays: f64,
     /// Any-hit (occlusion) throughput on the same rays, millions of rays per second.
     pub occluded_mrays: f64,
-    /// Rays whose closest hit (triangle, or miss) equals `tracery-sah`'s, as a fraction.
+    /// Rays whose closest hit (triangle, or miss) equals the first engine's (`tracery-sah` by
+    /// default), as a fraction.
     pub agreement: f64,
     /// Our BVH's statistics (only for our engines).
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -132,10 +133,20 @@ pub struct BenchConfig {
     pub threads: Vec<usize>,
     /// Each measurement is repeated this many times and the best kept.
     pub repeat: usize,
-    /// Options for our builders (the split method is set per engine).
-    pub options: BuildOptions,
+    /// Our engines: a name and the build options of each (see [`BenchConfig::ours`]).
+    pub ours: Vec<(String, BuildOptions)>,
     /// Also measure the `obvhs` crate.
     pub peers: bool,
+}
+
+impl BenchConfig {
+    /// Our two engines, `tracery-sah` and `tracery-median`, with `options` (split set per
+    /// engine). `tracery-sah` comes first: the agreement column and the hits file use it.
+    pub fn ours(options: BuildOptions) -> Vec<(String, BuildOptions)> {
+        [SplitMethod::Sah, SplitMethod::Median]
+            .map(|s| (format!("tracery-{s}"), options.with_split(s)))
+            .into()
+    }
 }
 
 /// A ray tracing engine under test: built once, traced many times.
@@ -260,7 +271,7 @@ fn agreement(a: &[HitRecord], b: &[HitRecord]) -> f64 {
 pub struct MeshBench {
     /// One row per engine and thread count.
     pub results: Vec<EngineResult>,
-    /// `tracery-sah`'s closest hits on the canonical rays.
+    /// The first engine's closest hits on the canonical rays (`tracery-sah` by default).
     pub sah_hits: Vec<HitRecord>,
 }
 
@@ -291,10 +302,10 @@ pub fn run(
 ) -> MeshBench {
     let one = pool(1);
     let mut builders: Vec<(String, Builder)> = Vec::new();
-    for split in [SplitMethod::Sah, SplitMethod::Median] {
-        let options = config.options.with_split(split);
+    for (name, options) in &config.ours {
+        let options = *options;
         builders.push((
-            format!("tracery-{split}"),
+            name.clone(),
             Box::new(move || {
                 let bvh = Bvh::build(triangles, &options);
                 let stats = bvh.stats;

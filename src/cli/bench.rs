@@ -71,7 +71,7 @@ pub fn run(a: BenchArgs) -> Result<()> {
     let config = BenchConfig {
         threads,
         repeat: a.repeat,
-        options,
+        ours: BenchConfig::ours(options),
         peers: !a.no_peers,
     };
 

@@ -69,7 +69,7 @@ fn splits(meshes: Vec<PathBuf>, repeat: usize) -> Result<()> {
         let config = BenchConfig {
             threads: vec![1, cores],
             repeat,
-            options: BuildOptions::sah(),
+            ours: BenchConfig::ours(BuildOptions::sah()),
             peers: false,
         };
         eprintln!("{}: measuring", scene.name);
@@ -128,33 +128,29 @@ fn splits(meshes: Vec<PathBuf>, repeat: usize) -> Result<()> {
 fn bins_table(mesh: PathBuf, bins: Vec<u32>, repeat: usize) -> Result<()> {
     let scene = load_scene(Some(&mesh))?;
     let rays = bench::canonical_rays(&scene.mesh.bounds());
-    println!("| bins | build ms | SAH cost | levels | leaves | closest Mrays/s (1 thread) |");
-    println!("|---:|---:|---:|---:|---:|---:|");
-    for b in bins {
+    let mut ours = Vec::new();
+    for &b in &bins {
         let options = BuildOptions {
             bins: b,
             ..BuildOptions::sah()
         };
         options.validate().map_err(anyhow::Error::msg)?;
-        let config = BenchConfig {
-            threads: vec![1],
-            repeat,
-            options,
-            peers: false,
-        };
-        eprintln!("{}: {b} bins", scene.name);
-        let out = bench::run(
-            &scene.name,
-            &scene.mesh.triangles,
-            &rays,
-            &config,
-            &mut |_| {},
-        );
-        let r = out
-            .results
-            .iter()
-            .find(|r| r.engine == "tracery-sah")
-            .expect("the SAH engine ran");
+        ours.push((format!("sah-{b}"), options));
+    }
+    // One run with every bin count as an engine, so builds and traces are interleaved and a
+    // burst of load elsewhere on the machine does not favour one bin count.
+    let config = BenchConfig {
+        threads: vec![1],
+        repeat,
+        ours,
+        peers: false,
+    };
+    let out = bench::run(&scene.name, &scene.mesh.triangles, &rays, &config, &mut |l| {
+        eprintln!("  {l}")
+    });
+    println!("| bins | build ms | SAH cost | levels | leaves | closest Mrays/s (1 thread) |");
+    println!("|---:|---:|---:|---:|---:|---:|");
+    for (b, r) in bins.iter().zip(&out.results) {
         let s = r.stats.expect("our engines report stats");
         println!(
             "| {b} | {:.1} | {:.2} | {} | {} | {:.2} |",
