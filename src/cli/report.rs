@@ -145,9 +145,13 @@ fn bins_table(mesh: PathBuf, bins: Vec<u32>, repeat: usize) -> Result<()> {
         ours,
         peers: false,
     };
-    let out = bench::run(&scene.name, &scene.mesh.triangles, &rays, &config, &mut |l| {
-        eprintln!("  {l}")
-    });
+    let out = bench::run(
+        &scene.name,
+        &scene.mesh.triangles,
+        &rays,
+        &config,
+        &mut |l| eprintln!("  {l}"),
+    );
     println!("| bins | build ms | SAH cost | levels | leaves | closest Mrays/s (1 thread) |");
     println!("|---:|---:|---:|---:|---:|---:|");
     for (b, r) in bins.iter().zip(&out.results) {
