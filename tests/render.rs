@@ -21,6 +21,7 @@ fn image_is_identical_with_1_and_2_threads() {
         height: 64,
         spp: 3,
         seed: 42,
+        ..RenderSettings::default()
     };
     let one = render_with_threads(1, &settings);
     let two = render_with_threads(2, &settings);
@@ -43,6 +44,7 @@ fn cornell_box_render_is_lit_and_finite() {
         height: 64,
         spp: 4,
         seed: 0,
+        ..RenderSettings::default()
     };
     let film = render_with_threads(2, &settings);
     assert_eq!(film.rejected, 0);
@@ -64,7 +66,7 @@ fn empty_images_and_zero_samples_are_rejected() {
             width: w,
             height: h,
             spp,
-            seed: 0,
+            ..RenderSettings::default()
         };
         assert!(s.validate().is_err(), "{w}x{h} {spp} spp");
     }

@@ -7,7 +7,7 @@ use anyhow::Result;
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 use tracery::bvh::Bvh;
-use tracery::render::{RenderSettings, render};
+use tracery::render::{Explain, RenderPlan, RenderSettings, render};
 
 use super::{BvhArgs, ensure_parent, load_scene, set_threads};
 
@@ -30,6 +30,12 @@ pub struct RenderArgs {
     /// Seed of the random streams (the same seed gives the same image on any thread count).
     #[arg(long, default_value_t = 0)]
     seed: u64,
+    /// Largest number of mirror reflections or transparent surfaces along a path.
+    #[arg(long, default_value_t = 5)]
+    max_depth: u32,
+    /// Print the render plan (what the scene needs and what is left out), then render.
+    #[arg(long)]
+    explain: bool,
     /// Exposure multiplier applied before tone mapping.
     #[arg(long, default_value_t = 1.0)]
     exposure: f32,
@@ -47,10 +53,15 @@ pub fn run(a: RenderArgs) -> Result<()> {
         height: a.height,
         spp: a.spp,
         seed: a.seed,
+        max_depth: a.max_depth,
     };
     settings.validate().map_err(anyhow::Error::msg)?;
     let options = a.bvh.options()?;
     let scene = load_scene(a.scene.as_deref())?;
+    if a.explain {
+        let plan = RenderPlan::new(&scene, &settings);
+        eprintln!("{}", Explain(&plan, &scene, &settings));
+    }
     let bvh = Bvh::build(&scene.mesh.triangles, &options);
     let s = &bvh.stats;
     eprintln!(
@@ -86,15 +97,18 @@ pub fn run(a: RenderArgs) -> Result<()> {
     let path = ensure_parent(&a.output)?;
     out.film.save_png(&path, a.exposure)?;
     let secs = took.as_secs_f64();
+    let r = &out.rays;
     println!(
-        "wrote {} ({}x{}, {} spp) in {:.0} ms: {} camera rays, {} shadow rays, {:.2} Mrays/s{}",
+        "wrote {} ({}x{}, {} spp) in {:.0} ms: rays {} camera, {} shadow, {} reflection, {} transmission; {:.2} Mrays/s{}",
         path.display(),
         settings.width,
         settings.height,
         settings.spp,
         secs * 1e3,
-        out.rays.camera,
-        out.rays.shadow,
+        r.camera,
+        r.shadow,
+        r.reflection,
+        r.transmission,
         out.rays.total() as f64 / secs / 1e6,
         if out.film.rejected > 0 {
             format!("; {} non-finite samples left out", out.film.rejected)

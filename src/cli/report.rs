@@ -100,6 +100,7 @@ fn splits(meshes: Vec<PathBuf>, repeat: usize) -> Result<()> {
                 height: 512,
                 spp: 1,
                 seed: 0,
+                ..RenderSettings::default()
             };
             let mut best = f64::INFINITY;
             for _ in 0..repeat.max(1) {

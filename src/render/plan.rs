@@ -1,0 +1,142 @@
+//! The render plan: what a scene and its settings need, decided once before rendering, so
+//! that nothing a scene does not use is loaded, sampled or traced.
+
+use std::fmt;
+
+use crate::scene::{Environment, Light, Scene};
+
+use super::RenderSettings;
+
+/// The features a render uses. Each `false` means that work is skipped entirely.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct RenderPlan {
+    /// Rays that leave the scene sample the environment (else they see black).
+    pub environment: bool,
+    /// Shadow rays pass through transparent surfaces and are attenuated by them (else a
+    /// shadow ray is a plain any-hit occlusion test).
+    pub transparent_shadows: bool,
+    /// Mirror surfaces spawn reflection rays (up to [`RenderSettings::max_depth`]).
+    pub reflections: bool,
+    /// Transparent surfaces let camera and reflection rays continue through them.
+    pub transmission: bool,
+    /// Closed transparent meshes absorb light with distance (Beer-Lambert).
+    pub absorption: bool,
+    /// Camera rays start on a thin lens (else a pinhole).
+    pub thin_lens: bool,
+}
+
+impl RenderPlan {
+    /// Derives the plan from the scene and settings.
+    pub fn new(scene: &Scene, settings: &RenderSettings) -> Self {
+        let transparent = scene.materials.iter().any(|m| m.is_transparent());
+        let absorbing = scene
+            .materials
+            .iter()
+            .any(|m| m.is_transparent() && m.absorption.max_element() > 0.0);
+        let bounces = settings.max_depth > 0;
+        Self {
+            environment: !matches!(scene.environment, Environment::None),
+            transparent_shadows: transparent,
+            reflections: bounces && scene.materials.iter().any(|m| m.is_mirror()),
+            transmission: bounces && transparent,
+            absorption: absorbing,
+            thin_lens: scene.camera.lens_radius > 0.0,
+        }
+    }
+
+    /// Everything on: the reference the tests compare a pruned plan against.
+    pub fn everything() -> Self {
+        Self {
+            environment: true,
+            transparent_shadows: true,
+            reflections: true,
+            transmission: true,
+            absorption: true,
+            thin_lens: true,
+        }
+    }
+}
+
+/// The plan as `tracery render --explain` prints it, with the lights of `scene`.
+pub struct Explain<'a>(pub &'a RenderPlan, pub &'a Scene, pub &'a RenderSettings);
+
+impl fmt::Display for Explain<'_> {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let (p, scene, s) = (self.0, self.1, self.2);
+        let on = |b: bool| if b { "yes" } else { "no, skipped" };
+        writeln!(f, "render plan for {}:", scene.name)?;
+        writeln!(
+            f,
+            "  environment          {}",
+            if p.environment {
+                format!("yes ({})", env_name(&scene.environment))
+            } else {
+                "no, nothing loaded or sampled".into()
+            }
+        )?;
+        writeln!(
+            f,
+            "  transparent shadows  {}",
+            if p.transparent_shadows {
+                "yes (shadow rays pass transparent surfaces)"
+            } else {
+                "no transparent material: occlusion-only shadow rays"
+            }
+        )?;
+        writeln!(f, "  absorption           {}", on(p.absorption))?;
+        writeln!(
+            f,
+            "  reflections          {}",
+            if p.reflections {
+                format!("yes, up to {} bounces", s.max_depth)
+            } else {
+                "no mirror (or depth 0): no reflection rays".into()
+            }
+        )?;
+        writeln!(
+            f,
+            "  transmission         {}",
+            if p.transmission {
+                format!("yes, up to {} surfaces", s.max_depth)
+            } else {
+                "no transparent material: camera rays stop at the first hit".into()
+            }
+        )?;
+        writeln!(
+            f,
+            "  lens                 {}",
+            if p.thin_lens {
+                format!(
+                    "thin lens, radius {}, focus at {}",
+                    scene.camera.lens_radius, scene.camera.focus_distance
+                )
+            } else {
+                "pinhole".into()
+            }
+        )?;
+        for (i, l) in scene.lights.iter().enumerate() {
+            match l {
+                Light::Point { .. } => writeln!(f, "  light {i}              point: 1 shadow ray")?,
+                Light::Rect { samples, .. } => writeln!(
+                    f,
+                    "  light {i}              rectangle: {samples} shadow rays"
+                )?,
+            }
+        }
+        write!(
+            f,
+            "  samples              {} per pixel, {}x{}",
+            s.spp, s.width, s.height
+        )
+    }
+}
+
+fn env_name(e: &Environment) -> &'static str {
+    match e {
+        Environment::None => "none",
+        Environment::Color(_) => "constant colour",
+        Environment::Sky { .. } => "procedural sky",
+        Environment::CubeMap { .. } => "cube map",
+        Environment::Equirect { .. } => "equirectangular image",
+    }
+}

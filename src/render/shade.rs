@@ -1,0 +1,253 @@
+//! Shading: Blinn-Phong under point and rectangular lights, shadows that let light through
+//! transparent surfaces (with Beer-Lambert absorption inside closed meshes), mirror
+//! reflections and transmission, each only where the [`RenderPlan`] says the scene needs it.
+
+use glam::Vec3;
+
+use super::environment::environment;
+use super::{RayCounts, RenderPlan};
+use crate::bvh::Bvh;
+use crate::geometry::{Ray, offset_ray_origin};
+use crate::sampling::SplitMix64;
+use crate::scene::{Light, Material, Scene, face_normal};
+
+/// Traces rays through a scene and returns the radiance they carry back.
+pub struct Tracer<'a> {
+    /// The scene.
+    pub scene: &'a Scene,
+    /// Its BVH.
+    pub bvh: &'a Bvh,
+    /// What to compute.
+    pub plan: RenderPlan,
+    /// Largest number of reflection or transmission events along a path.
+    pub max_depth: u32,
+}
+
+/// Where a ray met a surface.
+struct Surface<'a> {
+    p: Vec3,
+    /// Geometric normal facing the incoming ray.
+    ng: Vec3,
+    /// Shading normal on the same side as `ng`.
+    n: Vec3,
+    /// True when the ray arrived on the side the triangle's winding calls outside.
+    entering: bool,
+    material: &'a Material,
+}
+
+impl Tracer<'_> {
+    /// Radiance arriving at the ray's origin from along the ray.
+    pub fn radiance(&self, ray: &Ray, rng: &mut SplitMix64, counts: &mut RayCounts) -> Vec3 {
+        self.trace(ray, 0, rng, counts)
+    }
+
+    fn background(&self, dir: Vec3) -> Vec3 {
+        if self.plan.environment {
+            environment(&self.scene.environment, dir)
+        } else {
+            Vec3::ZERO
+        }
+    }
+
+    fn surface(&self, ray: &Ray, prim: u32, u: f32, v: f32) -> Surface<'_> {
+        let scene = self.scene;
+        let tri = &scene.mesh.triangles[prim as usize];
+        let ns = &scene.mesh.normals[prim as usize];
+        let p = tri[0] * (1.0 - u - v) + tri[1] * u + tri[2] * v;
+        let outward = face_normal(tri);
+        let entering = outward.dot(ray.dir) < 0.0;
+        let ng = if entering { outward } else { -outward };
+        let mut n = (ns[0] * (1.0 - u - v) + ns[1] * u + ns[2] * v)
+            .try_normalize()
+            .unwrap_or(ng);
+        if n.dot(ng) < 0.0 {
+            n = -n;
+        }
+        Surface {
+            p,
+            ng,
+            n,
+            entering,
+            material: scene.material_of(prim),
+        }
+    }
+
+    fn trace(&self, ray: &Ray, depth: u32, rng: &mut SplitMix64, counts: &mut RayCounts) -> Vec3 {
+        let Some(hit) = self.bvh.intersect(ray, f32::INFINITY) else {
+            return self.background(ray.dir);
+        };
+        let s = self.surface(ray, hit.prim, hit.u, hit.v);
+        let m = s.material;
+        let alpha = if self.plan.transmission {
+            m.opacity
+        } else {
+            1.0
+        };
+        let wo = -ray.dir.normalize();
+
+        let mut l = alpha * (m.emission + self.direct(&s, wo, rng, counts));
+        if self.plan.reflections && m.is_mirror() && depth < self.max_depth {
+            let r = reflect(ray.dir, s.n);
+            if r.dot(s.ng) > 0.0 {
+                counts.reflection += 1;
+                let bounce = Ray::new(offset_ray_origin(s.p, s.ng), r);
+                l += alpha * m.mirror.min(Vec3::ONE) * self.trace(&bounce, depth + 1, rng, counts);
+            }
+        }
+        if alpha < 1.0 && depth < self.max_depth {
+            counts.transmission += 1;
+            let (dir, side) = transmit(ray.dir, &s);
+            let through = Ray::new(offset_ray_origin(s.p, side), dir);
+            let tint = (1.0 - alpha) * m.diffuse.min(Vec3::ONE);
+            l += tint * self.trace(&through, depth + 1, rng, counts);
+        }
+        if self.plan.absorption && !s.entering && m.is_transparent() {
+            // The segment just travelled ran inside this material's closed mesh.
+            l *= beer_lambert(m.absorption, hit.t * ray.dir.length());
+        }
+        l
+    }
+
+    /// Light arriving directly from the light sources, reflected towards `wo`.
+    fn direct(&self, s: &Surface, wo: Vec3, rng: &mut SplitMix64, counts: &mut RayCounts) -> Vec3 {
+        let m = s.material;
+        if m.diffuse == Vec3::ZERO && m.specular == Vec3::ZERO {
+            return Vec3::ZERO;
+        }
+        let origin = offset_ray_origin(s.p, s.ng);
+        let mut sum = Vec3::ZERO;
+        for light in &self.scene.lights {
+            sum += match *light {
+                Light::Point {
+                    position,
+                    color,
+                    intensity,
+                } => {
+                    let to = position - origin;
+                    let d2 = to.length_squared();
+                    let wi = to / d2.sqrt();
+                    if s.n.dot(wi) <= 0.0 || s.ng.dot(to) <= 0.0 {
+                        continue;
+                    }
+                    let pass = self.shadow(origin, to, 1.0, counts);
+                    brdf(m, s.n, wi, wo) * s.n.dot(wi) * color * intensity * pass / d2
+                }
+                Light::Rect {
+                    corner,
+                    edge_u,
+                    edge_v,
+                    color,
+                    intensity,
+                    samples,
+                } => {
+                    let normal = edge_u.cross(edge_v);
+                    let area = normal.length();
+                    let ln = normal / area;
+                    let mut acc = Vec3::ZERO;
+                    for _ in 0..samples {
+                        let q = corner + rng.next_f32() * edge_u + rng.next_f32() * edge_v;
+                        let to = q - origin;
+                        let d2 = to.length_squared();
+                        let wi = to / d2.sqrt();
+                        let cos_l = -ln.dot(wi);
+                        if s.n.dot(wi) <= 0.0 || cos_l <= 0.0 || s.ng.dot(to) <= 0.0 {
+                            continue;
+                        }
+                        // Stop just short of the light so its own quad does not shadow it.
+                        let pass = self.shadow(origin, to, 1.0 - 1e-4, counts);
+                        acc += brdf(m, s.n, wi, wo) * s.n.dot(wi) * cos_l * area / d2 * pass;
+                    }
+                    acc * color * intensity / samples as f32
+                }
+            };
+        }
+        sum
+    }
+
+    /// Fraction of light passing from `origin + to * t_max` back to `origin`, per channel.
+    fn shadow(&self, origin: Vec3, to: Vec3, t_max: f32, counts: &mut RayCounts) -> Vec3 {
+        counts.shadow += 1;
+        let ray = Ray::new(origin, to);
+        if !self.plan.transparent_shadows {
+            return if self.bvh.occluded(&ray, t_max) {
+                Vec3::ZERO
+            } else {
+                Vec3::ONE
+            };
+        }
+        let scene = self.scene;
+        let len = to.length();
+        // Absorption needs the distance travelled inside each medium. Summing `+t` over exits
+        // and `-t` over entries gives it in any order, so hits need no sorting; a medium the
+        // segment ends inside adds `t_max` once per unmatched entry.
+        let mut inside: Vec<(u32, f32, i32)> = Vec::new();
+        let mut pass = self.bvh.transmittance(&ray, t_max, |prim, t| {
+            let m = scene.material_of(prim);
+            if !m.is_transparent() {
+                return Vec3::ZERO;
+            }
+            if self.plan.absorption && m.absorption.max_element() > 0.0 {
+                let id = scene.mesh.material_ids[prim as usize];
+                let entering = face_normal(&scene.mesh.triangles[prim as usize]).dot(to) < 0.0;
+                let (dt, db) = if entering { (-t, 1) } else { (t, -1) };
+                match inside.iter_mut().find(|e| e.0 == id) {
+                    Some(e) => {
+                        e.1 += dt;
+                        e.2 += db;
+                    }
+                    None => inside.push((id, dt, db)),
+                }
+            }
+            (1.0 - m.opacity) * m.diffuse.min(Vec3::ONE)
+        });
+        for (id, sum, balance) in inside {
+            let d = (sum + balance.max(0) as f32 * t_max) * len;
+            pass *= beer_lambert(scene.materials[id as usize].absorption, d.max(0.0));
+        }
+        pass
+    }
+}
+
+/// Blinn-Phong, energy-normalized: `Kd / pi + Ks (Ns + 8) / (8 pi) cos^Ns(n, h)`.
+fn brdf(m: &Material, n: Vec3, wi: Vec3, wo: Vec3) -> Vec3 {
+    let mut f = m.diffuse * std::f32::consts::FRAC_1_PI;
+    if m.specular != Vec3::ZERO {
+        let h = (wi + wo).normalize_or_zero();
+        let c = n.dot(h).max(0.0);
+        let ns = m.shininess.max(0.0);
+        f += m.specular * (ns + 8.0) / (8.0 * std::f32::consts::PI) * c.powf(ns);
+    }
+    f
+}
+
+/// Mirror direction of `d` about the normal `n`.
+pub fn reflect(d: Vec3, n: Vec3) -> Vec3 {
+    d - 2.0 * d.dot(n) * n
+}
+
+/// Direction through a transparent surface (refracted by its index of refraction, or totally
+/// reflected) and the side of the surface the new ray leaves from.
+fn transmit(d: Vec3, s: &Surface) -> (Vec3, Vec3) {
+    let ior = s.material.ior;
+    if ior == 1.0 || ior.is_nan() || ior <= 0.0 {
+        return (d, -s.ng);
+    }
+    let eta = if s.entering { 1.0 / ior } else { ior };
+    let dn = d.normalize();
+    let cos_i = -dn.dot(s.n);
+    let k = 1.0 - eta * eta * (1.0 - cos_i * cos_i);
+    if k < 0.0 {
+        (reflect(dn, s.n), s.ng) // total internal reflection
+    } else {
+        (eta * dn + (eta * cos_i - k.sqrt()) * s.n, -s.ng)
+    }
+}
+
+/// `exp(-sigma d)` per channel.
+pub fn beer_lambert(sigma: Vec3, d: f32) -> Vec3 {
+    Vec3::new(
+        (-sigma.x * d).exp(),
+        (-sigma.y * d).exp(),
+        (-sigma.z * d).exp(),
+    )
+}

@@ -1,0 +1,259 @@
+//! Shading against analytic answers: the cosine law, light through transparent layers and
+//! absorbing media, mirrors, transparency seen by the camera, and the render plan.
+
+use glam::{Affine3A, Vec3};
+use tracery::bvh::{BuildOptions, Bvh};
+use tracery::geometry::Ray;
+use tracery::render::{
+    RayCounts, RenderPlan, RenderSettings, Tracer, render_with_plan, shade::beer_lambert, sky,
+};
+use tracery::sampling::SplitMix64;
+use tracery::scene::{Camera, Environment, Light, Material, Mesh, Scene, shapes};
+
+/// A scene from (triangles, material) parts.
+fn scene(parts: Vec<(Vec<[Vec3; 3]>, Material)>, lights: Vec<Light>, env: Environment) -> Scene {
+    let mut mesh = Mesh::default();
+    let mut materials = Vec::new();
+    for (tris, m) in parts {
+        mesh.append(Mesh::from_triangles(tris, 0), materials.len() as u32);
+        materials.push(m);
+    }
+    Scene {
+        name: "test".into(),
+        mesh,
+        materials,
+        lights,
+        camera: Camera::canonical(&tracery::geometry::Aabb::new(Vec3::splat(-1.0), Vec3::ONE)),
+        environment: env,
+        warnings: Vec::new(),
+    }
+}
+
+fn moved(tris: Vec<[Vec3; 3]>, scale: Vec3, at: Vec3) -> Vec<[Vec3; 3]> {
+    let m = Affine3A::from_scale_rotation_translation(scale, glam::Quat::IDENTITY, at);
+    tris.iter()
+        .map(|t| t.map(|v| m.transform_point3(v)))
+        .collect()
+}
+
+fn white() -> Material {
+    Material {
+        diffuse: Vec3::ONE,
+        ..Material::default()
+    }
+}
+
+fn glass(opacity: f32) -> Material {
+    Material {
+        diffuse: Vec3::ONE,
+        opacity,
+        ..Material::default()
+    }
+}
+
+fn floor() -> Vec<[Vec3; 3]> {
+    moved(shapes::quad(), Vec3::splat(100.0), Vec3::ZERO)
+}
+
+fn radiance(s: &Scene, ray: &Ray) -> (Vec3, RayCounts) {
+    let bvh = Bvh::build(&s.mesh.triangles, &BuildOptions::sah());
+    let settings = RenderSettings::default();
+    let tracer = Tracer {
+        scene: s,
+        bvh: &bvh,
+        plan: RenderPlan::new(s, &settings),
+        max_depth: settings.max_depth,
+    };
+    let mut counts = RayCounts::default();
+    let l = tracer.radiance(ray, &mut SplitMix64::new(1), &mut counts);
+    (l, counts)
+}
+
+fn close(a: Vec3, b: Vec3, rel: f32) -> bool {
+    (a - b).abs().max_element() <= rel * b.abs().max_element().max(1e-12)
+}
+
+const H: f32 = 2.0;
+const I: f32 = 10.0;
+
+fn point_light() -> Vec<Light> {
+    vec![Light::Point {
+        position: Vec3::new(0.0, H, 0.0),
+        color: Vec3::ONE,
+        intensity: I,
+    }]
+}
+
+/// Radiance of a white diffuse floor at `(x, 0, 0)` under the light at height `H`.
+fn cosine_law(x: f32) -> Vec3 {
+    let d2 = x * x + H * H;
+    Vec3::splat(I / std::f32::consts::PI * (H / d2.sqrt()) / d2)
+}
+
+fn look_down_at(x: f32, from: f32) -> Ray {
+    Ray::new(Vec3::new(x, from, 0.0), -Vec3::Y)
+}
+
+#[test]
+fn diffuse_plane_under_a_point_light_follows_the_cosine_law() {
+    let s = scene(vec![(floor(), white())], point_light(), Environment::None);
+    for x in [0.0, 0.5, 1.0, 2.0, 4.0, 8.0] {
+        let (l, counts) = radiance(&s, &look_down_at(x, 1.0));
+        assert!(
+            close(l, cosine_law(x), 0.01),
+            "x = {x}: {l} vs {}",
+            cosine_law(x)
+        );
+        assert_eq!(counts.shadow, 1);
+    }
+}
+
+#[test]
+fn light_through_k_transparent_layers_is_t_to_the_k() {
+    let t = 0.6f32;
+    for k in 0..6 {
+        let mut parts = vec![(floor(), white())];
+        for i in 0..k {
+            let y = 0.5 + 0.2 * i as f32;
+            parts.push((
+                moved(shapes::quad(), Vec3::splat(50.0), Vec3::Y * y),
+                glass(1.0 - t),
+            ));
+        }
+        let s = scene(parts, point_light(), Environment::None);
+        for x in [0.0, 1.0] {
+            let (l, _) = radiance(&s, &look_down_at(x, 0.25));
+            let expected = cosine_law(x) * t.powi(k);
+            assert!(
+                close(l, expected, 1e-4),
+                "k = {k}, x = {x}: {l} vs {expected}"
+            );
+        }
+    }
+}
+
+#[test]
+fn absorption_through_a_slab_is_exp_minus_sigma_d() {
+    let sigma = Vec3::new(0.5, 1.0, 2.0);
+    for d in [0.25f32, 0.5, 1.0] {
+        // A closed box of clear, absorbing glass between the light and the floor.
+        let slab = moved(shapes::cube(), Vec3::new(3.0, d, 3.0), Vec3::Y * 1.0);
+        let m = Material {
+            absorption: sigma,
+            ..glass(0.0)
+        };
+        let s = scene(
+            vec![(floor(), white()), (slab, m)],
+            point_light(),
+            Environment::None,
+        );
+        let (l, _) = radiance(&s, &look_down_at(0.0, 0.25));
+        let expected = cosine_law(0.0) * beer_lambert(sigma, d);
+        assert!(close(l, expected, 1e-4), "d = {d}: {l} vs {expected}");
+    }
+}
+
+#[test]
+fn a_mirror_returns_the_environment_in_the_reflected_direction() {
+    let mirror = Material {
+        diffuse: Vec3::ZERO,
+        mirror: Vec3::new(0.9, 0.8, 0.7),
+        ..Material::default()
+    };
+    let env = Environment::Sky {
+        intensity: 1.5,
+        rotation_deg: 0.0,
+    };
+    let s = scene(vec![(floor(), mirror.clone())], vec![], env);
+    for d in [
+        Vec3::new(1.0, -1.0, 0.0),
+        Vec3::new(0.2, -1.0, 0.5),
+        Vec3::new(-3.0, -0.5, 1.0),
+    ] {
+        let (l, counts) = radiance(&s, &Ray::new(Vec3::new(0.0, 1.0, 0.0), d));
+        let r = Vec3::new(d.x, -d.y, d.z);
+        let expected = mirror.mirror * sky(r) * 1.5;
+        assert!(close(l, expected, 1e-5), "d = {d}: {l} vs {expected}");
+        assert_eq!((counts.reflection, counts.shadow), (1, 0));
+    }
+}
+
+#[test]
+fn what_lies_behind_a_transparent_surface_is_seen() {
+    let lamp = Material {
+        diffuse: Vec3::ZERO,
+        emission: Vec3::new(2.0, 3.0, 4.0),
+        ..Material::default()
+    };
+    let alpha = 0.3;
+    let s = scene(
+        vec![
+            (floor(), lamp.clone()),
+            (
+                moved(shapes::quad(), Vec3::splat(10.0), Vec3::Y),
+                glass(alpha),
+            ),
+        ],
+        vec![],
+        Environment::None,
+    );
+    let (l, counts) = radiance(&s, &look_down_at(0.0, 2.0));
+    assert!(close(l, (1.0 - alpha) * lamp.emission, 1e-6), "{l}");
+    assert_eq!(counts.transmission, 1);
+}
+
+#[test]
+fn two_facing_mirrors_stop_at_the_depth_with_bounded_radiance() {
+    let mirror = Material {
+        diffuse: Vec3::ZERO,
+        mirror: Vec3::ONE,
+        ..Material::default()
+    };
+    let lower = floor();
+    let upper = moved(shapes::quad(), Vec3::splat(100.0), Vec3::Y * 2.0);
+    let s = scene(
+        vec![(lower, mirror.clone()), (upper, mirror)],
+        vec![],
+        Environment::Color(Vec3::ONE),
+    );
+    let (l, counts) = radiance(&s, &Ray::new(Vec3::Y, Vec3::new(0.01, -1.0, 0.0)));
+    assert!(l.is_finite() && l.max_element() <= 1.0);
+    assert_eq!(
+        counts.reflection,
+        RenderSettings::default().max_depth as u64
+    );
+}
+
+#[test]
+fn leaving_out_unneeded_features_changes_no_pixel_and_traces_none_of_them() {
+    let settings = RenderSettings {
+        width: 48,
+        height: 48,
+        spp: 2,
+        ..RenderSettings::default()
+    };
+    let s = Scene::cornell_box();
+    let bvh = Bvh::build(&s.mesh.triangles, &BuildOptions::sah());
+    let plan = RenderPlan::new(&s, &settings);
+    assert!(
+        !plan.environment && !plan.transparent_shadows && !plan.reflections && !plan.transmission
+    );
+    let pruned = render_with_plan(&s, &bvh, &settings, plan, &|_| {});
+    let full = render_with_plan(&s, &bvh, &settings, RenderPlan::everything(), &|_| {});
+    assert_eq!(pruned.film, full.film);
+    assert_eq!((pruned.rays.reflection, pruned.rays.transmission), (0, 0));
+    assert_eq!(pruned.rays.shadow, full.rays.shadow);
+
+    // Depth 0 turns mirrors off even where a scene has them.
+    let mut mirrored = s.clone();
+    mirrored.materials[0].mirror = Vec3::splat(0.5);
+    let no_bounce = RenderSettings {
+        max_depth: 0,
+        ..settings.clone()
+    };
+    assert!(RenderPlan::new(&mirrored, &settings).reflections);
+    let p = RenderPlan::new(&mirrored, &no_bounce);
+    assert!(!p.reflections);
+    let out = render_with_plan(&mirrored, &bvh, &no_bounce, p, &|_| {});
+    assert_eq!(out.rays.reflection, 0);
+}
