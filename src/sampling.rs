@@ -33,3 +33,168 @@ pub fn mix64(mut z: u64) -> u64 {
     z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
     z ^ (z >> 31)
 }
+
+/// How the pixel, lens and light samples are drawn.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum SamplerKind {
+    /// Independent uniform random numbers.
+    Random,
+    /// Owen-scrambled Sobol points, padded by 2D dimension pairs (Burley 2020): every 2D
+    /// decision (pixel position, lens position, one light sample) is a (0, 2)-sequence in
+    /// the sample index, scrambled per pixel and per dimension pair.
+    Sobol,
+}
+
+impl std::fmt::Display for SamplerKind {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            SamplerKind::Random => "random",
+            SamplerKind::Sobol => "sobol",
+        })
+    }
+}
+
+impl std::str::FromStr for SamplerKind {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s.to_ascii_lowercase().as_str() {
+            "random" => Ok(SamplerKind::Random),
+            "sobol" => Ok(SamplerKind::Sobol),
+            other => Err(format!(
+                "unknown sampler `{other}` (expected random or sobol)"
+            )),
+        }
+    }
+}
+
+/// Fixed 2D dimensions: a decision always reads the same dimension whether or not the others
+/// were drawn, so leaving out a feature never shifts the samples of the rest.
+pub mod dim {
+    /// Position inside the pixel.
+    pub const PIXEL: u32 = 0;
+    /// Position on the lens.
+    pub const LENS: u32 = 1;
+    /// First light sample; later ones follow.
+    pub const LIGHT: u32 = 2;
+}
+
+/// The samples of one pixel: a 2D point for any (sample index, dimension) pair, computed
+/// from a hash rather than drawn from a stream, so it does not depend on what was drawn
+/// before (or on which thread).
+#[derive(Clone, Copy, Debug)]
+pub struct PixelSampler {
+    kind: SamplerKind,
+    seed: u64,
+    index: u32,
+}
+
+impl PixelSampler {
+    /// The sampler of `pixel` for sample number `index`, from the render's `seed`.
+    pub fn new(kind: SamplerKind, seed: u64, pixel: u64, index: u32) -> Self {
+        Self {
+            kind,
+            seed: mix64(seed ^ mix64(pixel.wrapping_add(0x5851_F42D_4C95_7F2D))),
+            index,
+        }
+    }
+
+    /// The same pixel's sampler for another sample index.
+    pub fn with_index(self, index: u32) -> Self {
+        Self { index, ..self }
+    }
+
+    /// The 2D point of dimension pair `dim`, in `[0, 1)^2`.
+    pub fn get_2d(&self, dim: u32) -> glam::Vec2 {
+        let h = mix64(self.seed ^ (dim as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15));
+        match self.kind {
+            SamplerKind::Random => {
+                let r = mix64(h ^ (self.index as u64).wrapping_mul(0xD1B5_4A32_D192_ED03));
+                glam::Vec2::new(unit((r >> 32) as u32), unit(r as u32))
+            }
+            SamplerKind::Sobol => {
+                // Shuffle the index (decorrelates dimension pairs), then scramble each axis.
+                let i = nested_uniform_scramble(self.index, h as u32);
+                let x = nested_uniform_scramble(i.reverse_bits(), (h >> 32) as u32 ^ 0x68bc_21eb);
+                let y = nested_uniform_scramble(sobol_dim1(i), (h >> 16) as u32 ^ 0x02e5_be93);
+                glam::Vec2::new(unit(x), unit(y))
+            }
+        }
+    }
+}
+
+/// Maps 32 random bits to `[0, 1)` (24 bits kept, so the result is never 1).
+#[inline]
+fn unit(x: u32) -> f32 {
+    (x >> 8) as f32 * (1.0 / (1u32 << 24) as f32)
+}
+
+/// The second Sobol dimension (the first is the bit-reversed index): with it, the first `2^k`
+/// points form a (0, 2)-sequence, one point in every elementary interval.
+#[inline]
+pub fn sobol_dim1(mut i: u32) -> u32 {
+    let mut v = 1u32 << 31;
+    let mut r = 0;
+    while i != 0 {
+        if i & 1 != 0 {
+            r ^= v;
+        }
+        i >>= 1;
+        v ^= v >> 1;
+    }
+    r
+}
+
+/// Owen scrambling by hashing (Laine-Karras permutation on the reversed bits, Burley 2020).
+#[inline]
+pub fn nested_uniform_scramble(x: u32, seed: u32) -> u32 {
+    let mut v = x.reverse_bits();
+    v = v.wrapping_add(seed);
+    v ^= v.wrapping_mul(0x6c50_b47c);
+    v ^= v.wrapping_mul(0xb82f_1e52);
+    v ^= v.wrapping_mul(0xc7af_e638);
+    v ^= v.wrapping_mul(0x8d22_f6e6);
+    v.reverse_bits()
+}
+
+/// Shirley-Chiu concentric map of the unit square onto the unit disk (keeps strata intact).
+pub fn concentric_disk(u: glam::Vec2) -> glam::Vec2 {
+    let o = 2.0 * u - glam::Vec2::ONE;
+    if o == glam::Vec2::ZERO {
+        return glam::Vec2::ZERO;
+    }
+    let (r, theta) = if o.x.abs() > o.y.abs() {
+        (o.x, std::f32::consts::FRAC_PI_4 * (o.y / o.x))
+    } else {
+        (
+            o.y,
+            std::f32::consts::FRAC_PI_2 - std::f32::consts::FRAC_PI_4 * (o.x / o.y),
+        )
+    };
+    r * glam::Vec2::new(theta.cos(), theta.sin())
+}
+
+/// The light-sample dimensions of one camera path, handed out in the order the path asks for
+/// them (after the fixed pixel and lens dimensions).
+#[derive(Clone, Copy, Debug)]
+pub struct PathSampler {
+    pixel: PixelSampler,
+    next: u32,
+}
+
+impl PathSampler {
+    /// Light samples for the path of `pixel`'s current sample.
+    pub fn new(pixel: PixelSampler) -> Self {
+        Self {
+            pixel,
+            next: dim::LIGHT,
+        }
+    }
+
+    /// The next 2D light sample.
+    pub fn next_2d(&mut self) -> glam::Vec2 {
+        let v = self.pixel.get_2d(self.next);
+        self.next += 1;
+        v
+    }
+}

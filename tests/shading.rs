@@ -7,7 +7,7 @@ use tracery::geometry::Ray;
 use tracery::render::{
     RayCounts, RenderPlan, RenderSettings, Tracer, render_with_plan, shade::beer_lambert, sky,
 };
-use tracery::sampling::SplitMix64;
+use tracery::sampling::{PathSampler, PixelSampler, SamplerKind};
 use tracery::scene::{Camera, Environment, Light, Material, Mesh, Scene, shapes};
 
 /// A scene from (triangles, material) parts.
@@ -65,7 +65,8 @@ fn radiance(s: &Scene, ray: &Ray) -> (Vec3, RayCounts) {
         max_depth: settings.max_depth,
     };
     let mut counts = RayCounts::default();
-    let l = tracer.radiance(ray, &mut SplitMix64::new(1), &mut counts);
+    let mut samples = PathSampler::new(PixelSampler::new(SamplerKind::Sobol, 1, 0, 0));
+    let l = tracer.radiance(ray, &mut samples, &mut counts);
     (l, counts)
 }
 

@@ -8,6 +8,7 @@ use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 use tracery::bvh::Bvh;
 use tracery::render::{Explain, RenderPlan, RenderSettings, render};
+use tracery::sampling::SamplerKind;
 
 use super::{BvhArgs, ensure_parent, load_scene, set_threads};
 
@@ -30,6 +31,9 @@ pub struct RenderArgs {
     /// Seed of the random streams (the same seed gives the same image on any thread count).
     #[arg(long, default_value_t = 0)]
     seed: u64,
+    /// Sampler for pixel, lens and light samples: sobol (Owen-scrambled) or random.
+    #[arg(long, default_value_t = SamplerKind::Sobol)]
+    sampler: SamplerKind,
     /// Largest number of mirror reflections or transparent surfaces along a path.
     #[arg(long, default_value_t = 5)]
     max_depth: u32,
@@ -54,6 +58,7 @@ pub fn run(a: RenderArgs) -> Result<()> {
         spp: a.spp,
         seed: a.seed,
         max_depth: a.max_depth,
+        sampler: a.sampler,
     };
     settings.validate().map_err(anyhow::Error::msg)?;
     let options = a.bvh.options()?;

@@ -14,13 +14,12 @@ pub use shade::Tracer;
 
 use std::sync::atomic::{AtomicUsize, Ordering};
 
-use glam::Vec2;
 use rayon::prelude::*;
 
 use crate::bvh::Bvh;
 use crate::camera::CameraRays;
 use crate::film::Film;
-use crate::sampling::{SplitMix64, mix64};
+use crate::sampling::{PathSampler, PixelSampler, SamplerKind, concentric_disk, dim};
 use crate::scene::Scene;
 
 /// What to render.
@@ -36,6 +35,8 @@ pub struct RenderSettings {
     pub seed: u64,
     /// Largest number of mirror reflections or transparent surfaces along a path.
     pub max_depth: u32,
+    /// How pixel, lens and light samples are drawn.
+    pub sampler: SamplerKind,
 }
 
 impl Default for RenderSettings {
@@ -46,6 +47,7 @@ impl Default for RenderSettings {
             spp: 16,
             seed: 0,
             max_depth: 5,
+            sampler: SamplerKind::Sobol,
         }
     }
 }
@@ -154,18 +156,22 @@ pub fn render_with_plan(
         .map(|(y, row)| {
             let mut rays = RayCounts::default();
             let mut rejected = 0u64;
-            for (x, px) in row.iter_mut().enumerate() {
+            for (x, px_sum) in row.iter_mut().enumerate() {
                 let pixel = y as u64 * w as u64 + x as u64;
+                let first = PixelSampler::new(settings.sampler, settings.seed, pixel, 0);
                 for s in 0..settings.spp {
-                    let mut rng = SplitMix64::new(mix64(
-                        settings.seed ^ mix64(pixel.wrapping_mul(0x1_0000_0001) ^ s as u64),
-                    ));
-                    let jitter = Vec2::new(rng.next_f32(), rng.next_f32());
-                    let ray = cam.thin_lens(x as f32 + jitter.x, y as f32 + jitter.y, Vec2::ZERO);
+                    let sampler = first.with_index(s);
+                    let jitter = sampler.get_2d(dim::PIXEL);
+                    let (px, py) = (x as f32 + jitter.x, y as f32 + jitter.y);
+                    let ray = if plan.thin_lens {
+                        cam.thin_lens(px, py, concentric_disk(sampler.get_2d(dim::LENS)))
+                    } else {
+                        cam.pinhole(px, py)
+                    };
                     rays.camera += 1;
-                    let l = tracer.radiance(&ray, &mut rng, &mut rays);
+                    let l = tracer.radiance(&ray, &mut PathSampler::new(sampler), &mut rays);
                     if l.is_finite() {
-                        *px += l;
+                        *px_sum += l;
                     } else {
                         rejected += 1;
                     }

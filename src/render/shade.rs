@@ -8,7 +8,7 @@ use super::environment::environment;
 use super::{RayCounts, RenderPlan};
 use crate::bvh::Bvh;
 use crate::geometry::{Ray, offset_ray_origin};
-use crate::sampling::SplitMix64;
+use crate::sampling::PathSampler;
 use crate::scene::{Light, Material, Scene, face_normal};
 
 /// Traces rays through a scene and returns the radiance they carry back.
@@ -37,7 +37,7 @@ struct Surface<'a> {
 
 impl Tracer<'_> {
     /// Radiance arriving at the ray's origin from along the ray.
-    pub fn radiance(&self, ray: &Ray, rng: &mut SplitMix64, counts: &mut RayCounts) -> Vec3 {
+    pub fn radiance(&self, ray: &Ray, rng: &mut PathSampler, counts: &mut RayCounts) -> Vec3 {
         self.trace(ray, 0, rng, counts)
     }
 
@@ -72,7 +72,7 @@ impl Tracer<'_> {
         }
     }
 
-    fn trace(&self, ray: &Ray, depth: u32, rng: &mut SplitMix64, counts: &mut RayCounts) -> Vec3 {
+    fn trace(&self, ray: &Ray, depth: u32, rng: &mut PathSampler, counts: &mut RayCounts) -> Vec3 {
         let Some(hit) = self.bvh.intersect(ray, f32::INFINITY) else {
             return self.background(ray.dir);
         };
@@ -109,7 +109,7 @@ impl Tracer<'_> {
     }
 
     /// Light arriving directly from the light sources, reflected towards `wo`.
-    fn direct(&self, s: &Surface, wo: Vec3, rng: &mut SplitMix64, counts: &mut RayCounts) -> Vec3 {
+    fn direct(&self, s: &Surface, wo: Vec3, rng: &mut PathSampler, counts: &mut RayCounts) -> Vec3 {
         let m = s.material;
         if m.diffuse == Vec3::ZERO && m.specular == Vec3::ZERO {
             return Vec3::ZERO;
@@ -145,7 +145,8 @@ impl Tracer<'_> {
                     let ln = normal / area;
                     let mut acc = Vec3::ZERO;
                     for _ in 0..samples {
-                        let q = corner + rng.next_f32() * edge_u + rng.next_f32() * edge_v;
+                        let u = rng.next_2d();
+                        let q = corner + u.x * edge_u + u.y * edge_v;
                         let to = q - origin;
                         let d2 = to.length_squared();
                         let wi = to / d2.sqrt();

@@ -1,0 +1,113 @@
+//! Samplers and the thin lens.
+
+use glam::Vec2;
+use tracery::bvh::{BuildOptions, Bvh};
+use tracery::camera::CameraRays;
+use tracery::render::{RenderPlan, RenderSettings, render_with_plan};
+use tracery::sampling::{PixelSampler, SamplerKind, concentric_disk, dim};
+use tracery::scene::Scene;
+
+#[test]
+fn sobol_points_fill_every_elementary_interval() {
+    // The first 2^k points of each dimension pair: one per cell of every 2^a x 2^(k-a) grid.
+    let k = 6;
+    let n = 1u32 << k;
+    for pixel in [0u64, 7, 12345] {
+        for d in [dim::PIXEL, dim::LENS, dim::LIGHT, dim::LIGHT + 5] {
+            let base = PixelSampler::new(SamplerKind::Sobol, 3, pixel, 0);
+            let pts: Vec<Vec2> = (0..n).map(|i| base.with_index(i).get_2d(d)).collect();
+            assert!(
+                pts.iter()
+                    .all(|p| p.cmpge(Vec2::ZERO).all() && p.cmplt(Vec2::ONE).all())
+            );
+            for a in 0..=k {
+                let (cx, cy) = (1u32 << a, 1u32 << (k - a));
+                let mut seen = vec![false; n as usize];
+                for p in &pts {
+                    let cell = (p.x * cx as f32) as u32 * cy + (p.y * cy as f32) as u32;
+                    assert!(
+                        !seen[cell as usize],
+                        "pixel {pixel} dim {d}: two points in a {cx}x{cy} cell"
+                    );
+                    seen[cell as usize] = true;
+                }
+            }
+        }
+    }
+}
+
+#[test]
+fn samples_do_not_depend_on_what_was_drawn_before() {
+    for kind in [SamplerKind::Random, SamplerKind::Sobol] {
+        let s = PixelSampler::new(kind, 9, 42, 5);
+        let a = s.get_2d(dim::LIGHT);
+        let _ = s.get_2d(dim::LENS);
+        assert_eq!(s.get_2d(dim::LIGHT), a);
+        assert_ne!(s.get_2d(dim::LIGHT + 1), a);
+        assert_ne!(s.with_index(6).get_2d(dim::LIGHT), a);
+    }
+}
+
+#[test]
+fn concentric_map_stays_in_the_disk_and_keeps_the_centre() {
+    assert_eq!(concentric_disk(Vec2::splat(0.5)), Vec2::ZERO);
+    for i in 0..32 {
+        for j in 0..32 {
+            let p = concentric_disk(Vec2::new(i as f32 / 31.0, j as f32 / 31.0));
+            assert!(p.length() <= 1.0 + 1e-6);
+        }
+    }
+    // The square's edge lands on the circle.
+    assert!((concentric_disk(Vec2::new(1.0, 0.5)).length() - 1.0).abs() < 1e-6);
+}
+
+#[test]
+fn lens_radius_zero_gives_the_pinhole_image_bit_for_bit() {
+    let scene = Scene::cornell_box();
+    let bvh = Bvh::build(&scene.mesh.triangles, &BuildOptions::sah());
+    let settings = RenderSettings {
+        width: 40,
+        height: 40,
+        spp: 3,
+        ..RenderSettings::default()
+    };
+    let pinhole = render_with_plan(
+        &scene,
+        &bvh,
+        &settings,
+        RenderPlan::new(&scene, &settings),
+        &|_| {},
+    );
+    // Thin lens on, radius 0: the lens sample is drawn but changes nothing.
+    let lens = render_with_plan(&scene, &bvh, &settings, RenderPlan::everything(), &|_| {});
+    assert_eq!(pinhole.film, lens.film);
+}
+
+#[test]
+fn thin_lens_rays_meet_on_the_focus_plane() {
+    let mut camera = Scene::cornell_box().camera;
+    camera.lens_radius = 0.3;
+    camera.focus_distance = 6.0;
+    let cam = CameraRays::new(&camera, 64, 48);
+    for (px, py) in [(32.0, 24.0), (3.5, 40.25), (60.0, 2.0)] {
+        let pin = cam.pinhole(px, py);
+        let t = camera.focus_distance / pin.dir.dot(cam.forward);
+        let focus = pin.at(t);
+        for lens in [
+            Vec2::new(1.0, 0.0),
+            Vec2::new(-0.5, 0.7),
+            Vec2::new(0.1, -0.9),
+        ] {
+            let r = cam.thin_lens(px, py, lens);
+            assert!((r.origin - cam.eye).length() > 0.0);
+            // Walk the lens ray to the focus plane: it arrives at the same point.
+            let s = (focus - r.origin).dot(cam.forward) / r.dir.dot(cam.forward);
+            assert!(
+                (r.at(s) - focus).length() < 1e-4,
+                "{px},{py}: {} vs {focus}",
+                r.at(s)
+            );
+            assert!((r.dir.length() - 1.0).abs() < 1e-6);
+        }
+    }
+}
