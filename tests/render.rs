@@ -11,7 +11,7 @@ fn render_with_threads(threads: usize, settings: &RenderSettings) -> tracery::fi
         .num_threads(threads)
         .build()
         .unwrap();
-    pool.install(|| render(&scene, &bvh, settings, &|_| {}).film)
+    pool.install(|| render(&scene, &bvh, settings, &|_| {}).unwrap().film)
 }
 
 #[test]

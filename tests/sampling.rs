@@ -3,7 +3,7 @@
 use glam::Vec2;
 use tracery::bvh::{BuildOptions, Bvh};
 use tracery::camera::CameraRays;
-use tracery::render::{RenderPlan, RenderSettings, render_with_plan};
+use tracery::render::{EnvironmentMap, RenderPlan, RenderSettings, render_with_plan};
 use tracery::sampling::{PixelSampler, SamplerKind, concentric_disk, dim};
 use tracery::scene::Scene;
 
@@ -74,12 +74,20 @@ fn lens_radius_zero_gives_the_pinhole_image_bit_for_bit() {
     let pinhole = render_with_plan(
         &scene,
         &bvh,
+        &EnvironmentMap::None,
         &settings,
         RenderPlan::new(&scene, &settings),
         &|_| {},
     );
     // Thin lens on, radius 0: the lens sample is drawn but changes nothing.
-    let lens = render_with_plan(&scene, &bvh, &settings, RenderPlan::everything(), &|_| {});
+    let lens = render_with_plan(
+        &scene,
+        &bvh,
+        &EnvironmentMap::None,
+        &settings,
+        RenderPlan::everything(),
+        &|_| {},
+    );
     assert_eq!(pinhole.film, lens.film);
 }
 

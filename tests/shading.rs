@@ -5,7 +5,8 @@ use glam::{Affine3A, Vec3};
 use tracery::bvh::{BuildOptions, Bvh};
 use tracery::geometry::Ray;
 use tracery::render::{
-    RayCounts, RenderPlan, RenderSettings, Tracer, render_with_plan, shade::beer_lambert, sky,
+    EnvironmentMap, RayCounts, RenderPlan, RenderSettings, Tracer, render_with_plan,
+    shade::beer_lambert, sky,
 };
 use tracery::sampling::{PathSampler, PixelSampler, SamplerKind};
 use tracery::scene::{Camera, Environment, Light, Material, Mesh, Scene, shapes};
@@ -58,11 +59,14 @@ fn floor() -> Vec<[Vec3; 3]> {
 fn radiance(s: &Scene, ray: &Ray) -> (Vec3, RayCounts) {
     let bvh = Bvh::build(&s.mesh.triangles, &BuildOptions::sah());
     let settings = RenderSettings::default();
+    let plan = RenderPlan::new(s, &settings);
+    let env = EnvironmentMap::load(&s.environment, plan.environment).unwrap();
     let tracer = Tracer {
         scene: s,
         bvh: &bvh,
-        plan: RenderPlan::new(s, &settings),
+        plan,
         max_depth: settings.max_depth,
+        env: &env,
     };
     let mut counts = RayCounts::default();
     let mut samples = PathSampler::new(PixelSampler::new(SamplerKind::Sobol, 1, 0, 0));
@@ -239,8 +243,15 @@ fn leaving_out_unneeded_features_changes_no_pixel_and_traces_none_of_them() {
     assert!(
         !plan.environment && !plan.transparent_shadows && !plan.reflections && !plan.transmission
     );
-    let pruned = render_with_plan(&s, &bvh, &settings, plan, &|_| {});
-    let full = render_with_plan(&s, &bvh, &settings, RenderPlan::everything(), &|_| {});
+    let pruned = render_with_plan(&s, &bvh, &EnvironmentMap::None, &settings, plan, &|_| {});
+    let full = render_with_plan(
+        &s,
+        &bvh,
+        &EnvironmentMap::None,
+        &settings,
+        RenderPlan::everything(),
+        &|_| {},
+    );
     assert_eq!(pruned.film, full.film);
     assert_eq!((pruned.rays.reflection, pruned.rays.transmission), (0, 0));
     assert_eq!(pruned.rays.shadow, full.rays.shadow);
@@ -255,6 +266,13 @@ fn leaving_out_unneeded_features_changes_no_pixel_and_traces_none_of_them() {
     assert!(RenderPlan::new(&mirrored, &settings).reflections);
     let p = RenderPlan::new(&mirrored, &no_bounce);
     assert!(!p.reflections);
-    let out = render_with_plan(&mirrored, &bvh, &no_bounce, p, &|_| {});
+    let out = render_with_plan(
+        &mirrored,
+        &bvh,
+        &EnvironmentMap::None,
+        &no_bounce,
+        p,
+        &|_| {},
+    );
     assert_eq!(out.rays.reflection, 0);
 }

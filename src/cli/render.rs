@@ -96,7 +96,7 @@ pub fn run(a: RenderArgs) -> Result<()> {
         .expect("valid template"),
     );
     let start = Instant::now();
-    let out = render(&scene, &bvh, &settings, &|_| bar.inc(1));
+    let out = render(&scene, &bvh, &settings, &|_| bar.inc(1))?;
     let took = start.elapsed();
     bar.finish_and_clear();
     let path = ensure_parent(&a.output)?;

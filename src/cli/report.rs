@@ -105,7 +105,7 @@ fn splits(meshes: Vec<PathBuf>, repeat: usize) -> Result<()> {
             let mut best = f64::INFINITY;
             for _ in 0..repeat.max(1) {
                 let start = Instant::now();
-                render(&scene, &bvh, &settings, &|_| {});
+                render(&scene, &bvh, &settings, &|_| {})?;
                 best = best.min(start.elapsed().as_secs_f64() * 1e3);
             }
             println!(

@@ -8,7 +8,7 @@ pub mod environment;
 pub mod plan;
 pub mod shade;
 
-pub use environment::{environment, sky};
+pub use environment::{CubeMap, EnvironmentMap, LinearImage, sky};
 pub use plan::{Explain, RenderPlan};
 pub use shade::Tracer;
 
@@ -114,27 +114,26 @@ pub struct RenderOutput {
     pub rays: RayCounts,
 }
 
-/// Renders `scene` with a prebuilt `bvh` and the plan the scene needs. `progress` is called
-/// with the number of finished rows (from any thread).
+/// Renders `scene` with a prebuilt `bvh` and the plan the scene needs, loading the
+/// environment's images if the plan uses them. `progress` is called with the number of
+/// finished rows (from any thread).
 pub fn render(
     scene: &Scene,
     bvh: &Bvh,
     settings: &RenderSettings,
     progress: &(dyn Fn(usize) + Sync),
-) -> RenderOutput {
-    render_with_plan(
-        scene,
-        bvh,
-        settings,
-        RenderPlan::new(scene, settings),
-        progress,
-    )
+) -> anyhow::Result<RenderOutput> {
+    let plan = RenderPlan::new(scene, settings);
+    let env = EnvironmentMap::load(&scene.environment, plan.environment)?;
+    Ok(render_with_plan(scene, bvh, &env, settings, plan, progress))
 }
 
-/// [`render`] with a given plan (tests compare a pruned plan with [`RenderPlan::everything`]).
+/// [`render`] with a loaded environment and a given plan (tests compare a pruned plan with
+/// [`RenderPlan::everything`]).
 pub fn render_with_plan(
     scene: &Scene,
     bvh: &Bvh,
+    env: &EnvironmentMap,
     settings: &RenderSettings,
     plan: RenderPlan,
     progress: &(dyn Fn(usize) + Sync),
@@ -148,6 +147,7 @@ pub fn render_with_plan(
         bvh,
         plan,
         max_depth: settings.max_depth,
+        env,
     };
     let (rays, rejected) = film
         .sum

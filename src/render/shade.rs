@@ -4,7 +4,7 @@
 
 use glam::Vec3;
 
-use super::environment::environment;
+use super::environment::EnvironmentMap;
 use super::{RayCounts, RenderPlan};
 use crate::bvh::Bvh;
 use crate::geometry::{Ray, offset_ray_origin};
@@ -21,6 +21,8 @@ pub struct Tracer<'a> {
     pub plan: RenderPlan,
     /// Largest number of reflection or transmission events along a path.
     pub max_depth: u32,
+    /// The environment, loaded (black when the plan has none).
+    pub env: &'a EnvironmentMap,
 }
 
 /// Where a ray met a surface.
@@ -43,7 +45,7 @@ impl Tracer<'_> {
 
     fn background(&self, dir: Vec3) -> Vec3 {
         if self.plan.environment {
-            environment(&self.scene.environment, dir)
+            self.env.radiance(dir)
         } else {
             Vec3::ZERO
         }
