@@ -268,3 +268,38 @@ fn scene_file_errors_name_the_file_and_line() {
         assert!(e.contains(what), "{to}: {e}");
     }
 }
+
+#[test]
+fn every_project_scene_loads_and_renders() {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("assets/scenes");
+    let mut checked = 0;
+    for entry in std::fs::read_dir(&dir).unwrap() {
+        let path = entry.unwrap().path();
+        if path.extension().and_then(|e| e.to_str()) != Some("toml") {
+            continue;
+        }
+        let text = std::fs::read_to_string(&path).unwrap();
+        let needs = text
+            .split('"')
+            .filter(|s| s.starts_with("../external/"))
+            .map(|s| s.trim_start_matches("../external/").to_string())
+            .collect::<Vec<_>>();
+        if needs.iter().any(|n| common::external(n).is_none()) {
+            continue;
+        }
+        let scene = Scene::load(&path).unwrap_or_else(|e| panic!("{}: {e:#}", path.display()));
+        assert!(scene.warnings.is_empty(), "{:?}", scene.warnings);
+        let bvh = tracery::bvh::Bvh::build(&scene.mesh.triangles, &Default::default());
+        let settings = tracery::render::RenderSettings {
+            width: 12,
+            height: 9,
+            spp: 2,
+            ..Default::default()
+        };
+        let out = tracery::render::render(&scene, &bvh, &settings, &|_| {}).unwrap();
+        assert_eq!(out.film.rejected, 0, "{}", path.display());
+        assert!(out.film.mean().iter().all(|c| c.is_finite()));
+        checked += 1;
+    }
+    assert!(checked >= 5, "only {checked} scenes checked");
+}
