@@ -9,6 +9,7 @@
 //!   queries; brute force to check them against.
 //! - [`camera`], [`render`], [`film`], [`sampling`]: from camera rays to an 8-bit image.
 //! - [`bench`]: the canonical benchmark rays, their file formats, and peers measured alike.
+//! - [`convergence`]: image error against render time, per sampler, with a plot.
 //!
 //! ```
 //! use glam::Vec3;
@@ -30,8 +31,10 @@
 pub mod bench;
 pub mod bvh;
 pub mod camera;
+pub mod convergence;
 pub mod film;
 pub mod geometry;
+pub mod plot_font;
 pub mod render;
 pub mod sampling;
 pub mod scene;

@@ -1,6 +1,7 @@
 //! Command-line parsing and the commands.
 
 mod bench;
+mod convergence;
 mod render;
 mod report;
 mod stats;
@@ -30,6 +31,8 @@ enum Command {
     Bench(bench::BenchArgs),
     /// Print the README's measurement tables (Markdown).
     Report(report::ReportArgs),
+    /// Measure image error against render time per sampler; write a CSV and a log-log plot.
+    Convergence(convergence::ConvergenceArgs),
 }
 
 /// BVH settings shared by the commands.
@@ -65,6 +68,7 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::Stats(a) => stats::run(a),
         Command::Bench(a) => bench::run(a),
         Command::Report(a) => report::run(a),
+        Command::Convergence(a) => convergence::run(a),
     }
 }
 
