@@ -37,8 +37,11 @@ pub struct ConvergenceConfig {
 impl ConvergenceConfig {
     /// Checks the settings; the message says what is wrong.
     pub fn validate(&self) -> Result<()> {
-        if !self.max_spp.is_power_of_two() {
-            bail!("--max-spp must be a power of two, got {}", self.max_spp);
+        if !self.max_spp.is_power_of_two() || self.max_spp < 4 {
+            bail!(
+                "--max-spp must be a power of two of at least 4 (three points to fit a slope), got {}",
+                self.max_spp
+            );
         }
         if self.reference_spp < 64 * self.max_spp {
             bail!(
