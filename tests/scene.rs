@@ -303,3 +303,21 @@ fn every_project_scene_loads_and_renders() {
     }
     assert!(checked >= 5, "only {checked} scenes checked");
 }
+
+#[test]
+fn a_scene_file_without_an_environment_gets_the_procedural_sky() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = write(dir.path(), "bare.toml", b"[[meshes]]\nshape = \"cube\"\n");
+    let s = Scene::load(&p).unwrap();
+    assert!(
+        matches!(s.environment, Environment::Sky { .. }),
+        "{:?}",
+        s.environment
+    );
+    let p = write(
+        dir.path(),
+        "dark.toml",
+        b"[[meshes]]\nshape = \"cube\"\n[environment]\nkind = \"none\"\n",
+    );
+    assert_eq!(Scene::load(&p).unwrap().environment, Environment::None);
+}

@@ -28,7 +28,7 @@
 //! intensity = 15.0
 //!
 //! [environment]
-//! kind = "sky"               # none, color, sky, cubemap, equirect
+//! kind = "sky"               # none, color, sky (the default), cubemap, equirect
 //! ```
 
 use std::collections::BTreeMap;
@@ -283,7 +283,11 @@ pub fn parse(path: &Path, text: &str, read: ReadFn, check_files: bool) -> Result
     };
 
     let environment = match &def.environment {
-        None => Environment::None,
+        // No [environment] table: the procedural sky, which needs no files.
+        None => Environment::Sky {
+            intensity: 1.0,
+            rotation_deg: 0.0,
+        },
         Some(e) => {
             let pos = e.span().start;
             let check = |p: PathBuf| -> Result<PathBuf> {
