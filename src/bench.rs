@@ -315,43 +315,41 @@ pub fn run(
     }
     if config.peers {
         let otris = std::sync::Arc::new(peers::to_otris(triangles));
-        let o = otris.clone();
-        builders.push((
-            "obvhs-bvh2".into(),
-            Box::new(move || {
-                let bvh = obvhs::bvh2::builder::build_bvh2_from_tris(
-                    &o,
-                    obvhs::BvhBuildParams::medium_build(),
-                    &mut Duration::default(),
-                );
-                let tris = bvh
-                    .primitive_indices
-                    .iter()
-                    .map(|&i| o[i as usize])
-                    .collect();
-                (Box::new(peers::Bvh2 { bvh, tris }) as Box<dyn Engine>, None)
-            }),
-        ));
-        let o = otris;
-        builders.push((
-            "obvhs-cwbvh".into(),
-            Box::new(move || {
-                let bvh = obvhs::cwbvh::builder::build_cwbvh_from_tris(
-                    &o,
-                    obvhs::BvhBuildParams::medium_build(),
-                    &mut Duration::default(),
-                );
-                let tris = bvh
-                    .primitive_indices
-                    .iter()
-                    .map(|&i| o[i as usize])
-                    .collect();
-                (
-                    Box::new(peers::Cwbvh { bvh, tris }) as Box<dyn Engine>,
-                    None,
-                )
-            }),
-        ));
+        // Each obvhs kind: build with the medium preset, then put its triangles in leaf order.
+        macro_rules! peer {
+            ($name:literal, $build:path, $engine:ident) => {{
+                let o = otris.clone();
+                builders.push((
+                    $name.into(),
+                    Box::new(move || {
+                        let bvh = $build(
+                            &o,
+                            obvhs::BvhBuildParams::medium_build(),
+                            &mut Duration::default(),
+                        );
+                        let tris = bvh
+                            .primitive_indices
+                            .iter()
+                            .map(|&i| o[i as usize])
+                            .collect();
+                        (
+                            Box::new(peers::$engine { bvh, tris }) as Box<dyn Engine>,
+                            None,
+                        )
+                    }),
+                ));
+            }};
+        }
+        peer!(
+            "obvhs-bvh2",
+            obvhs::bvh2::builder::build_bvh2_from_tris,
+            Bvh2
+        );
+        peer!(
+            "obvhs-cwbvh",
+            obvhs::cwbvh::builder::build_cwbvh_from_tris,
+            Cwbvh
+        );
     }
 
     // Builds, on one thread, interleaved. The obvhs build time is the builder call alone;
