@@ -108,3 +108,24 @@ fn ties_in_t_go_to_the_lowest_index() {
         assert_eq!(hit.prim, 17, "{:?}", options.split);
     }
 }
+
+/// Rays aimed exactly at triangle vertices graze the corners of the boxes that hold them,
+/// where the slab test's far distance can round below its near distance: without Ize's
+/// conservative scaling the BVH would skip boxes whose triangles brute force hits.
+#[test]
+fn rays_aimed_at_vertices_and_edges_match_brute_force() {
+    let tris = shapes::random_soup(4000, 0.3, 77);
+    let mut rng = tracery::sampling::SplitMix64::new(4);
+    let mut rays = Vec::new();
+    for (k, t) in tris.iter().enumerate().take(4000) {
+        for target in [t[k % 3], (t[0] + t[1]) * 0.5] {
+            for _ in 0..20 {
+                let from = Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) * 4.0
+                    - Vec3::splat(1.5);
+                rays.push(tracery::geometry::Ray::new(from, target - from));
+            }
+        }
+    }
+    let bvhs = common::both_builders().map(|o| Bvh::build(&tris, &o));
+    common::assert_matches_brute_force("vertex rays", &tris, &[&bvhs[0], &bvhs[1]], &rays);
+}

@@ -71,7 +71,11 @@ pub(super) struct RayLanes {
 
 /// Far distances are scaled up by this (Ize 2013); one more rounding than the scalar slab
 /// test because the scale is folded into the reciprocal, hence `gamma(4)`.
-const FAR_SCALE: f32 = 1.0 + 2.0 * gamma(4);
+const FAR_SCALE: f32 = if cfg!(feature = "no-conservative-slab") {
+    1.0
+} else {
+    1.0 + 2.0 * gamma(4)
+};
 
 impl RayLanes {
     pub(super) fn new(ray: &PreparedRay) -> Self {

@@ -131,7 +131,11 @@ impl Aabb {
     /// `t_near > t_far` when the line misses the box.
     #[inline(always)]
     pub fn slab(&self, ray: &PreparedRay) -> (f32, f32) {
-        const FAR_SCALE: f32 = 1.0 + 2.0 * gamma(3);
+        const FAR_SCALE: f32 = if cfg!(feature = "no-conservative-slab") {
+            1.0
+        } else {
+            1.0 + 2.0 * gamma(3)
+        };
         let t0 = (self.min - ray.origin) * ray.inv_dir;
         let t1 = (self.max - ray.origin) * ray.inv_dir;
         // Near plane by the direction's sign bit, so `+0` and `-0` give the same answer.

@@ -77,7 +77,7 @@ fn sheared<const KX: usize, const KY: usize, const KZ: usize>(
     let v = ax * cy - ay * cx;
     let w = bx * ay - by * ax;
     // Non-short-circuit `|`: one well-predicted branch instead of several random ones.
-    if (u == 0.0) | (v == 0.0) | (w == 0.0) {
+    if !cfg!(feature = "no-watertight-fallback") && (u == 0.0) | (v == 0.0) | (w == 0.0) {
         return intersect_exact(
             [(ax, ay), (bx, by), (cx, cy)],
             [a_z * sz, b_z * sz, c_z * sz],

@@ -194,6 +194,16 @@ fn convert_material(m: &tobj::Material) -> Material {
 /// Finds the first line that explains a `tobj` error: the line number and what is wrong.
 fn locate_error(text: &str, err: tobj::LoadError) -> Option<(usize, String)> {
     use tobj::LoadError as E;
+    if matches!(err, E::ReadError) {
+        // tobj reads line by line as UTF-8; `text` was decoded lossily, so the first
+        // replacement character marks the first line that is not UTF-8.
+        return text.find('\u{FFFD}').map(|pos| {
+            (
+                super::line_of(text, pos),
+                "not UTF-8 text (UTF-16 or another encoding?)".into(),
+            )
+        });
+    }
     let (mut nv, mut nvt, mut nvn) = (0i64, 0i64, 0i64);
     let floats = |rest: &[&str], min: usize, max: usize| {
         rest.len() >= min && rest.len() <= max && rest.iter().all(|t| t.parse::<f32>().is_ok())
@@ -205,6 +215,9 @@ fn locate_error(text: &str, err: tobj::LoadError) -> Option<(usize, String)> {
             continue;
         };
         match key {
+            "usemtl" | "mtllib" if matches!(err, E::MaterialParseError) && rest.is_empty() => {
+                return Some((line, format!("`{key}` needs a name")));
+            }
             "v" => {
                 if matches!(err, E::PositionParseError) && !floats(rest, 3, 7) {
                     return Some((line, format!("expected 3 numbers in `{}`", raw.trim())));

@@ -1,0 +1,82 @@
+//! Every OBJ in the fetched corpora (tinyobjloader's `models/`, assimp's `invalid/` and
+//! `OBJ/`) loads or fails with an error naming the file (and the line where tobj's error can
+//! be placed): no panic, no hang.
+
+mod common;
+
+use std::path::{Path, PathBuf};
+use std::sync::mpsc;
+use std::time::Duration;
+
+use tracery::scene::Scene;
+
+fn objs(dir: &Path, out: &mut Vec<PathBuf>) {
+    for e in std::fs::read_dir(dir).unwrap() {
+        let p = e.unwrap().path();
+        if p.is_dir() {
+            objs(&p, out);
+        } else if p.extension().is_some_and(|x| x.eq_ignore_ascii_case("obj")) {
+            out.push(p);
+        }
+    }
+}
+
+#[test]
+fn every_corpus_obj_loads_or_fails_with_a_message_naming_it() {
+    let mut files = Vec::new();
+    // One file of each folder proves the folder was fetched.
+    for probe in [
+        "corpus/tinyobjloader/cube.obj",
+        "corpus/assimp/OBJ/box.obj",
+        "corpus/assimp/invalid/malformed.obj",
+    ] {
+        let Some(p) = common::external(probe) else {
+            return;
+        };
+        objs(p.parent().unwrap(), &mut files);
+    }
+    files.sort();
+    files.dedup();
+    assert!(files.len() > 50, "{} files", files.len());
+    let (mut loaded, mut failed) = (0, 0);
+    for f in &files {
+        let (tx, rx) = mpsc::channel();
+        let path = f.clone();
+        std::thread::spawn(move || {
+            let r = std::panic::catch_unwind(|| Scene::load(&path).map(|s| s.triangle_count()));
+            let _ = tx.send(r);
+        });
+        let result = rx
+            .recv_timeout(Duration::from_secs(30))
+            .unwrap_or_else(|_| panic!("{}: no answer within 30 s", f.display()));
+        match result {
+            Err(_) => panic!("{}: panicked", f.display()),
+            Ok(Ok(_)) => loaded += 1,
+            Ok(Err(e)) => {
+                let msg = format!("{e:#}");
+                let name = f.file_name().unwrap().to_string_lossy();
+                assert!(msg.contains(&*name), "{}: {msg}", f.display());
+                failed += 1;
+            }
+        }
+    }
+    eprintln!("{loaded} loaded, {failed} refused with a message");
+    assert!(loaded > 0 && failed > 0);
+}
+
+#[test]
+fn known_bad_corpus_files_name_their_line() {
+    for (file, line) in [
+        ("corpus/assimp/invalid/malformed.obj", 23),
+        ("corpus/tinyobjloader/issue-140-zero-face-idx.obj", 16),
+        ("corpus/assimp/OBJ/empty_mat.obj", 233),
+        ("corpus/assimp/OBJ/box_UTF16BE.obj", 1),
+    ] {
+        let Some(p) = common::external(file) else {
+            return;
+        };
+        let e = format!("{:#}", Scene::load(&p).unwrap_err());
+        let name = p.file_name().unwrap().to_string_lossy();
+        assert!(e.contains(&format!("{name}:{line}:")), "{e}");
+    }
+}
