@@ -20,7 +20,7 @@ mod traverse;
 use glam::{Vec3, Vec3A};
 
 pub use pairs::PairNode;
-pub use reference::{BruteForce, closest_hit_brute_force};
+pub use reference::BruteForce;
 pub use stats::BvhStats;
 pub use traverse::{Hit, Visit};
 
@@ -165,11 +165,6 @@ impl BvhNode {
     pub(crate) fn set_aabb(&mut self, b: &Aabb) {
         self.min = b.min.to_array();
         self.max = b.max.to_array();
-    }
-
-    /// For a leaf, the range of leaf slots it holds.
-    pub fn leaf_range(&self) -> std::ops::Range<usize> {
-        self.first as usize..(self.first + self.count) as usize
     }
 }
 

@@ -116,8 +116,3 @@ impl BruteForce {
         out
     }
 }
-
-/// Closest hit by testing every triangle (see [`BruteForce::closest`]).
-pub fn closest_hit_brute_force(triangles: &[[Vec3; 3]], ray: &Ray, t_max: f32) -> Option<Hit> {
-    BruteForce::new(triangles).closest(ray, t_max)
-}

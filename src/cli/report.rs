@@ -8,6 +8,7 @@ use clap::{Args, Subcommand};
 use tracery::bench::{self, BenchConfig};
 use tracery::bvh::{BuildOptions, Bvh, SplitMethod};
 use tracery::render::{RenderSettings, render};
+use tracery::scene::Scene;
 
 use super::load_scene;
 
@@ -48,6 +49,18 @@ pub fn run(a: ReportArgs) -> Result<()> {
     }
 }
 
+/// Runs the benchmark on the scene's canonical camera rays, progress on stderr.
+fn measure(scene: &Scene, config: &BenchConfig) -> bench::MeshBench {
+    let rays = bench::canonical_rays(&scene.mesh.bounds());
+    bench::run(
+        &scene.name,
+        &scene.mesh.triangles,
+        &rays,
+        config,
+        &mut |l| eprintln!("  {l}"),
+    )
+}
+
 fn all_threads() -> usize {
     std::thread::available_parallelism().map_or(1, |n| n.get())
 }
@@ -65,7 +78,6 @@ fn splits(meshes: Vec<PathBuf>, repeat: usize) -> Result<()> {
     println!("|---|---:|---|---:|---:|---:|---:|---:|---:|---:|");
     for src in &sources {
         let scene = load_scene(src.as_deref())?;
-        let rays = bench::canonical_rays(&scene.mesh.bounds());
         let config = BenchConfig {
             threads: vec![1, cores],
             repeat,
@@ -73,13 +85,7 @@ fn splits(meshes: Vec<PathBuf>, repeat: usize) -> Result<()> {
             peers: false,
         };
         eprintln!("{}: measuring", scene.name);
-        let out = bench::run(
-            &scene.name,
-            &scene.mesh.triangles,
-            &rays,
-            &config,
-            &mut |l| eprintln!("  {l}"),
-        );
+        let out = measure(&scene, &config);
         for split in [SplitMethod::Median, SplitMethod::Sah] {
             let engine = format!("tracery-{split}");
             let row = |t: usize| {
@@ -128,7 +134,6 @@ fn splits(meshes: Vec<PathBuf>, repeat: usize) -> Result<()> {
 
 fn bins_table(mesh: PathBuf, bins: Vec<u32>, repeat: usize) -> Result<()> {
     let scene = load_scene(Some(&mesh))?;
-    let rays = bench::canonical_rays(&scene.mesh.bounds());
     let mut ours = Vec::new();
     for &b in &bins {
         let options = BuildOptions {
@@ -146,13 +151,7 @@ fn bins_table(mesh: PathBuf, bins: Vec<u32>, repeat: usize) -> Result<()> {
         ours,
         peers: false,
     };
-    let out = bench::run(
-        &scene.name,
-        &scene.mesh.triangles,
-        &rays,
-        &config,
-        &mut |l| eprintln!("  {l}"),
-    );
+    let out = measure(&scene, &config);
     println!("| bins | build ms | SAH cost | levels | leaves | closest Mrays/s (1 thread) |");
     println!("|---:|---:|---:|---:|---:|---:|");
     for (b, r) in bins.iter().zip(&out.results) {

@@ -32,15 +32,6 @@ impl Aabb {
         }
     }
 
-    /// The smallest box holding all the points.
-    pub fn from_points(points: &[Vec3]) -> Self {
-        let mut b = Self::EMPTY;
-        for p in points {
-            b.grow_point(Vec3A::from(*p));
-        }
-        b
-    }
-
     /// Grows the box to hold `p`.
     #[inline]
     pub fn grow_point(&mut self, p: Vec3A) {
@@ -104,11 +95,6 @@ impl Aabb {
         } else {
             2
         }
-    }
-
-    /// True when `p` lies in the closed box.
-    pub fn contains(&self, p: Vec3A) -> bool {
-        p.cmpge(self.min).all() && p.cmple(self.max).all()
     }
 
     /// The slab test. Returns the entry distance (clamped to `>= 0`) when the ray meets the
