@@ -1,6 +1,6 @@
 //! Camera rays: pinhole and thin lens, pixel row 0 at the top.
 
-use glam::{Vec2, Vec3};
+use glam::{Quat, Vec2, Vec3};
 
 use crate::geometry::Ray;
 use crate::scene::Camera;
@@ -62,6 +62,52 @@ impl CameraRays {
             height,
             lens_radius: camera.lens_radius.max(0.0),
             focus_distance: focus,
+        }
+    }
+
+    /// Frames a camera given as a pose: position `eye` and orientation `rotation` of a camera
+    /// that looks down its local `-z` with `+y` up (Bevy's convention), a vertical field of
+    /// view in radians, and a lens. Rays through the image match what a 3D view with the same
+    /// transform and perspective projection shows, pixel for pixel.
+    #[allow(clippy::too_many_arguments)]
+    pub fn from_pose(
+        eye: Vec3,
+        rotation: Quat,
+        vfov_rad: f32,
+        width: u32,
+        height: u32,
+        lens_radius: f32,
+        focus_distance: f32,
+    ) -> Self {
+        let rotation = if rotation.is_finite() && rotation.length_squared() > 1e-12 {
+            rotation.normalize()
+        } else {
+            Quat::IDENTITY
+        };
+        let vfov = if vfov_rad.is_finite() {
+            vfov_rad.clamp(1e-5, 3.12)
+        } else {
+            std::f32::consts::FRAC_PI_4
+        };
+        Self {
+            eye,
+            forward: rotation * Vec3::NEG_Z,
+            right: rotation * Vec3::X,
+            up: rotation * Vec3::Y,
+            tan_half: (vfov * 0.5).tan(),
+            aspect: width.max(1) as f32 / height.max(1) as f32,
+            width,
+            height,
+            lens_radius: if lens_radius.is_finite() {
+                lens_radius.max(0.0)
+            } else {
+                0.0
+            },
+            focus_distance: if focus_distance.is_finite() && focus_distance > 0.0 {
+                focus_distance
+            } else {
+                1.0
+            },
         }
     }
 

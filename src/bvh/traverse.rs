@@ -106,8 +106,11 @@ impl Bvh {
         let limit = best.t.next_up();
         for slot in first as usize..(first + count) as usize {
             let t = intersect_triangle_t(ray, &self.tris[slot], limit);
-            seen(self.prim_ids[slot], t <= best.t);
-            if t <= best.t {
+            // `t < limit` is `t <= best.t`, except that a miss (+inf) never counts, even
+            // while the best is still +inf.
+            let hit = t < limit;
+            seen(self.prim_ids[slot], hit);
+            if hit {
                 let id = self.prim_ids[slot];
                 if t < best.t || id < best.id {
                     *best = Best { t, slot, id };

@@ -4,16 +4,21 @@
 //! Every pixel draws its samples from its own random stream, seeded from the pixel index and
 //! the sample index, so an image is the same for any number of threads.
 
+pub mod debug;
 pub mod environment;
+pub mod heatmap;
 pub mod plan;
+pub mod progressive;
 pub mod shade;
 
 pub use environment::{CubeMap, EnvironmentMap, LinearImage, sky};
 pub use plan::{Explain, RenderPlan};
+pub use progressive::Progressive;
 pub use shade::Tracer;
 
 use std::sync::atomic::{AtomicUsize, Ordering};
 
+use glam::Vec3;
 use rayon::prelude::*;
 
 use crate::bvh::Bvh;
@@ -149,39 +154,73 @@ pub fn render_with_plan(
         max_depth: settings.max_depth,
         env,
     };
+    let samples = SampleRange {
+        sampler: settings.sampler,
+        seed: settings.seed,
+        first: 0,
+        count: settings.spp,
+    };
     let (rays, rejected) = film
         .sum
         .par_chunks_mut(w as usize)
         .enumerate()
         .map(|(y, row)| {
-            let mut rays = RayCounts::default();
-            let mut rejected = 0u64;
-            for (x, px_sum) in row.iter_mut().enumerate() {
-                let pixel = y as u64 * w as u64 + x as u64;
-                let first = PixelSampler::new(settings.sampler, settings.seed, pixel, 0);
-                for s in 0..settings.spp {
-                    let sampler = first.with_index(s);
-                    let jitter = sampler.get_2d(dim::PIXEL);
-                    let (px, py) = (x as f32 + jitter.x, y as f32 + jitter.y);
-                    let ray = if plan.thin_lens {
-                        cam.thin_lens(px, py, concentric_disk(sampler.get_2d(dim::LENS)))
-                    } else {
-                        cam.pinhole(px, py)
-                    };
-                    rays.camera += 1;
-                    let l = tracer.radiance(&ray, &mut PathSampler::new(sampler), &mut rays);
-                    if l.is_finite() {
-                        *px_sum += l;
-                    } else {
-                        rejected += 1;
-                    }
-                }
-            }
+            let r = trace_row(&tracer, &cam, &samples, y as u32, row);
             progress(rows_done.fetch_add(1, Ordering::Relaxed) + 1);
-            (rays, rejected)
+            r
         })
         .reduce(|| (RayCounts::default(), 0), |a, b| (a.0 + b.0, a.1 + b.1));
     film.samples = settings.spp;
     film.rejected = rejected;
     RenderOutput { film, rays }
+}
+
+/// Which samples of each pixel to take: indices `first..first + count` of the pixel's
+/// stream, so an image built up over several calls equals one rendered in a single call.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct SampleRange {
+    /// How samples are drawn.
+    pub sampler: SamplerKind,
+    /// Seed of the random streams.
+    pub seed: u64,
+    /// Index of the first sample.
+    pub first: u32,
+    /// Number of samples.
+    pub count: u32,
+}
+
+/// Adds the samples `samples` of every pixel of row `y` into `row` (one radiance sum per
+/// pixel); returns the rays traced and the number of non-finite samples left out.
+pub fn trace_row(
+    tracer: &Tracer,
+    cam: &CameraRays,
+    samples: &SampleRange,
+    y: u32,
+    row: &mut [Vec3],
+) -> (RayCounts, u64) {
+    let mut rays = RayCounts::default();
+    let mut rejected = 0u64;
+    let thin_lens = tracer.plan.thin_lens && cam.lens_radius > 0.0;
+    for (x, px_sum) in row.iter_mut().enumerate() {
+        let pixel = y as u64 * cam.width as u64 + x as u64;
+        let first = PixelSampler::new(samples.sampler, samples.seed, pixel, 0);
+        for s in samples.first..samples.first.saturating_add(samples.count) {
+            let sampler = first.with_index(s);
+            let jitter = sampler.get_2d(dim::PIXEL);
+            let (px, py) = (x as f32 + jitter.x, y as f32 + jitter.y);
+            let ray = if thin_lens {
+                cam.thin_lens(px, py, concentric_disk(sampler.get_2d(dim::LENS)))
+            } else {
+                cam.pinhole(px, py)
+            };
+            rays.camera += 1;
+            let l = tracer.radiance(&ray, &mut PathSampler::new(sampler), &mut rays);
+            if l.is_finite() {
+                *px_sum += l;
+            } else {
+                rejected += 1;
+            }
+        }
+    }
+    (rays, rejected)
 }

@@ -12,6 +12,9 @@ use super::RenderSettings;
 pub struct RenderPlan {
     /// Rays that leave the scene sample the environment (else they see black).
     pub environment: bool,
+    /// Shadow rays are traced towards the lights (else every light is seen unblocked: no
+    /// shadows, and no shadow rays).
+    pub shadows: bool,
     /// Shadow rays pass through transparent surfaces and are attenuated by them (else a
     /// shadow ray is a plain any-hit occlusion test).
     pub transparent_shadows: bool,
@@ -36,6 +39,7 @@ impl RenderPlan {
         let bounces = settings.max_depth > 0;
         Self {
             environment: !matches!(scene.environment, Environment::None),
+            shadows: !scene.lights.is_empty(),
             transparent_shadows: transparent,
             reflections: bounces && scene.materials.iter().any(|m| m.is_mirror()),
             transmission: bounces && transparent,
@@ -48,6 +52,7 @@ impl RenderPlan {
     pub fn everything() -> Self {
         Self {
             environment: true,
+            shadows: true,
             transparent_shadows: true,
             reflections: true,
             transmission: true,
@@ -72,6 +77,15 @@ impl fmt::Display for Explain<'_> {
                 format!("yes ({})", env_name(&scene.environment))
             } else {
                 "no, nothing loaded or sampled".into()
+            }
+        )?;
+        writeln!(
+            f,
+            "  shadows              {}",
+            if p.shadows {
+                "yes"
+            } else {
+                "no, lights are never blocked"
             }
         )?;
         writeln!(

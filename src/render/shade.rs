@@ -26,15 +26,15 @@ pub struct Tracer<'a> {
 }
 
 /// Where a ray met a surface.
-struct Surface<'a> {
-    p: Vec3,
+pub(super) struct Surface<'a> {
+    pub(super) p: Vec3,
     /// Geometric normal facing the incoming ray.
-    ng: Vec3,
+    pub(super) ng: Vec3,
     /// Shading normal on the same side as `ng`.
-    n: Vec3,
+    pub(super) n: Vec3,
     /// True when the ray arrived on the side the triangle's winding calls outside.
-    entering: bool,
-    material: &'a Material,
+    pub(super) entering: bool,
+    pub(super) material: &'a Material,
 }
 
 impl Tracer<'_> {
@@ -51,7 +51,7 @@ impl Tracer<'_> {
         }
     }
 
-    fn surface(&self, ray: &Ray, prim: u32, u: f32, v: f32) -> Surface<'_> {
+    pub(super) fn surface(&self, ray: &Ray, prim: u32, u: f32, v: f32) -> Surface<'_> {
         let scene = self.scene;
         let tri = &scene.mesh.triangles[prim as usize];
         let ns = &scene.mesh.normals[prim as usize];
@@ -168,7 +168,16 @@ impl Tracer<'_> {
     }
 
     /// Fraction of light passing from `origin + to * t_max` back to `origin`, per channel.
-    fn shadow(&self, origin: Vec3, to: Vec3, t_max: f32, counts: &mut RayCounts) -> Vec3 {
+    pub(super) fn shadow(
+        &self,
+        origin: Vec3,
+        to: Vec3,
+        t_max: f32,
+        counts: &mut RayCounts,
+    ) -> Vec3 {
+        if !self.plan.shadows {
+            return Vec3::ONE;
+        }
         counts.shadow += 1;
         let ray = Ray::new(origin, to);
         if !self.plan.transparent_shadows {
@@ -230,7 +239,7 @@ pub fn reflect(d: Vec3, n: Vec3) -> Vec3 {
 
 /// Direction through a transparent surface (refracted by its index of refraction, or totally
 /// reflected) and the side of the surface the new ray leaves from.
-fn transmit(d: Vec3, s: &Surface) -> (Vec3, Vec3) {
+pub(super) fn transmit(d: Vec3, s: &Surface) -> (Vec3, Vec3) {
     let ior = s.material.ior;
     if ior == 1.0 || ior.is_nan() || ior <= 0.0 {
         return (d, -s.ng);

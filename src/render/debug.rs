@@ -1,0 +1,259 @@
+//! A debug ray: one camera ray followed through the scene as the shader follows it, with
+//! every bounce, the shadow ray to each light and what fraction of the light passes, the
+//! normal at each hit, and the BVH nodes each segment entered.
+
+use std::collections::HashMap;
+
+use glam::Vec3;
+
+use super::RayCounts;
+use super::shade::{Tracer, reflect, transmit};
+use crate::bvh::{Bvh, Visit};
+use crate::geometry::{Ray, offset_ray_origin};
+use crate::scene::Light;
+
+/// How a segment of the path began.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SegmentKind {
+    /// From the camera.
+    Camera,
+    /// Reflected by a mirror.
+    Reflection,
+    /// Continued through a transparent surface.
+    Transmission,
+}
+
+/// A BVH node a segment entered.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct EnteredNode {
+    /// Index into [`Bvh::nodes`].
+    pub index: u32,
+    /// Depth, root at 0.
+    pub depth: u32,
+    /// True when a triangle tested below this node (during this traversal) was hit; false
+    /// marks a box the ray entered for nothing.
+    pub found_hit: bool,
+}
+
+/// Where a segment ended on a surface.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SegmentHit {
+    /// Distance along the segment's (unit) direction.
+    pub t: f32,
+    /// Triangle index in the scene's list.
+    pub prim: u32,
+    /// The hit point.
+    pub point: Vec3,
+    /// Shading normal, facing the incoming ray.
+    pub normal: Vec3,
+}
+
+/// One straight piece of the path.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Segment {
+    /// How it began.
+    pub kind: SegmentKind,
+    /// Index of the segment it continues (`None` for the camera ray).
+    pub parent: Option<usize>,
+    /// The ray (unit direction).
+    pub ray: Ray,
+    /// The surface it met, if any (else it left the scene).
+    pub hit: Option<SegmentHit>,
+    /// The BVH nodes it entered, in traversal order.
+    pub nodes: Vec<EnteredNode>,
+}
+
+/// A shadow ray from a hit point towards a light.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ShadowRay {
+    /// Segment whose hit point it starts from.
+    pub segment: usize,
+    /// Index of the light in the scene.
+    pub light: usize,
+    /// Start (the hit point, offset off the surface).
+    pub from: Vec3,
+    /// The point on the light aimed at (a rectangle light's centre).
+    pub to: Vec3,
+    /// Fraction of the light that arrives, per channel (0: blocked, 1: visible).
+    pub transmittance: Vec3,
+}
+
+impl ShadowRay {
+    /// Blocked, visible, or attenuated (some but not all light passes).
+    pub fn state(&self) -> ShadowState {
+        let m = self.transmittance.max_element();
+        if m <= 0.0 {
+            ShadowState::Blocked
+        } else if self.transmittance.min_element() >= 1.0 {
+            ShadowState::Visible
+        } else {
+            ShadowState::Attenuated
+        }
+    }
+}
+
+/// What a shadow ray found.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ShadowState {
+    /// All light arrives.
+    Visible,
+    /// Nothing arrives.
+    Blocked,
+    /// Some light arrives through transparent surfaces.
+    Attenuated,
+}
+
+/// A camera ray's whole path.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct DebugPath {
+    /// Segments, the camera ray first; each later one names its parent.
+    pub segments: Vec<Segment>,
+    /// Shadow rays from every hit that the shader lights directly.
+    pub shadows: Vec<ShadowRay>,
+}
+
+impl Tracer<'_> {
+    /// Follows `ray` as [`Tracer::radiance`] would, recording the path instead of shading it.
+    /// Rectangle lights are aimed at their centre.
+    pub fn debug_path(&self, ray: &Ray) -> DebugPath {
+        let mut path = DebugPath::default();
+        let ray = Ray::new(ray.origin, ray.dir.normalize_or_zero());
+        self.debug_segment(&ray, SegmentKind::Camera, None, 0, &mut path);
+        path
+    }
+
+    fn debug_segment(
+        &self,
+        ray: &Ray,
+        kind: SegmentKind,
+        parent: Option<usize>,
+        depth: u32,
+        path: &mut DebugPath,
+    ) {
+        let (hit, nodes) = entered_nodes(self.bvh, ray);
+        let index = path.segments.len();
+        let Some(hit) = hit else {
+            path.segments.push(Segment {
+                kind,
+                parent,
+                ray: *ray,
+                hit: None,
+                nodes,
+            });
+            return;
+        };
+        let s = self.surface(ray, hit.prim, hit.u, hit.v);
+        path.segments.push(Segment {
+            kind,
+            parent,
+            ray: *ray,
+            hit: Some(SegmentHit {
+                t: hit.t,
+                prim: hit.prim,
+                point: s.p,
+                normal: s.n,
+            }),
+            nodes,
+        });
+        let m = s.material;
+        if m.diffuse != Vec3::ZERO || m.specular != Vec3::ZERO {
+            let origin = offset_ray_origin(s.p, s.ng);
+            for (li, light) in self.scene.lights.iter().enumerate() {
+                let (to_point, t_max) = match *light {
+                    Light::Point { position, .. } => (position, 1.0),
+                    Light::Rect { .. } => (light.center(), 1.0 - 1e-4),
+                };
+                let to = to_point - origin;
+                let transmittance = if s.ng.dot(to) <= 0.0 {
+                    Vec3::ZERO // the light is behind the surface
+                } else {
+                    self.shadow(origin, to, t_max, &mut RayCounts::default())
+                };
+                path.shadows.push(ShadowRay {
+                    segment: index,
+                    light: li,
+                    from: origin,
+                    to: to_point,
+                    transmittance,
+                });
+            }
+        }
+        if depth >= self.max_depth {
+            return;
+        }
+        if self.plan.reflections && m.is_mirror() {
+            let r = reflect(ray.dir, s.n);
+            if r.dot(s.ng) > 0.0 {
+                let bounce = Ray::new(offset_ray_origin(s.p, s.ng), r.normalize());
+                self.debug_segment(
+                    &bounce,
+                    SegmentKind::Reflection,
+                    Some(index),
+                    depth + 1,
+                    path,
+                );
+            }
+        }
+        let alpha = if self.plan.transmission {
+            m.opacity
+        } else {
+            1.0
+        };
+        if alpha < 1.0 {
+            let (dir, side) = transmit(ray.dir, &s);
+            let through = Ray::new(offset_ray_origin(s.p, side), dir.normalize());
+            self.debug_segment(
+                &through,
+                SegmentKind::Transmission,
+                Some(index),
+                depth + 1,
+                path,
+            );
+        }
+    }
+}
+
+/// The closest hit of `ray` and the nodes its traversal entered, each marked with whether a
+/// triangle below it was hit.
+pub fn entered_nodes(bvh: &Bvh, ray: &Ray) -> (Option<crate::bvh::Hit>, Vec<EnteredNode>) {
+    let mut order: Vec<(u32, u32)> = Vec::new();
+    let mut leaf_hit: HashMap<u32, bool> = HashMap::new();
+    let mut current_leaf = None;
+    let hit = bvh.intersect_visit(ray, f32::INFINITY, |v| match v {
+        Visit::Node { index, depth } => {
+            order.push((index, depth));
+            current_leaf = bvh.nodes[index as usize].is_leaf().then_some(index);
+        }
+        Visit::Triangle { hit, .. } => {
+            if let Some(leaf) = current_leaf {
+                *leaf_hit.entry(leaf).or_insert(false) |= hit;
+            }
+        }
+    });
+    // Children are stored after their parents: walking the entered nodes from the highest
+    // index down settles every child before its parent.
+    let mut found: HashMap<u32, bool> = HashMap::new();
+    let mut by_index: Vec<u32> = order.iter().map(|&(i, _)| i).collect();
+    by_index.sort_unstable_by(|a, b| b.cmp(a));
+    by_index.dedup();
+    for i in by_index {
+        let n = &bvh.nodes[i as usize];
+        let f = if n.is_leaf() {
+            leaf_hit.get(&i).copied().unwrap_or(false)
+        } else {
+            [n.first, n.first + 1]
+                .iter()
+                .any(|c| found.get(c).copied().unwrap_or(false))
+        };
+        found.insert(i, f);
+    }
+    let nodes = order
+        .into_iter()
+        .map(|(index, depth)| EnteredNode {
+            index,
+            depth,
+            found_hit: found.get(&index).copied().unwrap_or(false),
+        })
+        .collect();
+    (hit, nodes)
+}

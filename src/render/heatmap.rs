@@ -1,0 +1,85 @@
+//! Traversal cost as a picture: the number of BVH nodes each pixel's camera ray entered,
+//! mapped through a colour ramp, with the numbers a legend needs.
+
+use glam::Vec3;
+
+use crate::bvh::{Bvh, Visit};
+use crate::camera::CameraRays;
+
+/// Work done by the closest-hit traversal of one ray.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct TraversalCost {
+    /// Nodes entered (inner nodes and leaves).
+    pub nodes: u32,
+    /// Triangles tested.
+    pub triangles: u32,
+}
+
+/// Traces the ray through the centre of pixel `(x, y)` and counts its traversal work.
+pub fn pixel_cost(bvh: &Bvh, cam: &CameraRays, x: u32, y: u32) -> TraversalCost {
+    let ray = cam.pinhole(x as f32 + 0.5, y as f32 + 0.5);
+    let mut cost = TraversalCost::default();
+    bvh.intersect_visit(&ray, f32::INFINITY, |v| match v {
+        Visit::Node { .. } => cost.nodes += 1,
+        Visit::Triangle { .. } => cost.triangles += 1,
+    });
+    cost
+}
+
+/// Adds the node count of every pixel of row `y` to the `x` lane of `row` (the layout of
+/// [`super::Progressive`]'s sums, so the cost image refines like the shaded one).
+pub fn cost_row(bvh: &Bvh, cam: &CameraRays, y: u32, row: &mut [Vec3]) {
+    for (x, px) in row.iter_mut().enumerate() {
+        px.x += pixel_cost(bvh, cam, x as u32, y).nodes as f32;
+    }
+}
+
+/// The colour ramp of the heatmap: dark blue (cheap) through green and yellow to red and
+/// white (expensive); `t` is clamped to `[0, 1]`. Returns sRGB bytes.
+pub fn heat_color(t: f32) -> [u8; 3] {
+    const STOPS: [[f32; 3]; 6] = [
+        [0.05, 0.03, 0.25],
+        [0.10, 0.35, 0.75],
+        [0.15, 0.70, 0.45],
+        [0.95, 0.85, 0.20],
+        [0.90, 0.25, 0.10],
+        [1.00, 1.00, 1.00],
+    ];
+    let t = if t.is_nan() { 0.0 } else { t.clamp(0.0, 1.0) };
+    let x = t * (STOPS.len() - 1) as f32;
+    let i = (x as usize).min(STOPS.len() - 2);
+    let f = x - i as f32;
+    let a = Vec3::from(STOPS[i]);
+    let b = Vec3::from(STOPS[i + 1]);
+    let c = a.lerp(b, f);
+    [
+        (c.x * 255.0 + 0.5) as u8,
+        (c.y * 255.0 + 0.5) as u8,
+        (c.z * 255.0 + 0.5) as u8,
+    ]
+}
+
+/// Maps per-pixel node counts (the `x` lane of `sums`, one pass) to RGBA8, with `max` nodes
+/// at the top of the ramp.
+pub fn heatmap_rgba8(sums: &[Vec3], max: f32) -> Vec<u8> {
+    let k = if max > 0.0 { 1.0 / max } else { 0.0 };
+    let mut out = Vec::with_capacity(sums.len() * 4);
+    for s in sums {
+        let [r, g, b] = heat_color(s.x * k);
+        out.extend_from_slice(&[r, g, b, 255]);
+    }
+    out
+}
+
+/// Mean and largest node counts of an image (the `x` lane of `sums`), for the legend.
+pub fn cost_summary(sums: &[Vec3]) -> (f32, f32) {
+    if sums.is_empty() {
+        return (0.0, 0.0);
+    }
+    let (mut total, mut max) = (0.0f64, 0.0f32);
+    for s in sums {
+        total += s.x as f64;
+        max = max.max(s.x);
+    }
+    ((total / sums.len() as f64) as f32, max)
+}

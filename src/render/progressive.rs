@@ -1,0 +1,218 @@
+//! Progressive rendering: an image refined one pass (one sample per pixel) at a time, traced
+//! in batches of rows within a time budget, so an interactive caller can trace a little every
+//! frame and show the picture as it improves.
+//!
+//! Pass `p` takes sample `p` of every pixel's stream ([`SampleRange`]), so after `n` complete
+//! passes the sums equal those of a one-shot [`super::render`] with `n` samples per pixel.
+
+use std::time::{Duration, Instant};
+
+use glam::Vec3;
+use rayon::prelude::*;
+
+use super::{RayCounts, SampleRange, Tracer, trace_row};
+use crate::camera::CameraRays;
+use crate::film::{Film, srgb8, tone_map};
+use crate::sampling::SamplerKind;
+
+/// An image being refined pass by pass.
+#[derive(Clone, Debug)]
+pub struct Progressive {
+    width: u32,
+    height: u32,
+    sum: Vec<Vec3>,
+    /// Samples taken in each row: `passes + 1` for rows of the current pass already traced.
+    row_samples: Vec<u32>,
+    /// First row of the current pass not yet traced.
+    next_row: u32,
+    passes: u32,
+    /// Estimated wall time of one row, from the batches traced so far.
+    row_seconds: Option<f64>,
+    /// Rays traced since the last reset.
+    pub rays: RayCounts,
+    /// Non-finite samples left out since the last reset.
+    pub rejected: u64,
+}
+
+/// What one call of [`Progressive::step`] did.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct StepReport {
+    /// Rows traced.
+    pub rows: u32,
+    /// Passes completed during the call.
+    pub passes_completed: u32,
+    /// Rays traced.
+    pub rays: RayCounts,
+    /// Wall time spent.
+    pub seconds: f64,
+}
+
+impl Progressive {
+    /// A black image of `width x height` with no samples.
+    pub fn new(width: u32, height: u32) -> Self {
+        let n = width as usize * height as usize;
+        Self {
+            width,
+            height,
+            sum: vec![Vec3::ZERO; n],
+            row_samples: vec![0; height as usize],
+            next_row: 0,
+            passes: 0,
+            row_seconds: None,
+            rays: RayCounts::default(),
+            rejected: 0,
+        }
+    }
+
+    /// Width in pixels.
+    pub fn width(&self) -> u32 {
+        self.width
+    }
+
+    /// Height in pixels.
+    pub fn height(&self) -> u32 {
+        self.height
+    }
+
+    /// Passes completed: every pixel has at least this many samples.
+    pub fn passes(&self) -> u32 {
+        self.passes
+    }
+
+    /// True when no pass is part-way done (every pixel has [`Progressive::passes`] samples).
+    pub fn is_between_passes(&self) -> bool {
+        self.next_row == 0
+    }
+
+    /// Forgets every sample (the camera, scene or settings changed). Keeps the row-time
+    /// estimate, which still describes the scene well enough to plan the next batch.
+    pub fn reset(&mut self) {
+        self.sum.fill(Vec3::ZERO);
+        self.row_samples.fill(0);
+        self.next_row = 0;
+        self.passes = 0;
+        self.rays = RayCounts::default();
+        self.rejected = 0;
+    }
+
+    /// Traces rows of the current pass (and the passes after it) with `row` until `budget`
+    /// is spent or `max_passes` passes are complete; always traces at least one batch when a
+    /// pass is left to do, so progress never stalls. `row(y, pass, sums)` adds sample `pass`
+    /// of every pixel of row `y` to `sums` and returns the rays it traced and the number of
+    /// non-finite samples it left out. Rows are traced in parallel on the rayon pool.
+    pub fn step(
+        &mut self,
+        budget: Duration,
+        max_passes: u32,
+        row: impl Fn(u32, u32, &mut [Vec3]) -> (RayCounts, u64) + Sync,
+    ) -> StepReport {
+        let start = Instant::now();
+        let mut report = StepReport::default();
+        let w = self.width as usize;
+        if w == 0 || self.height == 0 {
+            return report;
+        }
+        let threads = rayon::current_num_threads().max(1) as u32;
+        while self.passes < max_passes {
+            let left = budget.as_secs_f64() - start.elapsed().as_secs_f64();
+            if report.rows > 0 && left <= 0.0 {
+                break;
+            }
+            // Rows that fit in what is left of the budget, in whole rounds of the pool.
+            let fit = match self.row_seconds {
+                Some(s) if s > 0.0 => ((left.max(0.0) / s) as u32 / threads).max(1) * threads,
+                _ => threads,
+            };
+            let first = self.next_row;
+            let count = fit.min(self.height - first);
+            let pass = self.passes;
+            let t0 = Instant::now();
+            let span = &mut self.sum[first as usize * w..(first + count) as usize * w];
+            let (rays, rejected) = span
+                .par_chunks_mut(w)
+                .enumerate()
+                .map(|(i, sums)| row(first + i as u32, pass, sums))
+                .reduce(|| (RayCounts::default(), 0), |a, b| (a.0 + b.0, a.1 + b.1));
+            let per_row = t0.elapsed().as_secs_f64() / count as f64;
+            self.row_seconds = Some(match self.row_seconds {
+                Some(old) => 0.5 * old + 0.5 * per_row,
+                None => per_row,
+            });
+            for s in &mut self.row_samples[first as usize..(first + count) as usize] {
+                *s += 1;
+            }
+            self.rays = self.rays + rays;
+            self.rejected += rejected;
+            report.rays = report.rays + rays;
+            report.rows += count;
+            self.next_row += count;
+            if self.next_row == self.height {
+                self.next_row = 0;
+                self.passes += 1;
+                report.passes_completed += 1;
+            }
+        }
+        report.seconds = start.elapsed().as_secs_f64();
+        report
+    }
+
+    /// [`Progressive::step`] tracing the shaded image of `tracer` through `cam` (which must be
+    /// framed for this image's size).
+    pub fn step_shaded(
+        &mut self,
+        tracer: &Tracer,
+        cam: &CameraRays,
+        sampler: SamplerKind,
+        seed: u64,
+        budget: Duration,
+        max_passes: u32,
+    ) -> StepReport {
+        self.step(budget, max_passes, |y, pass, sums| {
+            let samples = SampleRange {
+                sampler,
+                seed,
+                first: pass,
+                count: 1,
+            };
+            trace_row(tracer, cam, &samples, y, sums)
+        })
+    }
+
+    /// Tone maps (after `exposure`) and encodes sRGB to RGBA8, each row by its own sample
+    /// count; rows without samples are black.
+    pub fn to_rgba8(&self, exposure: f32) -> Vec<u8> {
+        let mut out = Vec::with_capacity(self.sum.len() * 4);
+        let w = self.width as usize;
+        if w == 0 {
+            return out;
+        }
+        for (row, &n) in self.sum.chunks(w).zip(&self.row_samples) {
+            let k = if n == 0 { 0.0 } else { exposure / n as f32 };
+            for s in row {
+                let c = tone_map(*s * k);
+                out.extend_from_slice(&[srgb8(c.x), srgb8(c.y), srgb8(c.z), 255]);
+            }
+        }
+        out
+    }
+
+    /// The sums of the complete passes as a [`Film`]; `None` while a pass is part-way done
+    /// (rows would hold different sample counts).
+    pub fn to_film(&self) -> Option<Film> {
+        if !self.is_between_passes() {
+            return None;
+        }
+        Some(Film {
+            width: self.width,
+            height: self.height,
+            sum: self.sum.clone(),
+            samples: self.passes,
+            rejected: self.rejected,
+        })
+    }
+
+    /// The raw per-pixel sums (row 0 at the top).
+    pub fn sums(&self) -> &[Vec3] {
+        &self.sum
+    }
+}

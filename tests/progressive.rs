@@ -1,0 +1,243 @@
+//! The viewer's building blocks in the core: progressive passes equal a one-shot render,
+//! a camera pose frames rays like the scene camera, the debug ray follows the real
+//! traversal, and the traversal-cost heatmap counts what the traversal does.
+
+use std::time::Duration;
+
+use glam::{Quat, Vec3};
+use tracery::bvh::{BuildOptions, Bvh, Visit};
+use tracery::camera::CameraRays;
+use tracery::geometry::Ray;
+use tracery::render::debug::{SegmentKind, ShadowState};
+use tracery::render::heatmap::{cost_row, heat_color, pixel_cost};
+use tracery::render::{EnvironmentMap, Progressive, RenderPlan, RenderSettings, Tracer, render};
+use tracery::scene::Scene;
+
+fn scene_and_bvh(path: Option<&str>) -> (Scene, Bvh) {
+    let scene = match path {
+        Some(p) => Scene::load(std::path::Path::new(p)).unwrap(),
+        None => Scene::cornell_box(),
+    };
+    let bvh = Bvh::build(&scene.mesh.triangles, &BuildOptions::sah());
+    (scene, bvh)
+}
+
+/// A look-at camera's rotation in Bevy's convention (looking down local -z, +y up).
+fn look_rotation(eye: Vec3, target: Vec3, up: Vec3) -> Quat {
+    let f = (target - eye).normalize();
+    let r = f.cross(up).normalize();
+    let u = r.cross(f);
+    Quat::from_mat3(&glam::Mat3::from_cols(r, u, -f))
+}
+
+#[test]
+fn progressive_passes_equal_a_one_shot_render() {
+    for path in [None, Some("assets/scenes/cornell_mirror_glass.toml")] {
+        let (scene, bvh) = scene_and_bvh(path);
+        let settings = RenderSettings {
+            width: 48,
+            height: 40,
+            spp: 3,
+            seed: 7,
+            ..RenderSettings::default()
+        };
+        let oneshot = render(&scene, &bvh, &settings, &|_| {}).unwrap().film;
+
+        let plan = RenderPlan::new(&scene, &settings);
+        let env = EnvironmentMap::load(&scene.environment, plan.environment).unwrap();
+        let tracer = Tracer {
+            scene: &scene,
+            bvh: &bvh,
+            plan,
+            max_depth: settings.max_depth,
+            env: &env,
+        };
+        let cam = CameraRays::new(&scene.camera, settings.width, settings.height);
+        let mut p = Progressive::new(settings.width, settings.height);
+        // A zero budget still traces one batch per call: many small steps, as a frame would.
+        let mut steps = 0;
+        while p.passes() < settings.spp {
+            let r = p.step_shaded(
+                &tracer,
+                &cam,
+                settings.sampler,
+                settings.seed,
+                Duration::ZERO,
+                3,
+            );
+            assert!(r.rows > 0, "a step always makes progress");
+            steps += 1;
+        }
+        assert!(steps > 3, "passes were split over several steps ({steps})");
+        // Asking for more than max_passes does nothing.
+        assert_eq!(
+            p.step_shaded(
+                &tracer,
+                &cam,
+                settings.sampler,
+                settings.seed,
+                Duration::ZERO,
+                3
+            )
+            .rows,
+            0
+        );
+        let film = p.to_film().expect("between passes");
+        assert_eq!(film, oneshot, "{path:?}");
+        assert_eq!(p.to_rgba8(1.0), oneshot.to_rgba8(1.0));
+
+        p.reset();
+        assert_eq!(p.passes(), 0);
+        assert!(p.sums().iter().all(|s| *s == Vec3::ZERO));
+        assert!(p.to_rgba8(1.0).chunks(4).all(|c| c == [0, 0, 0, 255]));
+    }
+}
+
+#[test]
+fn part_way_pass_shows_rows_by_their_own_sample_count() {
+    let (scene, bvh) = scene_and_bvh(None);
+    let plan = RenderPlan::new(&scene, &RenderSettings::default());
+    let env = EnvironmentMap::None;
+    let tracer = Tracer {
+        scene: &scene,
+        bvh: &bvh,
+        plan,
+        max_depth: 5,
+        env: &env,
+    };
+    let cam = CameraRays::new(&scene.camera, 32, 64);
+    let mut p = Progressive::new(32, 64);
+    p.step_shaded(
+        &tracer,
+        &cam,
+        tracery::sampling::SamplerKind::Sobol,
+        0,
+        Duration::ZERO,
+        1,
+    );
+    assert!(!p.is_between_passes());
+    assert!(
+        p.to_film().is_none(),
+        "no film while rows differ in samples"
+    );
+    let rgba = p.to_rgba8(1.0);
+    // The last row is not traced yet: black.
+    assert!(
+        rgba[rgba.len() - 32 * 4..]
+            .chunks(4)
+            .all(|c| c == [0, 0, 0, 255])
+    );
+}
+
+#[test]
+fn camera_pose_frames_rays_like_the_scene_camera() {
+    let (scene, _) = scene_and_bvh(None);
+    let c = &scene.camera;
+    let a = CameraRays::new(c, 320, 200);
+    let b = CameraRays::from_pose(
+        c.position,
+        look_rotation(c.position, c.look_at, c.up),
+        c.vfov_deg.to_radians(),
+        320,
+        200,
+        c.lens_radius,
+        c.focus_distance,
+    );
+    for (x, y) in [(0.0, 0.0), (160.0, 100.0), (319.5, 199.5), (10.0, 150.0)] {
+        let (ra, rb) = (a.pinhole(x, y), b.pinhole(x, y));
+        assert!(
+            (ra.dir - rb.dir).length() < 1e-5,
+            "{x},{y}: {} vs {}",
+            ra.dir,
+            rb.dir
+        );
+        assert_eq!(ra.origin, rb.origin);
+    }
+    // Broken inputs fall back to a usable frame instead of NaN rays.
+    let odd = CameraRays::from_pose(
+        Vec3::ZERO,
+        Quat::from_xyzw(0.0, 0.0, 0.0, 0.0),
+        f32::NAN,
+        8,
+        8,
+        -1.0,
+        f32::NAN,
+    );
+    assert!(odd.pinhole(4.0, 4.0).dir.is_finite());
+    assert_eq!(odd.lens_radius, 0.0);
+}
+
+#[test]
+fn debug_path_hits_equal_closest_hits() {
+    let (scene, bvh) = scene_and_bvh(Some("assets/scenes/cornell_mirror_glass.toml"));
+    let settings = RenderSettings::default();
+    let plan = RenderPlan::new(&scene, &settings);
+    let env = EnvironmentMap::load(&scene.environment, plan.environment).unwrap();
+    let tracer = Tracer {
+        scene: &scene,
+        bvh: &bvh,
+        plan,
+        max_depth: settings.max_depth,
+        env: &env,
+    };
+    let cam = CameraRays::new(&scene.camera, 64, 64);
+    let (mut bounces, mut shadows, mut kinds) = (0, 0, [0usize; 3]);
+    for y in (0..64).step_by(3) {
+        for x in (0..64).step_by(3) {
+            let ray = cam.pinhole(x as f32 + 0.5, y as f32 + 0.5);
+            let path = tracer.debug_path(&ray);
+            assert_eq!(path.segments[0].kind, SegmentKind::Camera);
+            for seg in &path.segments {
+                let core = bvh.intersect(&seg.ray, f32::INFINITY);
+                assert_eq!(seg.hit.map(|h| (h.t, h.prim)), core.map(|h| (h.t, h.prim)));
+                // The nodes it entered are what the visiting traversal reports.
+                let mut visited = Vec::new();
+                bvh.intersect_visit(&seg.ray, f32::INFINITY, |v| {
+                    if let Visit::Node { index, .. } = v {
+                        visited.push(index)
+                    }
+                });
+                assert_eq!(
+                    seg.nodes.iter().map(|n| n.index).collect::<Vec<_>>(),
+                    visited
+                );
+                // The root holds the hit exactly when there is one.
+                if let Some(root) = seg.nodes.first() {
+                    assert_eq!(root.found_hit, seg.hit.is_some());
+                }
+                kinds[seg.kind as usize] += 1;
+            }
+            bounces += path.segments.len() - 1;
+            for s in &path.shadows {
+                shadows += 1;
+                assert!(s.transmittance.is_finite());
+                // A visible shadow ray really meets nothing before the light.
+                if s.state() == ShadowState::Visible {
+                    assert!(!bvh.occluded(&Ray::new(s.from, s.to - s.from), 1.0 - 1e-4));
+                }
+            }
+        }
+    }
+    assert!(bounces > 0 && shadows > 0);
+    assert!(kinds[1] > 0, "some rays hit the mirror");
+    assert!(kinds[2] > 0, "some rays pass the glass");
+}
+
+#[test]
+fn heatmap_counts_the_nodes_the_traversal_enters() {
+    let (scene, bvh) = scene_and_bvh(None);
+    let cam = CameraRays::new(&scene.camera, 16, 16);
+    let mut row = vec![Vec3::ZERO; 16];
+    cost_row(&bvh, &cam, 8, &mut row);
+    for (x, px) in row.iter().enumerate() {
+        let c = pixel_cost(&bvh, &cam, x as u32, 8);
+        assert_eq!(px.x, c.nodes as f32);
+        assert!(c.nodes >= 1, "every ray inside the box enters the root");
+    }
+    // The ramp runs from dark to bright and clamps outside [0, 1].
+    let lum = |c: [u8; 3]| c.iter().map(|&v| v as u32).sum::<u32>();
+    assert!(lum(heat_color(0.0)) < lum(heat_color(0.6)));
+    assert_eq!(heat_color(-1.0), heat_color(0.0));
+    assert_eq!(heat_color(2.0), heat_color(1.0));
+    assert_eq!(heat_color(f32::NAN), heat_color(0.0));
+}
