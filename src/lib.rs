@@ -38,3 +38,5 @@ pub mod plot_font;
 pub mod render;
 pub mod sampling;
 pub mod scene;
+#[cfg(feature = "viewer")]
+pub mod viewer;

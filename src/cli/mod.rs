@@ -5,6 +5,8 @@ mod convergence;
 mod render;
 mod report;
 mod stats;
+#[cfg(feature = "viewer")]
+mod view;
 
 use std::path::{Path, PathBuf};
 
@@ -17,12 +19,17 @@ use tracery::scene::Scene;
 #[derive(Parser, Debug)]
 #[command(version, about, long_about = None)]
 pub struct Cli {
+    /// With no command, the viewer opens on the built-in Cornell box.
     #[command(subcommand)]
-    command: Command,
+    command: Option<Command>,
 }
 
 #[derive(Subcommand, Debug)]
 enum Command {
+    /// Open the real-time viewer on a scene file, OBJ or PLY (the built-in Cornell box by
+    /// default): fly the camera, watch the image refine, inspect the BVH.
+    #[cfg(feature = "viewer")]
+    View(Box<view::ViewArgs>),
     /// Render a scene (TOML scene file, OBJ or PLY; the built-in Cornell box by default) to PNG.
     Render(render::RenderArgs),
     /// Build the BVH of a mesh or scene and print its statistics (median and SAH side by side).
@@ -50,7 +57,7 @@ pub struct BvhArgs {
 }
 
 impl BvhArgs {
-    fn options(&self) -> Result<BuildOptions> {
+    pub fn options(&self) -> Result<BuildOptions> {
         let o = BuildOptions {
             split: self.split,
             bins: self.bins,
@@ -64,11 +71,19 @@ impl BvhArgs {
 /// Runs the parsed command.
 pub fn run(cli: Cli) -> Result<()> {
     match cli.command {
-        Command::Render(a) => render::run(a),
-        Command::Stats(a) => stats::run(a),
-        Command::Bench(a) => bench::run(a),
-        Command::Report(a) => report::run(a),
-        Command::Convergence(a) => convergence::run(a),
+        #[cfg(feature = "viewer")]
+        None => run(Cli::parse_from(["tracery", "view"])),
+        #[cfg(not(feature = "viewer"))]
+        None => anyhow::bail!(
+            "this build has no viewer (built without the `viewer` feature); try `tracery render`"
+        ),
+        #[cfg(feature = "viewer")]
+        Some(Command::View(a)) => view::run(*a),
+        Some(Command::Render(a)) => render::run(a),
+        Some(Command::Stats(a)) => stats::run(a),
+        Some(Command::Bench(a)) => bench::run(a),
+        Some(Command::Report(a)) => report::run(a),
+        Some(Command::Convergence(a)) => convergence::run(a),
     }
 }
 

@@ -83,3 +83,45 @@ pub fn cost_summary(sums: &[Vec3]) -> (f32, f32) {
     }
     ((total / sums.len() as f64) as f32, max)
 }
+
+/// Number of boxes at depth `level` (root 0) that `ray` passes through anywhere along its
+/// length, whatever it hits: where boxes of one level overlap, a ray crosses several.
+pub fn boxes_on_ray(bvh: &Bvh, ray: &crate::geometry::Ray, level: u32) -> u32 {
+    if bvh.tris.is_empty() {
+        return 0;
+    }
+    let ray = crate::geometry::PreparedRay::new(ray);
+    let crosses = |i: u32| {
+        let (near, far) = bvh.nodes[i as usize].aabb().slab(&ray);
+        near.max(0.0) <= far
+    };
+    if !crosses(0) {
+        return 0;
+    }
+    let mut count = 0;
+    let mut stack = vec![(0u32, 0u32)];
+    while let Some((i, depth)) = stack.pop() {
+        if depth == level {
+            count += 1;
+            continue;
+        }
+        let n = &bvh.nodes[i as usize];
+        if !n.is_leaf() {
+            for c in [n.first, n.first + 1] {
+                if crosses(c) {
+                    stack.push((c, depth + 1));
+                }
+            }
+        }
+    }
+    count
+}
+
+/// Adds [`boxes_on_ray`] of every pixel centre's camera ray in row `y` to the `x` lane of
+/// `row`.
+pub fn overlap_row(bvh: &Bvh, cam: &CameraRays, level: u32, y: u32, row: &mut [Vec3]) {
+    for (x, px) in row.iter_mut().enumerate() {
+        let ray = cam.pinhole(x as f32 + 0.5, y as f32 + 0.5);
+        px.x += boxes_on_ray(bvh, &ray, level) as f32;
+    }
+}

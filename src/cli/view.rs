@@ -1,0 +1,160 @@
+//! `tracery view` (and `tracery` with no command): the real-time viewer.
+
+use std::path::PathBuf;
+
+use anyhow::{Result, bail};
+use bevy::math::{UVec2, Vec2};
+use clap::{Args, ValueEnum};
+use tracery::viewer::capture::CaptureScript;
+use tracery::viewer::gizmos::LeafView;
+use tracery::viewer::trace::{RenderMode, ViewSettings};
+use tracery::viewer::{StartGizmos, ViewOptions};
+
+use super::BvhArgs;
+
+#[derive(Args, Debug)]
+pub struct ViewArgs {
+    /// Scene file (TOML), OBJ or PLY; the built-in Cornell box when left out.
+    scene: Option<PathBuf>,
+    /// Window width in pixels.
+    #[arg(long, default_value_t = 1280)]
+    width: u32,
+    /// Window height in pixels.
+    #[arg(long, default_value_t = 720)]
+    height: u32,
+    /// Stop accumulating at this many samples per pixel.
+    #[arg(long, default_value_t = 1024)]
+    spp: u32,
+    /// Largest number of mirror or transparent bounces.
+    #[arg(long, default_value_t = 5)]
+    max_depth: u32,
+    /// Image resolution relative to the window.
+    #[arg(long, default_value_t = 1.0)]
+    scale: f32,
+    /// What the image shows at start.
+    #[arg(long, value_enum, default_value_t = Mode::Shaded)]
+    mode: Mode,
+    /// BVH level for the level gizmo and the overlap view.
+    #[arg(long, default_value_t = 0)]
+    level: u32,
+    /// Gizmos on at start (comma-separated): level, leaves, leaf, ray-nodes.
+    #[arg(long, value_delimiter = ',')]
+    gizmos: Vec<Gizmo>,
+    /// The leaf drawn alone with its triangles (`--gizmos leaf`).
+    #[arg(long, default_value_t = 0)]
+    leaf: u32,
+    /// Shoot a debug ray through this window pixel at start: X,Y.
+    #[arg(long, value_parser = parse_pixel)]
+    ray: Option<Vec2>,
+    /// Hide the inspector and status line (Tab shows them).
+    #[arg(long)]
+    no_ui: bool,
+    #[command(flatten)]
+    bvh: BvhArgs,
+    /// Scripted run: run this many frames, then save --screenshot (if given) and exit.
+    #[arg(long)]
+    frames: Option<u32>,
+    /// With --frames: also wait until the full image has --spp samples per pixel.
+    #[arg(long)]
+    wait_spp: bool,
+    /// With --frames: window screenshot to save before exiting (PNG).
+    #[arg(long)]
+    screenshot: Option<PathBuf>,
+    /// With --frames: orbit the camera for this many frames first and print frame times
+    /// while moving and samples per second when still.
+    #[arg(long, default_value_t = 0)]
+    orbit: u32,
+}
+
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, ValueEnum)]
+enum Mode {
+    /// The shaded scene.
+    #[default]
+    Shaded,
+    /// Traversal cost heatmap.
+    Cost,
+    /// Boxes of the level each ray crosses.
+    Overlap,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+enum Gizmo {
+    /// Boxes of --level.
+    Level,
+    /// All leaves.
+    Leaves,
+    /// Leaf --leaf with its triangles.
+    Leaf,
+    /// The nodes the debug ray entered.
+    RayNodes,
+}
+
+fn parse_pixel(s: &str) -> Result<Vec2, String> {
+    let (x, y) = s
+        .split_once(',')
+        .ok_or_else(|| format!("`{s}`: expected X,Y"))?;
+    let p = |v: &str| {
+        v.trim()
+            .parse::<f32>()
+            .map_err(|e| format!("`{v}`: {e}"))
+    };
+    Ok(Vec2::new(p(x)?, p(y)?))
+}
+
+pub fn run(a: ViewArgs) -> Result<()> {
+    if a.width == 0 || a.height == 0 {
+        bail!("window size {}x{} has no pixels", a.width, a.height);
+    }
+    if a.spp == 0 {
+        bail!("--spp must be at least 1");
+    }
+    if !(a.scale > 0.0 && a.scale <= 1.0) {
+        bail!("--scale must be in (0, 1], not {}", a.scale);
+    }
+    if a.frames.is_none() && (a.screenshot.is_some() || a.orbit > 0 || a.wait_spp) {
+        bail!("--screenshot, --orbit and --wait-spp need --frames");
+    }
+    if let Some(p) = &a.scene
+        && !p.exists()
+    {
+        bail!("{}: no such file", p.display());
+    }
+    let options = a.bvh.options()?;
+    let settings = ViewSettings {
+        max_samples: a.spp,
+        max_depth: a.max_depth,
+        scale: a.scale,
+        level: a.level,
+        mode: match a.mode {
+            Mode::Shaded => RenderMode::Shaded,
+            Mode::Cost => RenderMode::TraversalCost,
+            Mode::Overlap => RenderMode::Overlap,
+        },
+        ..ViewSettings::default()
+    };
+    let has = |g| a.gizmos.contains(&g);
+    tracery::viewer::run(ViewOptions {
+        scene: a.scene.clone(),
+        window: UVec2::new(a.width, a.height),
+        bvh: options,
+        settings,
+        inspector: !a.no_ui,
+        gizmos: StartGizmos {
+            level: has(Gizmo::Level),
+            leaves: has(Gizmo::Leaves) || has(Gizmo::Leaf),
+            ray_nodes: has(Gizmo::RayNodes),
+        },
+        leaves: LeafView {
+            all: has(Gizmo::Leaves),
+            index: a.leaf,
+            ..LeafView::default()
+        },
+        ray: a.ray,
+        script: a.frames.map(|frames| CaptureScript {
+            frames,
+            samples: a.wait_spp.then_some(a.spp),
+            screenshot: a.screenshot.clone(),
+            orbit_frames: a.orbit,
+        }),
+    })
+}

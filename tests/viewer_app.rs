@@ -1,0 +1,287 @@
+//! The viewer's ECS without a window (`MinimalPlugins`, `app.update()`): the BVH is rebuilt
+//! exactly when its settings or the scene change, accumulation starts over when the camera
+//! moves, a bad file keeps the old scene and shows its error, a debug ray's hits are the
+//! core's closest hits, and the traced image equals the headless render of the same view.
+#![cfg(feature = "viewer")]
+
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+use bevy::prelude::*;
+use tracery::bvh::{BuildOptions, Bvh, SplitMethod};
+use tracery::render::{RenderSettings, render};
+use tracery::scene::Scene;
+use tracery::viewer::CorePlugins;
+use tracery::viewer::bvh::{BvhSettings, SceneBvh};
+use tracery::viewer::camera::pose_of;
+use tracery::viewer::debug_ray::{DebugRay, ShootRay, ray_through};
+use tracery::viewer::scene::{CurrentScene, LoadScene, SceneLoading, ViewerStatus};
+use tracery::viewer::trace::{
+    Accumulation, TraceCamera, TracedImage, ViewSettings, ViewportSize,
+};
+
+const SIZE: UVec2 = UVec2::new(64, 48);
+
+fn app(scene: Option<&str>) -> App {
+    let mut app = App::new();
+    app.add_plugins(MinimalPlugins).add_plugins(CorePlugins {
+        scene: scene.map(PathBuf::from),
+        bvh: BuildOptions::sah(),
+        settings: ViewSettings {
+            max_samples: 64,
+            ..ViewSettings::default()
+        },
+        viewport: SIZE,
+        interactive: false,
+    });
+    let camera = match scene {
+        Some(p) => Scene::load(Path::new(p)).unwrap().camera,
+        None => Scene::cornell_box().camera,
+    };
+    let (t, p) = pose_of(&camera);
+    app.world_mut().spawn((t, p, TraceCamera));
+    app
+}
+
+/// Updates until `done` holds (panics after 60 s).
+fn settle(app: &mut App, what: &str, done: impl Fn(&World) -> bool) {
+    let start = Instant::now();
+    loop {
+        app.update();
+        if done(app.world()) {
+            return;
+        }
+        assert!(start.elapsed() < Duration::from_secs(60), "timed out: {what}");
+        std::thread::sleep(Duration::from_millis(1));
+    }
+}
+
+fn builds(app: &App) -> u64 {
+    app.world().resource::<SceneBvh>().builds
+}
+
+fn idle(w: &World) -> bool {
+    w.resource::<SceneLoading>().current().is_none()
+}
+
+#[test]
+fn bvh_is_rebuilt_exactly_when_its_settings_or_the_scene_change() {
+    let mut app = app(None);
+    settle(&mut app, "first build", |w| w.resource::<SceneBvh>().builds == 1);
+    for _ in 0..20 {
+        app.update();
+    }
+    assert_eq!(builds(&app), 1, "nothing changed: no rebuild");
+
+    // Writing the same settings again (change detection fires, the value is the same).
+    let same = app.world().resource::<BvhSettings>().0;
+    app.world_mut().resource_mut::<BvhSettings>().0 = same;
+    for _ in 0..20 {
+        app.update();
+    }
+    assert_eq!(builds(&app), 1, "same settings: no rebuild");
+
+    for (n, change) in [
+        (2, BuildOptions {
+            max_leaf_size: 1,
+            ..BuildOptions::sah()
+        }),
+        (3, BuildOptions {
+            bins: 4,
+            max_leaf_size: 1,
+            ..BuildOptions::sah()
+        }),
+        (4, BuildOptions::median()),
+    ] {
+        app.world_mut().resource_mut::<BvhSettings>().0 = change;
+        settle(&mut app, "rebuild", |w| w.resource::<SceneBvh>().builds == n);
+        for _ in 0..10 {
+            app.update();
+        }
+        assert_eq!(builds(&app), n, "one rebuild per change");
+        let bvh = app.world().resource::<SceneBvh>();
+        assert_eq!(bvh.bvh.as_ref().unwrap().options, change);
+        assert_eq!(bvh.key.unwrap().options.split, change.split);
+    }
+    assert_eq!(
+        app.world().resource::<BvhSettings>().0.split,
+        SplitMethod::Median
+    );
+
+    // A new scene: exactly one more build, for the new scene.
+    app.world_mut()
+        .write_message(LoadScene("assets/scenes/cornell_mirror_glass.toml".into()));
+    settle(&mut app, "scene load", |w| {
+        w.resource::<CurrentScene>().generation == 1
+    });
+    settle(&mut app, "build for the new scene", |w| {
+        w.resource::<SceneBvh>().builds == 5
+    });
+    for _ in 0..10 {
+        app.update();
+    }
+    assert_eq!(builds(&app), 5);
+    let w = app.world();
+    let gen_ = w.resource::<CurrentScene>().generation;
+    assert!(w.resource::<SceneBvh>().for_scene(gen_).is_some());
+}
+
+#[test]
+fn accumulation_resets_when_the_camera_moves_and_only_then() {
+    let mut app = app(None);
+    settle(&mut app, "3 samples", |w| {
+        w.resource::<Accumulation>().full.passes() >= 3
+    });
+    let resets = app.world().resource::<Accumulation>().resets;
+    let passes = app.world().resource::<Accumulation>().full.passes();
+    app.update();
+    let acc = app.world().resource::<Accumulation>();
+    assert_eq!(acc.resets, resets, "a still camera keeps accumulating");
+    assert!(acc.full.passes() >= passes);
+
+    // Exposure only re-maps the image.
+    app.world_mut().resource_mut::<ViewSettings>().exposure = 2.0;
+    app.update();
+    assert_eq!(app.world().resource::<Accumulation>().resets, resets);
+
+    // Moving the camera starts over, with a preview on screen at once.
+    let mut q = app
+        .world_mut()
+        .query_filtered::<&mut Transform, With<TraceCamera>>();
+    q.single_mut(app.world_mut()).unwrap().translation.x += 0.01;
+    app.update();
+    let acc = app.world().resource::<Accumulation>();
+    assert_eq!(acc.resets, resets + 1);
+    assert_eq!(acc.full.passes(), 0);
+    let image = app.world().resource::<TracedImage>();
+    assert!(image.preview);
+    assert!(image.width <= SIZE.x && image.width >= 1);
+
+    // Turning the camera, or a render setting, also starts over.
+    q.single_mut(app.world_mut()).unwrap().rotate_y(0.01);
+    app.update();
+    assert_eq!(app.world().resource::<Accumulation>().resets, resets + 2);
+    app.world_mut().resource_mut::<ViewSettings>().max_depth = 1;
+    app.update();
+    assert_eq!(app.world().resource::<Accumulation>().resets, resets + 3);
+}
+
+#[test]
+fn a_bad_file_keeps_the_old_scene_and_shows_its_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let bad = dir.path().join("broken.obj");
+    std::fs::write(&bad, "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 7\n").unwrap();
+    let missing = dir.path().join("missing.ply");
+
+    let mut app = app(None);
+    settle(&mut app, "first build", |w| w.resource::<SceneBvh>().builds == 1);
+    for path in [&bad, &missing] {
+        app.world_mut().write_message(LoadScene(path.clone()));
+        app.update();
+        settle(&mut app, "load attempt", idle);
+        let w = app.world();
+        let current = w.resource::<CurrentScene>();
+        assert_eq!(current.generation, 0, "the old scene stays");
+        assert_eq!(current.scene.name, Scene::cornell_box().name);
+        let error = w.resource::<ViewerStatus>().error.clone().expect("an error");
+        assert!(
+            error.contains(&path.display().to_string()),
+            "the error names the file: {error}"
+        );
+        for _ in 0..5 {
+            app.update();
+        }
+        assert_eq!(builds(&app), 1, "no rebuild for a failed load");
+    }
+    let error = app.world().resource::<ViewerStatus>().error.clone().unwrap();
+    assert!(error.contains("missing.ply"));
+    // The OBJ error also gives the line.
+    app.world_mut().write_message(LoadScene(bad.clone()));
+    app.update();
+    settle(&mut app, "load attempt", idle);
+    let error = app.world().resource::<ViewerStatus>().error.clone().unwrap();
+    assert!(error.contains("broken.obj:4"), "{error}");
+
+    // A good file afterwards clears the error.
+    app.world_mut()
+        .write_message(LoadScene("assets/scenes/cornell_box.toml".into()));
+    app.update();
+    settle(&mut app, "good load", |w| {
+        w.resource::<CurrentScene>().generation == 1
+    });
+    assert!(app.world().resource::<ViewerStatus>().error.is_none());
+}
+
+#[test]
+fn debug_ray_hits_equal_the_cores_closest_hits() {
+    let scene = "assets/scenes/cornell_mirror_glass.toml";
+    let mut app = app(Some(scene));
+    settle(&mut app, "scene and BVH", |w| {
+        let g = w.resource::<CurrentScene>().generation;
+        g == 1 && w.resource::<SceneBvh>().for_scene(g).is_some()
+    });
+    let mut q = app
+        .world_mut()
+        .query_filtered::<(&Transform, &Projection), With<TraceCamera>>();
+    let (mut segments, mut bounces) = (0, 0);
+    for y in (2..SIZE.y).step_by(7) {
+        for x in (2..SIZE.x).step_by(7) {
+            let p = Vec2::new(x as f32 + 0.5, y as f32 + 0.5);
+            app.world_mut().write_message(ShootRay(p));
+            app.update();
+            let w = app.world();
+            let debug = w.resource::<DebugRay>();
+            assert_eq!(debug.pixel, Some(p));
+            let tree = w.resource::<SceneBvh>().bvh.clone().unwrap();
+            let (t, proj) = q.single(w).unwrap();
+            let settings = w.resource::<ViewSettings>();
+            let camera_ray = ray_through(t, proj, w.resource::<ViewportSize>().0, settings, p);
+            assert_eq!(debug.path.segments[0].ray.origin, camera_ray.origin);
+            assert!((debug.path.segments[0].ray.dir - camera_ray.dir.normalize()).length() < 1e-6);
+            for seg in &debug.path.segments {
+                let core = tree.intersect(&seg.ray, f32::INFINITY);
+                assert_eq!(
+                    seg.hit.map(|h| (h.t, h.prim)),
+                    core.map(|h| (h.t, h.prim)),
+                    "pixel {p}"
+                );
+                segments += 1;
+            }
+            bounces += debug.path.segments.len() - 1;
+        }
+    }
+    assert!(segments > 50 && bounces > 0, "{segments} segments, {bounces} bounces");
+}
+
+#[test]
+fn traced_image_equals_the_headless_render_of_the_same_view() {
+    let mut app = app(None);
+    app.world_mut().resource_mut::<ViewSettings>().max_samples = 4;
+    settle(&mut app, "4 samples", |w| {
+        let i = w.resource::<TracedImage>();
+        !i.preview && i.samples == 4
+    });
+    let shown = app.world().resource::<TracedImage>().rgba.clone();
+
+    let scene = Scene::cornell_box();
+    let bvh = Bvh::build(&scene.mesh.triangles, &BuildOptions::sah());
+    let settings = RenderSettings {
+        width: SIZE.x,
+        height: SIZE.y,
+        spp: 4,
+        ..RenderSettings::default()
+    };
+    let headless = render(&scene, &bvh, &settings, &|_| {}).unwrap().film.to_rgba8(1.0);
+    assert_eq!(shown.len(), headless.len());
+    let diff: u64 = shown
+        .iter()
+        .zip(&headless)
+        .map(|(a, b)| a.abs_diff(*b) as u64)
+        .sum();
+    let mean = diff as f64 / shown.len() as f64;
+    // The viewer's camera is a transform (rotation quaternion) and the headless one a
+    // look-at frame: the same rays up to rounding, so nearly every byte agrees.
+    assert!(mean < 0.5, "mean difference {mean} levels");
+    let same = shown.iter().zip(&headless).filter(|(a, b)| a == b).count();
+    assert!(same as f64 > 0.95 * shown.len() as f64, "{same} of {} bytes equal", shown.len());
+}

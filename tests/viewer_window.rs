@@ -1,0 +1,121 @@
+//! The viewer in a real window under Xvfb: it opens, traces, saves a window screenshot and
+//! exits 0; the screenshot shows the traced scene (it matches the headless render of the same
+//! camera), and gizmos, when enabled, change the picture.
+//!
+//! Needs `xvfb-run` and Mesa's Vulkan driver (`.ci/run` installs them). Without `xvfb-run`
+//! the test is skipped locally and fails in CI.
+#![cfg(feature = "viewer")]
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+const W: u32 = 320;
+const H: u32 = 240;
+
+fn have_xvfb() -> bool {
+    let found = Command::new("sh")
+        .args(["-c", "command -v xvfb-run"])
+        .output()
+        .is_ok_and(|o| o.status.success());
+    if !found {
+        assert!(
+            std::env::var_os("CI").is_none(),
+            "xvfb-run is missing: CI must install xvfb"
+        );
+        eprintln!("skipped: xvfb-run not installed");
+    }
+    found
+}
+
+fn bin() -> &'static str {
+    env!("CARGO_BIN_EXE_tracery")
+}
+
+/// Runs `tracery view` under Xvfb with `args` and returns the screenshot it saved.
+fn screenshot(dir: &Path, name: &str, args: &[&str]) -> image::RgbImage {
+    let out = dir.join(name);
+    let status = Command::new("xvfb-run")
+        .args(["-a", "-s", "-screen 0 1280x1024x24", bin(), "view"])
+        .args(args)
+        .args([
+            "--width",
+            &W.to_string(),
+            "--height",
+            &H.to_string(),
+            "--frames",
+            "8",
+            "--spp",
+            "4",
+            "--wait-spp",
+            "--no-ui",
+            "--screenshot",
+        ])
+        .arg(&out)
+        .env("WGPU_BACKEND", "vulkan")
+        .output()
+        .expect("xvfb-run starts");
+    assert!(
+        status.status.success(),
+        "viewer failed: {}\nstdout:\n{}\nstderr:\n{}",
+        status.status,
+        String::from_utf8_lossy(&status.stdout),
+        String::from_utf8_lossy(&status.stderr)
+    );
+    image::open(&out)
+        .unwrap_or_else(|e| panic!("{}: {e}", out.display()))
+        .to_rgb8()
+}
+
+fn mean_abs_diff(a: &image::RgbImage, b: &image::RgbImage) -> f64 {
+    assert_eq!(a.dimensions(), b.dimensions());
+    let sum: u64 = a
+        .as_raw()
+        .iter()
+        .zip(b.as_raw())
+        .map(|(x, y)| x.abs_diff(*y) as u64)
+        .sum();
+    sum as f64 / a.as_raw().len() as f64
+}
+
+#[test]
+fn window_shows_the_traced_scene_and_gizmos_change_it() {
+    if !have_xvfb() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let scene = "assets/scenes/cornell_mirror_glass.toml";
+    let plain = screenshot(dir.path(), "plain.png", &[scene]);
+    assert_eq!(plain.dimensions(), (W, H));
+
+    // The headless render of the same camera, size and samples.
+    let reference: PathBuf = dir.path().join("reference.png");
+    let status = Command::new(bin())
+        .args(["render", scene, "--width", &W.to_string(), "--height", &H.to_string()])
+        .args(["--spp", "4", "-o"])
+        .arg(&reference)
+        .status()
+        .unwrap();
+    assert!(status.success());
+    let reference = image::open(&reference).unwrap().to_rgb8();
+    let d = mean_abs_diff(&plain, &reference);
+    eprintln!("screenshot vs headless render: mean abs difference {d:.3} levels");
+    assert!(d < 2.0, "the window shows the traced image ({d:.3} levels off)");
+    let mean = plain.as_raw().iter().map(|&v| v as f64).sum::<f64>() / plain.as_raw().len() as f64;
+    assert!(mean > 20.0, "not a black window (mean {mean:.1})");
+
+    // Gizmos on: the BVH boxes of level 2 and the debug ray's path are drawn over the image.
+    let gizmos = screenshot(
+        dir.path(),
+        "gizmos.png",
+        &[scene, "--gizmos", "level", "--level", "2", "--ray", "160,120"],
+    );
+    let changed = plain
+        .pixels()
+        .zip(gizmos.pixels())
+        .filter(|(a, b)| a.0.iter().zip(b.0).any(|(x, y)| x.abs_diff(y) > 40))
+        .count();
+    eprintln!("gizmos changed {changed} pixels");
+    assert!(changed > 500, "gizmos change the picture ({changed} pixels)");
+    // ... while the rest of the picture is the same traced image.
+    assert!(mean_abs_diff(&gizmos, &reference) < 12.0);
+}
