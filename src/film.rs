@@ -37,12 +37,9 @@ impl Film {
 
     /// Tone maps (ACES fit of Narkowicz 2015, after `exposure`) and encodes sRGB to RGBA8.
     pub fn to_rgba8(&self, exposure: f32) -> Vec<u8> {
+        let mut out = vec![0u8; self.sum.len() * 4];
         let k = exposure / self.samples.max(1) as f32;
-        let mut out = Vec::with_capacity(self.sum.len() * 4);
-        for s in &self.sum {
-            let c = tone_map(*s * k);
-            out.extend_from_slice(&[srgb8(c.x), srgb8(c.y), srgb8(c.z), 255]);
-        }
+        encode_rgba8(&self.sum, k, &mut out);
         out
     }
 
@@ -65,6 +62,37 @@ pub fn tone_map(x: Vec3) -> Vec3 {
     let x = x.max(Vec3::ZERO);
     let (a, b, c, d, e) = (2.51, 0.03, 2.43, 0.59, 0.14);
     ((x * (a * x + b)) / (x * (c * x + d) + e)).clamp(Vec3::ZERO, Vec3::ONE)
+}
+
+/// Tone maps `sums * k` and writes sRGB RGBA8 into `out` (four bytes per value), on all
+/// cores: the encoding every picture of a film goes through, in the viewer as in PNGs.
+pub fn encode_rgba8(sums: &[Vec3], k: f32, out: &mut [u8]) {
+    use rayon::prelude::*;
+    const CHUNK: usize = 4096;
+    out.par_chunks_mut(CHUNK * 4)
+        .zip(sums.par_chunks(CHUNK))
+        .for_each(|(o, s)| {
+            for (px, v) in o.chunks_exact_mut(4).zip(s) {
+                let c = tone_map(*v * k);
+                px.copy_from_slice(&[srgb8_fast(c.x), srgb8_fast(c.y), srgb8_fast(c.z), 255]);
+            }
+        });
+}
+
+/// Entries of the [`srgb8_fast`] table over `[0, 1]`.
+const SRGB_LUT_SIZE: usize = 8192;
+
+/// [`srgb8`] by table lookup: never more than one level off the exact value (a test checks).
+#[inline]
+pub fn srgb8_fast(x: f32) -> u8 {
+    static LUT: std::sync::OnceLock<Vec<u8>> = std::sync::OnceLock::new();
+    let lut = LUT.get_or_init(|| {
+        (0..SRGB_LUT_SIZE)
+            .map(|i| srgb8(i as f32 / (SRGB_LUT_SIZE - 1) as f32))
+            .collect()
+    });
+    let x = if x.is_nan() { 0.0 } else { x.clamp(0.0, 1.0) };
+    lut[(x * (SRGB_LUT_SIZE - 1) as f32 + 0.5) as usize]
 }
 
 /// Linear `[0, 1]` to an 8-bit sRGB value.

@@ -72,3 +72,19 @@ fn empty_images_and_zero_samples_are_rejected() {
     }
     assert!(RenderSettings::default().validate().is_ok());
 }
+
+#[test]
+fn fast_srgb_encoding_is_within_one_level_of_the_exact_curve() {
+    use tracery::film::{srgb8, srgb8_fast};
+    let mut worst = 0;
+    for i in 0..=200_000 {
+        let x = i as f32 / 200_000.0;
+        worst = worst.max(srgb8(x).abs_diff(srgb8_fast(x)));
+    }
+    assert!(worst <= 1, "off by {worst} levels");
+    assert_eq!(srgb8_fast(0.0), 0);
+    assert_eq!(srgb8_fast(1.0), 255);
+    assert_eq!(srgb8_fast(-3.0), 0);
+    assert_eq!(srgb8_fast(7.0), 255);
+    assert_eq!(srgb8_fast(f32::NAN), 0);
+}

@@ -16,9 +16,7 @@ use tracery::viewer::bvh::{BvhSettings, SceneBvh};
 use tracery::viewer::camera::pose_of;
 use tracery::viewer::debug_ray::{DebugRay, ShootRay, ray_through};
 use tracery::viewer::scene::{CurrentScene, LoadScene, SceneLoading, ViewerStatus};
-use tracery::viewer::trace::{
-    Accumulation, TraceCamera, TracedImage, ViewSettings, ViewportSize,
-};
+use tracery::viewer::trace::{Accumulation, TraceCamera, TracedImage, ViewSettings, ViewportSize};
 
 const SIZE: UVec2 = UVec2::new(64, 48);
 
@@ -51,7 +49,10 @@ fn settle(app: &mut App, what: &str, done: impl Fn(&World) -> bool) {
         if done(app.world()) {
             return;
         }
-        assert!(start.elapsed() < Duration::from_secs(60), "timed out: {what}");
+        assert!(
+            start.elapsed() < Duration::from_secs(60),
+            "timed out: {what}"
+        );
         std::thread::sleep(Duration::from_millis(1));
     }
 }
@@ -67,7 +68,9 @@ fn idle(w: &World) -> bool {
 #[test]
 fn bvh_is_rebuilt_exactly_when_its_settings_or_the_scene_change() {
     let mut app = app(None);
-    settle(&mut app, "first build", |w| w.resource::<SceneBvh>().builds == 1);
+    settle(&mut app, "first build", |w| {
+        w.resource::<SceneBvh>().builds == 1
+    });
     for _ in 0..20 {
         app.update();
     }
@@ -82,19 +85,27 @@ fn bvh_is_rebuilt_exactly_when_its_settings_or_the_scene_change() {
     assert_eq!(builds(&app), 1, "same settings: no rebuild");
 
     for (n, change) in [
-        (2, BuildOptions {
-            max_leaf_size: 1,
-            ..BuildOptions::sah()
-        }),
-        (3, BuildOptions {
-            bins: 4,
-            max_leaf_size: 1,
-            ..BuildOptions::sah()
-        }),
+        (
+            2,
+            BuildOptions {
+                max_leaf_size: 1,
+                ..BuildOptions::sah()
+            },
+        ),
+        (
+            3,
+            BuildOptions {
+                bins: 4,
+                max_leaf_size: 1,
+                ..BuildOptions::sah()
+            },
+        ),
         (4, BuildOptions::median()),
     ] {
         app.world_mut().resource_mut::<BvhSettings>().0 = change;
-        settle(&mut app, "rebuild", |w| w.resource::<SceneBvh>().builds == n);
+        settle(&mut app, "rebuild", |w| {
+            w.resource::<SceneBvh>().builds == n
+        });
         for _ in 0..10 {
             app.update();
         }
@@ -174,7 +185,9 @@ fn a_bad_file_keeps_the_old_scene_and_shows_its_error() {
     let missing = dir.path().join("missing.ply");
 
     let mut app = app(None);
-    settle(&mut app, "first build", |w| w.resource::<SceneBvh>().builds == 1);
+    settle(&mut app, "first build", |w| {
+        w.resource::<SceneBvh>().builds == 1
+    });
     for path in [&bad, &missing] {
         app.world_mut().write_message(LoadScene(path.clone()));
         app.update();
@@ -183,7 +196,11 @@ fn a_bad_file_keeps_the_old_scene_and_shows_its_error() {
         let current = w.resource::<CurrentScene>();
         assert_eq!(current.generation, 0, "the old scene stays");
         assert_eq!(current.scene.name, Scene::cornell_box().name);
-        let error = w.resource::<ViewerStatus>().error.clone().expect("an error");
+        let error = w
+            .resource::<ViewerStatus>()
+            .error
+            .clone()
+            .expect("an error");
         assert!(
             error.contains(&path.display().to_string()),
             "the error names the file: {error}"
@@ -193,13 +210,23 @@ fn a_bad_file_keeps_the_old_scene_and_shows_its_error() {
         }
         assert_eq!(builds(&app), 1, "no rebuild for a failed load");
     }
-    let error = app.world().resource::<ViewerStatus>().error.clone().unwrap();
+    let error = app
+        .world()
+        .resource::<ViewerStatus>()
+        .error
+        .clone()
+        .unwrap();
     assert!(error.contains("missing.ply"));
     // The OBJ error also gives the line.
     app.world_mut().write_message(LoadScene(bad.clone()));
     app.update();
     settle(&mut app, "load attempt", idle);
-    let error = app.world().resource::<ViewerStatus>().error.clone().unwrap();
+    let error = app
+        .world()
+        .resource::<ViewerStatus>()
+        .error
+        .clone()
+        .unwrap();
     assert!(error.contains("broken.obj:4"), "{error}");
 
     // A good file afterwards clears the error.
@@ -250,7 +277,10 @@ fn debug_ray_hits_equal_the_cores_closest_hits() {
             bounces += debug.path.segments.len() - 1;
         }
     }
-    assert!(segments > 50 && bounces > 0, "{segments} segments, {bounces} bounces");
+    assert!(
+        segments > 50 && bounces > 0,
+        "{segments} segments, {bounces} bounces"
+    );
 }
 
 #[test]
@@ -271,7 +301,10 @@ fn traced_image_equals_the_headless_render_of_the_same_view() {
         spp: 4,
         ..RenderSettings::default()
     };
-    let headless = render(&scene, &bvh, &settings, &|_| {}).unwrap().film.to_rgba8(1.0);
+    let headless = render(&scene, &bvh, &settings, &|_| {})
+        .unwrap()
+        .film
+        .to_rgba8(1.0);
     assert_eq!(shown.len(), headless.len());
     let diff: u64 = shown
         .iter()
@@ -283,5 +316,9 @@ fn traced_image_equals_the_headless_render_of_the_same_view() {
     // look-at frame: the same rays up to rounding, so nearly every byte agrees.
     assert!(mean < 0.5, "mean difference {mean} levels");
     let same = shown.iter().zip(&headless).filter(|(a, b)| a == b).count();
-    assert!(same as f64 > 0.95 * shown.len() as f64, "{same} of {} bytes equal", shown.len());
+    assert!(
+        same as f64 > 0.95 * shown.len() as f64,
+        "{same} of {} bytes equal",
+        shown.len()
+    );
 }

@@ -90,7 +90,14 @@ fn window_shows_the_traced_scene_and_gizmos_change_it() {
     // The headless render of the same camera, size and samples.
     let reference: PathBuf = dir.path().join("reference.png");
     let status = Command::new(bin())
-        .args(["render", scene, "--width", &W.to_string(), "--height", &H.to_string()])
+        .args([
+            "render",
+            scene,
+            "--width",
+            &W.to_string(),
+            "--height",
+            &H.to_string(),
+        ])
         .args(["--spp", "4", "-o"])
         .arg(&reference)
         .status()
@@ -99,7 +106,10 @@ fn window_shows_the_traced_scene_and_gizmos_change_it() {
     let reference = image::open(&reference).unwrap().to_rgb8();
     let d = mean_abs_diff(&plain, &reference);
     eprintln!("screenshot vs headless render: mean abs difference {d:.3} levels");
-    assert!(d < 2.0, "the window shows the traced image ({d:.3} levels off)");
+    assert!(
+        d < 2.0,
+        "the window shows the traced image ({d:.3} levels off)"
+    );
     let mean = plain.as_raw().iter().map(|&v| v as f64).sum::<f64>() / plain.as_raw().len() as f64;
     assert!(mean > 20.0, "not a black window (mean {mean:.1})");
 
@@ -107,7 +117,9 @@ fn window_shows_the_traced_scene_and_gizmos_change_it() {
     let gizmos = screenshot(
         dir.path(),
         "gizmos.png",
-        &[scene, "--gizmos", "level", "--level", "2", "--ray", "160,120"],
+        &[
+            scene, "--gizmos", "level", "--level", "2", "--ray", "160,120",
+        ],
     );
     let changed = plain
         .pixels()
@@ -115,7 +127,10 @@ fn window_shows_the_traced_scene_and_gizmos_change_it() {
         .filter(|(a, b)| a.0.iter().zip(b.0).any(|(x, y)| x.abs_diff(y) > 40))
         .count();
     eprintln!("gizmos changed {changed} pixels");
-    assert!(changed > 500, "gizmos change the picture ({changed} pixels)");
+    assert!(
+        changed > 500,
+        "gizmos change the picture ({changed} pixels)"
+    );
     // ... while the rest of the picture is the same traced image.
     assert!(mean_abs_diff(&gizmos, &reference) < 12.0);
 }

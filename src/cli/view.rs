@@ -93,11 +93,7 @@ fn parse_pixel(s: &str) -> Result<Vec2, String> {
     let (x, y) = s
         .split_once(',')
         .ok_or_else(|| format!("`{s}`: expected X,Y"))?;
-    let p = |v: &str| {
-        v.trim()
-            .parse::<f32>()
-            .map_err(|e| format!("`{v}`: {e}"))
-    };
+    let p = |v: &str| v.trim().parse::<f32>().map_err(|e| format!("`{v}`: {e}"));
     Ok(Vec2::new(p(x)?, p(y)?))
 }
 

@@ -12,7 +12,7 @@ use rayon::prelude::*;
 
 use super::{RayCounts, SampleRange, Tracer, trace_row};
 use crate::camera::CameraRays;
-use crate::film::{Film, srgb8, tone_map};
+use crate::film::{Film, encode_rgba8};
 use crate::sampling::SamplerKind;
 
 /// An image being refined pass by pass.
@@ -181,17 +181,27 @@ impl Progressive {
     /// Tone maps (after `exposure`) and encodes sRGB to RGBA8, each row by its own sample
     /// count; rows without samples are black.
     pub fn to_rgba8(&self, exposure: f32) -> Vec<u8> {
-        let mut out = Vec::with_capacity(self.sum.len() * 4);
         let w = self.width as usize;
+        let mut out = vec![0u8; self.sum.len() * 4];
         if w == 0 {
             return out;
         }
-        for (row, &n) in self.sum.chunks(w).zip(&self.row_samples) {
+        // Rows are encoded in runs of equal sample counts (at most two runs per image); rows
+        // without samples get k = 0: black.
+        let mut y = 0usize;
+        while y < self.row_samples.len() {
+            let n = self.row_samples[y];
+            let end = y + self.row_samples[y..]
+                .iter()
+                .take_while(|&&m| m == n)
+                .count();
             let k = if n == 0 { 0.0 } else { exposure / n as f32 };
-            for s in row {
-                let c = tone_map(*s * k);
-                out.extend_from_slice(&[srgb8(c.x), srgb8(c.y), srgb8(c.z), 255]);
-            }
+            encode_rgba8(
+                &self.sum[y * w..end * w],
+                k,
+                &mut out[y * w * 4..end * w * 4],
+            );
+            y = end;
         }
         out
     }

@@ -65,7 +65,8 @@ fn save_png(
     };
     let film = &acc.full;
     if film.passes() == 0 {
-        status.notice = Some("nothing to save yet: the full-resolution image has no samples".into());
+        status.notice =
+            Some("nothing to save yet: the full-resolution image has no samples".into());
         return;
     }
     let path = path.unwrap_or_else(|| {
@@ -85,8 +86,14 @@ fn save_png(
         .map_or(Ok(()), std::fs::create_dir_all)
         .map_err(anyhow::Error::from)
         .and_then(|_| {
-            image::save_buffer(&path, &rgba, film.width(), film.height(), image::ColorType::Rgba8)
-                .map_err(anyhow::Error::from)
+            image::save_buffer(
+                &path,
+                &rgba,
+                film.width(),
+                film.height(),
+                image::ColorType::Rgba8,
+            )
+            .map_err(anyhow::Error::from)
         });
     status.notice = Some(match result {
         Ok(()) => format!(
@@ -107,6 +114,7 @@ struct Script {
     frame: u32,
     orbit_center: Option<Vec3>,
     moving_ms: Vec<f64>,
+    still_ms: Vec<f64>,
     still_start: Option<(f64, u64, u32)>,
     screenshot_requested: bool,
     saved: Arc<AtomicBool>,
@@ -121,7 +129,9 @@ fn orbit(
     if script.frame >= script.script.orbit_frames || script.frame == 0 {
         return;
     }
-    let center = *script.orbit_center.get_or_insert(current.scene.camera.look_at);
+    let center = *script
+        .orbit_center
+        .get_or_insert(current.scene.camera.look_at);
     for mut t in &mut camera {
         // A full turn over the orbit, about the vertical through the look-at point.
         let step = std::f32::consts::TAU / script.script.orbit_frames.max(1) as f32;
@@ -142,6 +152,10 @@ fn measure(mut script: ResMut<Script>, time: Res<Time<Real>>, acc: Res<Accumulat
     if frame > 3 && frame <= orbit {
         let ms = time.delta_secs_f64() * 1e3;
         script.moving_ms.push(ms);
+    }
+    if frame > orbit + 1 {
+        let ms = time.delta_secs_f64() * 1e3;
+        script.still_ms.push(ms);
     }
     if frame == orbit + 1 {
         script.still_start = Some((
@@ -182,12 +196,12 @@ fn finish(
         match script.script.screenshot.clone() {
             Some(path) => {
                 let saved = script.saved.clone();
-                commands
-                    .spawn(Screenshot::primary_window())
-                    .observe(move |shot: On<ScreenshotCaptured>| {
+                commands.spawn(Screenshot::primary_window()).observe(
+                    move |shot: On<ScreenshotCaptured>| {
                         save_screenshot(&shot.image, &path);
                         saved.store(true, Ordering::SeqCst);
-                    });
+                    },
+                );
                 script.screenshot_requested = true;
             }
             None => script.exit_in = Some(0),
@@ -213,7 +227,10 @@ fn save_screenshot(image: &Image, path: &std::path::Path) {
         });
     match result {
         Ok(()) => println!("screenshot {}", path.display()),
-        Err(e) => eprintln!("error: {}: cannot save the screenshot: {e:#}", path.display()),
+        Err(e) => eprintln!(
+            "error: {}: cannot save the screenshot: {e:#}",
+            path.display()
+        ),
     }
 }
 
@@ -240,15 +257,17 @@ fn report(script: &Script, acc: &Accumulation, stats: &TraceStats, time: &Time<R
         let secs = time.elapsed_secs_f64() - t0;
         let spp = acc.full.passes().saturating_sub(spp0);
         let rays = acc.full.rays.total().saturating_sub(rays0);
+        let frames = script.still_ms.len().max(1);
         if secs > 0.0 {
             println!(
-                "still: {} samples per pixel in {:.2} s = {:.2} spp/s at {}x{}, {:.2} Mrays/s",
+                "still: {} samples per pixel in {:.2} s = {:.2} spp/s at {}x{}, {:.2} Mrays/s; frame time mean {:.1} ms",
                 spp,
                 secs,
                 spp as f64 / secs,
                 stats.size.x,
                 stats.size.y,
-                rays as f64 / secs / 1e6
+                rays as f64 / secs / 1e6,
+                script.still_ms.iter().sum::<f64>() / frames as f64
             );
         }
     }

@@ -217,8 +217,16 @@ fn draw(
         };
         gizmos.line(seg.ray.origin, end, segment_color(seg.kind));
         if let Some(h) = seg.hit {
-            gizmos.arrow(h.point, h.point + h.normal * normal_len, Color::srgb(0.3, 0.5, 1.0));
-            gizmos.sphere(Isometry3d::from_translation(h.point), radius * 0.006, Color::WHITE);
+            gizmos.arrow(
+                h.point,
+                h.point + h.normal * normal_len,
+                Color::srgb(0.3, 0.5, 1.0),
+            );
+            gizmos.sphere(
+                Isometry3d::from_translation(h.point),
+                radius * 0.006,
+                Color::WHITE,
+            );
         }
     }
     for s in &debug.path.shadows {

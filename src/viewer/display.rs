@@ -74,6 +74,9 @@ fn spawn_view(mut commands: Commands, mut images: ResMut<Assets<Image>>) {
             ..default()
         },
         Tonemapping::None,
+        // Multisampling would only smooth the gizmo lines, at four times the fill cost of
+        // every pass (all on the CPU under a software Vulkan driver).
+        Msaa::Off,
     ));
     commands.spawn((
         Sprite {
@@ -91,6 +94,7 @@ fn spawn_view(mut commands: Commands, mut images: ResMut<Assets<Image>>) {
             ..default()
         },
         Tonemapping::None,
+        Msaa::Off,
         Projection::Perspective(PerspectiveProjection::default()),
         Transform::IDENTITY,
         TraceCamera,
@@ -117,7 +121,7 @@ fn track_window_size(
 }
 
 fn show_traced_image(
-    traced: Res<TracedImage>,
+    mut traced: ResMut<TracedImage>,
     mut display: ResMut<DisplayImage>,
     mut images: ResMut<Assets<Image>>,
 ) {
@@ -134,10 +138,14 @@ fn show_traced_image(
     if first || size.x != traced.width || size.y != traced.height || filtered != traced.preview {
         *image = blank(traced.width, traced.height, traced.preview);
     }
-    image.data = Some(traced.rgba.clone());
+    // The pixels move to the texture: the trace system writes a new buffer for the next image.
+    image.data = Some(std::mem::take(&mut traced.rgba));
 }
 
-fn open_dropped_files(mut drops: MessageReader<FileDragAndDrop>, mut load: MessageWriter<LoadScene>) {
+fn open_dropped_files(
+    mut drops: MessageReader<FileDragAndDrop>,
+    mut load: MessageWriter<LoadScene>,
+) {
     for d in drops.read() {
         if let FileDragAndDrop::DroppedFile { path_buf, .. } = d {
             load.write(LoadScene(path_buf.clone()));

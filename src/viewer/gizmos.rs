@@ -210,7 +210,11 @@ fn draw_level(
         } else {
             color
         };
-        gizmos.aabb_3d(aabb3d(&bvh.nodes[i as usize].aabb()), Transform::IDENTITY, c);
+        gizmos.aabb_3d(
+            aabb3d(&bvh.nodes[i as usize].aabb()),
+            Transform::IDENTITY,
+            c,
+        );
     }
 }
 

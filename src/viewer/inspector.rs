@@ -55,10 +55,7 @@ fn hdr_files() -> Vec<PathBuf> {
     let mut v: Vec<PathBuf> = std::fs::read_dir(std::path::Path::new(EXTERNAL).join("hdr"))
         .map(|d| {
             d.filter_map(|e| e.ok().map(|e| e.path()))
-                .filter(|p| {
-                    p.extension()
-                        .is_some_and(|x| x == "exr" || x == "hdr")
-                })
+                .filter(|p| p.extension().is_some_and(|x| x == "exr" || x == "hdr"))
                 .collect()
         })
         .unwrap_or_default();
@@ -145,7 +142,10 @@ fn status_line(
         stats.size.x,
         stats.size.y,
         if stats.moving {
-            format!(" (preview {}x{})", stats.preview_size.x, stats.preview_size.y)
+            format!(
+                " (preview {}x{})",
+                stats.preview_size.x, stats.preview_size.y
+            )
         } else {
             String::new()
         }
@@ -227,21 +227,23 @@ fn inspector(
         .default_width(300.0)
         .resizable(false)
         .show(ctx, |ui| {
-            egui::ScrollArea::vertical().max_height(ctx_height(ui) - 60.0).show(ui, |ui| {
-                scene_section(ui, &state, &current, &status, &mut load);
-                render_section(ui, &mut s, &stats);
-                dof_section(ui, &mut s, &mut picking.0);
-                env_section(ui, &mut s, &state);
-                bvh_section(ui, &mut b, &bvh, &building);
-                gizmo_section(ui, &mut s, &index, &mut leaves, &mut store, &mut debug);
-                ui.separator();
-                if ui.button("Save full-resolution PNG (P)").clicked() {
-                    save.write(SavePng(None));
-                }
-                if let Some(n) = &status.notice {
-                    ui.label(n);
-                }
-            });
+            egui::ScrollArea::vertical()
+                .max_height(ctx_height(ui) - 60.0)
+                .show(ui, |ui| {
+                    scene_section(ui, &state, &current, &status, &mut load);
+                    render_section(ui, &mut s, &stats);
+                    dof_section(ui, &mut s, &mut picking.0);
+                    env_section(ui, &mut s, &state);
+                    bvh_section(ui, &mut b, &bvh, &building);
+                    gizmo_section(ui, &mut s, &index, &mut leaves, &mut store, &mut debug);
+                    ui.separator();
+                    if ui.button("Save full-resolution PNG (P)").clicked() {
+                        save.write(SavePng(None));
+                    }
+                    if let Some(n) = &status.notice {
+                        ui.label(n);
+                    }
+                });
         });
     if s != *settings {
         *settings = s;
@@ -275,7 +277,9 @@ fn scene_section(
             let selected = current
                 .source
                 .as_ref()
-                .map_or("Cornell box (built in)".to_string(), |p| p.display().to_string());
+                .map_or("Cornell box (built in)".to_string(), |p| {
+                    p.display().to_string()
+                });
             egui::ComboBox::from_id_salt("scene")
                 .selected_text(selected)
                 .width(260.0)
@@ -330,7 +334,9 @@ fn render_section(ui: &mut egui::Ui, s: &mut ViewSettings, stats: &TraceStats) {
                     .logarithmic(true)
                     .text("exposure"),
             );
-            ui.add(egui::Slider::new(&mut s.frame_budget_ms, 5.0..=200.0).text("trace ms per frame"));
+            ui.add(
+                egui::Slider::new(&mut s.frame_budget_ms, 5.0..=200.0).text("trace ms per frame"),
+            );
             if s.mode != RenderMode::Shaded {
                 heat_legend(ui, s, stats);
             }
@@ -352,7 +358,10 @@ fn heat_legend(ui: &mut egui::Ui, s: &mut ViewSettings, stats: &TraceStats) {
         let x0 = rect.left() + rect.width() * i as f32 / steps as f32;
         let x1 = rect.left() + rect.width() * (i + 1) as f32 / steps as f32;
         ui.painter().rect_filled(
-            egui::Rect::from_min_max(egui::pos2(x0, rect.top()), egui::pos2(x1 + 0.5, rect.bottom())),
+            egui::Rect::from_min_max(
+                egui::pos2(x0, rect.top()),
+                egui::pos2(x1 + 0.5, rect.bottom()),
+            ),
             0.0,
             egui::Color32::from_rgb(r, g, b),
         );
@@ -409,7 +418,10 @@ fn env_section(ui: &mut egui::Ui, s: &mut ViewSettings, state: &InspectorState) 
                 EnvChoice::None => "none".into(),
                 EnvChoice::Sky => "sky".into(),
                 EnvChoice::CubeMap => "cube map (six images)".into(),
-                EnvChoice::Hdr(p) => format!("HDR {}", p.file_stem().unwrap_or_default().to_string_lossy()),
+                EnvChoice::Hdr(p) => format!(
+                    "HDR {}",
+                    p.file_stem().unwrap_or_default().to_string_lossy()
+                ),
             };
             egui::ComboBox::from_id_salt("env")
                 .selected_text(name(&s.environment))
@@ -428,7 +440,9 @@ fn env_section(ui: &mut egui::Ui, s: &mut ViewSettings, state: &InspectorState) 
                     }
                 });
             ui.add(egui::Slider::new(&mut s.env_intensity, 0.0..=4.0).text("intensity"));
-            ui.add(egui::Slider::new(&mut s.env_rotation_deg, -180.0..=180.0).text("rotation (deg)"));
+            ui.add(
+                egui::Slider::new(&mut s.env_rotation_deg, -180.0..=180.0).text("rotation (deg)"),
+            );
         });
 }
 
@@ -466,11 +480,17 @@ fn bvh_section(
                         ("levels", st.levels.to_string()),
                         (
                             "leaf size",
-                            format!("{}..{} (mean {:.2})", st.min_leaf_size, st.max_leaf_size, st.mean_leaf_size),
+                            format!(
+                                "{}..{} (mean {:.2})",
+                                st.min_leaf_size, st.max_leaf_size, st.mean_leaf_size
+                            ),
                         ),
                         ("SAH cost", format!("{:.2}", st.sah_cost)),
                         ("build", format!("{:.1} ms", st.build_ms)),
-                        ("left out", format!("{} non-finite, {} zero-area", st.excluded, st.degenerate)),
+                        (
+                            "left out",
+                            format!("{} non-finite, {} zero-area", st.excluded, st.degenerate),
+                        ),
                     ] {
                         ui.label(k);
                         ui.label(v);
@@ -493,12 +513,18 @@ fn gizmo_section(
         .default_open(true)
         .show(ui, |ui| {
             let depth = index.levels.len().saturating_sub(1) as u32;
-            ui.checkbox(&mut store.config_mut::<BvhLevelGizmos>().0.enabled, "BVH level boxes (B)");
+            ui.checkbox(
+                &mut store.config_mut::<BvhLevelGizmos>().0.enabled,
+                "BVH level boxes (B)",
+            );
             ui.add(egui::Slider::new(&mut s.level, 0..=depth.max(1)).text("level ([ ])"));
             if let Some(n) = index.levels.get(s.level as usize) {
                 ui.small(format!("{} boxes at level {}", n.len(), s.level));
             }
-            ui.checkbox(&mut store.config_mut::<LeafGizmos>().0.enabled, "BVH leaves (L)");
+            ui.checkbox(
+                &mut store.config_mut::<LeafGizmos>().0.enabled,
+                "BVH leaves (L)",
+            );
             ui.horizontal(|ui| {
                 ui.radio_value(&mut leaves.all, true, "all");
                 ui.radio_value(&mut leaves.all, false, "one, with triangles");
@@ -515,7 +541,10 @@ fn gizmo_section(
                     index.leaves.len()
                 ));
             }
-            ui.checkbox(&mut store.config_mut::<DebugRayGizmos>().0.enabled, "debug ray (R, click)");
+            ui.checkbox(
+                &mut store.config_mut::<DebugRayGizmos>().0.enabled,
+                "debug ray (R, click)",
+            );
             ui.checkbox(&mut debug.show_nodes, "nodes the debug ray entered");
             debug_ray_text(ui, debug);
         });

@@ -4,7 +4,7 @@
 
 use std::path::PathBuf;
 use std::sync::Arc;
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 use bevy::prelude::*;
 
@@ -155,8 +155,8 @@ impl Default for ViewSettings {
             mode: RenderMode::Shaded,
             level: 0,
             heat_max: 0.0,
-            frame_budget_ms: 25.0,
-            moving_budget_ms: 25.0,
+            frame_budget_ms: 20.0,
+            moving_budget_ms: 12.0,
         }
     }
 }
@@ -374,7 +374,8 @@ pub struct Accumulation {
     pub preview_scale: f32,
     /// Times the accumulation started over.
     pub resets: u64,
-    shown: Option<(bool, u32, u32, f32, f32)>,
+    shown: Option<(f32, f32)>,
+    last_show: Option<Instant>,
 }
 
 impl Default for Accumulation {
@@ -386,6 +387,7 @@ impl Default for Accumulation {
             preview_scale: 0.35,
             resets: 0,
             shown: None,
+            last_show: None,
         }
     }
 }
@@ -615,10 +617,14 @@ fn trace(
         );
         // Aim the next preview at the moving budget (square root: it scales both sides).
         let budget = settings.moving_budget_ms.max(1.0) as f64 * 1e-3;
+        // Steps of 1/32 with a dead band, so the preview texture keeps its size while the
+        // load is steady instead of being reallocated every frame.
         if r.seconds > 0.0 {
             let ideal = acc.preview_scale as f64 * (budget / r.seconds).sqrt();
-            let next = (acc.preview_scale as f64 * ideal).sqrt();
-            acc.preview_scale = (next as f32).clamp(0.05, 1.0);
+            let next = ((ideal * 32.0).round() / 32.0).clamp(1.0 / 32.0, 1.0) as f32;
+            if (next - acc.preview_scale).abs() > 0.08 * acc.preview_scale {
+                acc.preview_scale = next;
+            }
         }
         record(&mut stats, &r);
         stats.moving = true;
@@ -629,6 +635,7 @@ fn trace(
     }
     stats.moving = false;
     let target = settings.max_samples.max(1);
+    let mut completed = false;
     let mut traced = false;
     if acc.full.passes() < target {
         let cam = camera_rays(transform, projection, size, &settings);
@@ -637,21 +644,22 @@ fn trace(
         let r = step_mode(&mut acc.full, &settings, &tracer, tree, &cam, budget, max);
         record(&mut stats, &r);
         traced = r.rows > 0;
+        completed = r.passes_completed > 0;
     } else {
         stats.trace_ms = 0.0;
     }
-    // Show the full image once it has a complete pass; redraw when it gained samples or the
-    // tone mapping changed.
-    let look = (
-        false,
-        acc.full.passes(),
-        0,
-        settings.exposure,
-        settings.heat_max,
-    );
-    if acc.full.passes() >= 1 && (traced || acc.shown != Some(look)) {
+    // Show the full image once it has a complete pass; redraw when a pass completes, when the
+    // tone mapping changes, and now and then while a slow pass is under way.
+    let look = (settings.exposure, settings.heat_max);
+    let stale = acc
+        .last_show
+        .is_none_or(|t| t.elapsed() > Duration::from_millis(250));
+    if acc.full.passes() >= 1
+        && (completed || (traced && stale) || acc.shown != Some(look) || image.preview)
+    {
         stats.heat = show(&mut image, &acc.full, &settings, false);
         acc.shown = Some(look);
+        acc.last_show = Some(Instant::now());
     }
     stats.spp = image.samples;
 }
