@@ -164,7 +164,7 @@ fn status_line(
         .interactable(false)
         .show(ctx, |ui| {
             egui::Frame::popup(ui.style()).show(ui, |ui| {
-                ui.label(egui::RichText::new(text).monospace());
+                ui.add(egui::Label::new(egui::RichText::new(text).monospace()).extend());
             });
         });
     Ok(())
@@ -222,28 +222,28 @@ fn inspector(
     // accumulation and rebuilds the BVH) fires exactly when a value changes.
     let mut s = settings.clone();
     let mut b = bvh_settings.0;
+    let height = ctx.content_rect().height() - 24.0;
     egui::Window::new("Inspector")
         .anchor(egui::Align2::RIGHT_TOP, egui::vec2(-8.0, 8.0))
         .default_width(300.0)
+        .default_height(height)
+        .max_height(height)
         .resizable(false)
+        .vscroll(true)
         .show(ctx, |ui| {
-            egui::ScrollArea::vertical()
-                .max_height(ctx_height(ui) - 60.0)
-                .show(ui, |ui| {
-                    scene_section(ui, &state, &current, &status, &mut load);
-                    render_section(ui, &mut s, &stats);
-                    dof_section(ui, &mut s, &mut picking.0);
-                    env_section(ui, &mut s, &state);
-                    bvh_section(ui, &mut b, &bvh, &building);
-                    gizmo_section(ui, &mut s, &index, &mut leaves, &mut store, &mut debug);
-                    ui.separator();
-                    if ui.button("Save full-resolution PNG (P)").clicked() {
-                        save.write(SavePng(None));
-                    }
-                    if let Some(n) = &status.notice {
-                        ui.label(n);
-                    }
-                });
+            scene_section(ui, &state, &current, &status, &mut load);
+            render_section(ui, &mut s, &stats);
+            dof_section(ui, &mut s, &mut picking.0);
+            env_section(ui, &mut s, &state);
+            bvh_section(ui, &mut b, &bvh, &building);
+            gizmo_section(ui, &mut s, &index, &mut leaves, &mut store, &mut debug);
+            ui.separator();
+            if ui.button("Save full-resolution PNG (P)").clicked() {
+                save.write(SavePng(None));
+            }
+            if let Some(n) = &status.notice {
+                ui.label(n);
+            }
         });
     if s != *settings {
         *settings = s;
@@ -252,10 +252,6 @@ fn inspector(
         bvh_settings.0 = b;
     }
     Ok(())
-}
-
-fn ctx_height(ui: &egui::Ui) -> f32 {
-    ui.ctx().content_rect().height()
 }
 
 fn scene_section(
@@ -512,12 +508,19 @@ fn gizmo_section(
     egui::CollapsingHeader::new("Gizmos and debug")
         .default_open(true)
         .show(ui, |ui| {
-            let depth = index.levels.len().saturating_sub(1) as u32;
             ui.checkbox(
                 &mut store.config_mut::<BvhLevelGizmos>().0.enabled,
                 "BVH level boxes (B)",
             );
-            ui.add(egui::Slider::new(&mut s.level, 0..=depth.max(1)).text("level ([ ])"));
+            // Sliders only once the tree is indexed: a slider clamps its value to its range,
+            // and an empty range would lose the level or leaf asked for at start.
+            if let Some(depth) = index.levels.len().checked_sub(1) {
+                ui.add(
+                    egui::Slider::new(&mut s.level, 0..=depth as u32)
+                        .clamping(egui::SliderClamping::Edits)
+                        .text("level ([ ])"),
+                );
+            }
             if let Some(n) = index.levels.get(s.level as usize) {
                 ui.small(format!("{} boxes at level {}", n.len(), s.level));
             }
@@ -529,11 +532,14 @@ fn gizmo_section(
                 ui.radio_value(&mut leaves.all, true, "all");
                 ui.radio_value(&mut leaves.all, false, "one, with triangles");
             });
-            let last = index.leaves.len().saturating_sub(1) as u32;
-            ui.add_enabled(
-                !leaves.all,
-                egui::Slider::new(&mut leaves.index, 0..=last.max(1)).text("leaf (, .)"),
-            );
+            if let Some(last) = index.leaves.len().checked_sub(1) {
+                ui.add_enabled(
+                    !leaves.all,
+                    egui::Slider::new(&mut leaves.index, 0..=last as u32)
+                        .clamping(egui::SliderClamping::Edits)
+                        .text("leaf (, .)"),
+                );
+            }
             if leaves.all && index.leaves.len() > leaves.max_boxes {
                 ui.small(format!(
                     "drawing the first {} of {} leaves",
