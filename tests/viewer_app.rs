@@ -141,14 +141,14 @@ fn bvh_is_rebuilt_exactly_when_its_settings_or_the_scene_change() {
 fn accumulation_resets_when_the_camera_moves_and_only_then() {
     let mut app = app(None);
     settle(&mut app, "3 samples", |w| {
-        w.resource::<Accumulation>().full.passes() >= 3
+        w.resource::<Accumulation>().full_passes() >= 3
     });
     let resets = app.world().resource::<Accumulation>().resets;
-    let passes = app.world().resource::<Accumulation>().full.passes();
+    let passes = app.world().resource::<Accumulation>().full_passes();
     app.update();
     let acc = app.world().resource::<Accumulation>();
     assert_eq!(acc.resets, resets, "a still camera keeps accumulating");
-    assert!(acc.full.passes() >= passes);
+    assert!(acc.full_passes() >= passes);
 
     // Exposure only re-maps the image.
     app.world_mut().resource_mut::<ViewSettings>().exposure = 2.0;
@@ -163,7 +163,7 @@ fn accumulation_resets_when_the_camera_moves_and_only_then() {
     app.update();
     let acc = app.world().resource::<Accumulation>();
     assert_eq!(acc.resets, resets + 1);
-    assert_eq!(acc.full.passes(), 0);
+    assert_eq!(acc.full_passes(), 0);
     let image = app.world().resource::<TracedImage>();
     assert!(image.preview);
     assert!(image.width <= SIZE.x && image.width >= 1);

@@ -63,12 +63,11 @@ fn save_png(
     let Some(SavePng(path)) = requests.read().last().cloned() else {
         return;
     };
-    let film = &acc.full;
-    if film.passes() == 0 {
+    let Some(film) = acc.full().filter(|f| f.passes() > 0) else {
         status.notice =
             Some("nothing to save yet: the full-resolution image has no samples".into());
         return;
-    }
+    };
     let path = path.unwrap_or_else(|| {
         let stamp = std::time::SystemTime::now()
             .duration_since(std::time::UNIX_EPOCH)
@@ -160,8 +159,8 @@ fn measure(mut script: ResMut<Script>, time: Res<Time<Real>>, acc: Res<Accumulat
     if frame == orbit + 1 {
         script.still_start = Some((
             time.elapsed_secs_f64(),
-            acc.full.rays.total(),
-            acc.full.passes(),
+            acc.full().map_or(0, |f| f.rays.total()),
+            acc.full_passes(),
         ));
     }
 }
@@ -255,8 +254,11 @@ fn report(script: &Script, acc: &Accumulation, stats: &TraceStats, time: &Time<R
     }
     if let Some((t0, rays0, spp0)) = script.still_start {
         let secs = time.elapsed_secs_f64() - t0;
-        let spp = acc.full.passes().saturating_sub(spp0);
-        let rays = acc.full.rays.total().saturating_sub(rays0);
+        let spp = acc.full_passes().saturating_sub(spp0);
+        let rays = acc
+            .full()
+            .map_or(0, |f| f.rays.total())
+            .saturating_sub(rays0);
         let frames = script.still_ms.len().max(1);
         if secs > 0.0 {
             println!(

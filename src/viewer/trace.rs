@@ -364,8 +364,8 @@ pub struct TracedImage {
 /// The progressive films: a full-resolution one, and the preview traced at every change.
 #[derive(Resource)]
 pub struct Accumulation {
-    /// The full-resolution image being refined.
-    pub full: Progressive,
+    /// The full-resolution image being refined (see [`Accumulation::full`]).
+    full: Progressive,
     /// The last preview.
     pub preview: Progressive,
     key: Option<TraceKey>,
@@ -376,6 +376,20 @@ pub struct Accumulation {
     pub resets: u64,
     shown: Option<(f32, f32)>,
     last_show: Option<Instant>,
+    full_stale: bool,
+}
+
+impl Accumulation {
+    /// The full-resolution image being refined; `None` after a change until tracing it
+    /// resumes (it is cleared then, not on every frame of a camera move).
+    pub fn full(&self) -> Option<&Progressive> {
+        (!self.full_stale).then_some(&self.full)
+    }
+
+    /// Samples per pixel of the full-resolution image (0 after a change).
+    pub fn full_passes(&self) -> u32 {
+        self.full().map_or(0, Progressive::passes)
+    }
 }
 
 impl Default for Accumulation {
@@ -388,6 +402,7 @@ impl Default for Accumulation {
             resets: 0,
             shown: None,
             last_show: None,
+            full_stale: true,
         }
     }
 }
@@ -600,11 +615,8 @@ fn trace(
         } else {
             acc.preview.reset();
         }
-        if acc.full.width() != size.x || acc.full.height() != size.y {
-            acc.full = Progressive::new(size.x, size.y);
-        } else {
-            acc.full.reset();
-        }
+        // The full image is cleared when tracing it resumes, not on every frame of a move.
+        acc.full_stale = true;
         let cam = camera_rays(transform, projection, psize, &settings);
         let r = step_mode(
             &mut acc.preview,
@@ -637,6 +649,14 @@ fn trace(
     let target = settings.max_samples.max(1);
     let mut completed = false;
     let mut traced = false;
+    if acc.full_stale {
+        acc.full_stale = false;
+        if acc.full.width() != size.x || acc.full.height() != size.y {
+            acc.full = Progressive::new(size.x, size.y);
+        } else {
+            acc.full.reset();
+        }
+    }
     if acc.full.passes() < target {
         let cam = camera_rays(transform, projection, size, &settings);
         let max = (acc.full.passes() + settings.samples_per_frame.max(1)).min(target);
