@@ -106,9 +106,9 @@ impl Bvh {
         let limit = best.t.next_up();
         for slot in first as usize..(first + count) as usize {
             let t = intersect_triangle_t(ray, &self.tris[slot], limit);
-            // `t < limit` is `t <= best.t`, except that a miss (+inf) never counts, even
-            // while the best is still +inf.
-            let hit = t < limit;
+            // Against the current best (it shrinks within the leaf); a miss (+inf) never
+            // counts, even while the best is still +inf.
+            let hit = t <= best.t && t != f32::INFINITY;
             seen(self.prim_ids[slot], hit);
             if hit {
                 let id = self.prim_ids[slot];
