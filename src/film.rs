@@ -72,9 +72,11 @@ pub fn encode_rgba8(sums: &[Vec3], k: f32, out: &mut [u8]) {
     out.par_chunks_mut(CHUNK * 4)
         .zip(sums.par_chunks(CHUNK))
         .for_each(|(o, s)| {
+            let lut = srgb_lut();
+            let enc = |x: f32| lut_lookup(lut, x);
             for (px, v) in o.chunks_exact_mut(4).zip(s) {
                 let c = tone_map(*v * k);
-                px.copy_from_slice(&[srgb8_fast(c.x), srgb8_fast(c.y), srgb8_fast(c.z), 255]);
+                px.copy_from_slice(&[enc(c.x), enc(c.y), enc(c.z), 255]);
             }
         });
 }
@@ -85,12 +87,21 @@ const SRGB_LUT_SIZE: usize = 8192;
 /// [`srgb8`] by table lookup: never more than one level off the exact value (a test checks).
 #[inline]
 pub fn srgb8_fast(x: f32) -> u8 {
+    lut_lookup(srgb_lut(), x)
+}
+
+/// The [`srgb8_fast`] table, built on first use.
+fn srgb_lut() -> &'static [u8] {
     static LUT: std::sync::OnceLock<Vec<u8>> = std::sync::OnceLock::new();
-    let lut = LUT.get_or_init(|| {
+    LUT.get_or_init(|| {
         (0..SRGB_LUT_SIZE)
             .map(|i| srgb8(i as f32 / (SRGB_LUT_SIZE - 1) as f32))
             .collect()
-    });
+    })
+}
+
+#[inline(always)]
+fn lut_lookup(lut: &[u8], x: f32) -> u8 {
     let x = if x.is_nan() { 0.0 } else { x.clamp(0.0, 1.0) };
     lut[(x * (SRGB_LUT_SIZE - 1) as f32 + 0.5) as usize]
 }

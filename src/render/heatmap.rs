@@ -5,6 +5,7 @@ use glam::Vec3;
 
 use crate::bvh::{Bvh, Visit};
 use crate::camera::CameraRays;
+use crate::geometry::Ray;
 
 /// Work done by the closest-hit traversal of one ray.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -17,21 +18,31 @@ pub struct TraversalCost {
 
 /// Traces the ray through the centre of pixel `(x, y)` and counts its traversal work.
 pub fn pixel_cost(bvh: &Bvh, cam: &CameraRays, x: u32, y: u32) -> TraversalCost {
-    let ray = cam.pinhole(x as f32 + 0.5, y as f32 + 0.5);
+    ray_cost(bvh, &cam.pinhole(x as f32 + 0.5, y as f32 + 0.5))
+}
+
+/// The traversal work of the closest-hit query of `ray`.
+pub fn ray_cost(bvh: &Bvh, ray: &Ray) -> TraversalCost {
     let mut cost = TraversalCost::default();
-    bvh.intersect_visit(&ray, f32::INFINITY, |v| match v {
+    bvh.intersect_visit(ray, f32::INFINITY, |v| match v {
         Visit::Node { .. } => cost.nodes += 1,
         Visit::Triangle { .. } => cost.triangles += 1,
     });
     cost
 }
 
-/// Adds the node count of every pixel of row `y` to the `x` lane of `row` (the layout of
-/// [`super::Progressive`]'s sums, so the cost image refines like the shaded one).
-pub fn cost_row(bvh: &Bvh, cam: &CameraRays, y: u32, row: &mut [Vec3]) {
+/// Adds `count(ray)` for the camera ray through the centre of every pixel of row `y` to the
+/// `x` lane of `row` (the layout of [`super::Progressive`]'s sums, so a count image refines
+/// like the shaded one).
+pub fn count_row(cam: &CameraRays, y: u32, row: &mut [Vec3], count: impl Fn(&Ray) -> u32) {
     for (x, px) in row.iter_mut().enumerate() {
-        px.x += pixel_cost(bvh, cam, x as u32, y).nodes as f32;
+        px.x += count(&cam.pinhole(x as f32 + 0.5, y as f32 + 0.5)) as f32;
     }
+}
+
+/// [`count_row`] of the nodes each ray's traversal enters.
+pub fn cost_row(bvh: &Bvh, cam: &CameraRays, y: u32, row: &mut [Vec3]) {
+    count_row(cam, y, row, |ray| ray_cost(bvh, ray).nodes);
 }
 
 /// The colour ramp of the heatmap: dark blue (cheap) through green and yellow to red and
@@ -86,7 +97,7 @@ pub fn cost_summary(sums: &[Vec3]) -> (f32, f32) {
 
 /// Number of boxes at depth `level` (root 0) that `ray` passes through anywhere along its
 /// length, whatever it hits: where boxes of one level overlap, a ray crosses several.
-pub fn boxes_on_ray(bvh: &Bvh, ray: &crate::geometry::Ray, level: u32) -> u32 {
+pub fn boxes_on_ray(bvh: &Bvh, ray: &Ray, level: u32) -> u32 {
     if bvh.tris.is_empty() {
         return 0;
     }
@@ -117,11 +128,7 @@ pub fn boxes_on_ray(bvh: &Bvh, ray: &crate::geometry::Ray, level: u32) -> u32 {
     count
 }
 
-/// Adds [`boxes_on_ray`] of every pixel centre's camera ray in row `y` to the `x` lane of
-/// `row`.
+/// [`count_row`] of the boxes of depth `level` each ray crosses.
 pub fn overlap_row(bvh: &Bvh, cam: &CameraRays, level: u32, y: u32, row: &mut [Vec3]) {
-    for (x, px) in row.iter_mut().enumerate() {
-        let ray = cam.pinhole(x as f32 + 0.5, y as f32 + 0.5);
-        px.x += boxes_on_ray(bvh, &ray, level) as f32;
-    }
+    count_row(cam, y, row, |ray| boxes_on_ray(bvh, ray, level));
 }

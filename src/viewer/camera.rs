@@ -5,6 +5,7 @@
 use bevy::camera_controller::free_camera::{FreeCamera, FreeCameraPlugin, FreeCameraState};
 use bevy::prelude::*;
 
+use super::UiFocus;
 use super::scene::{CurrentScene, SceneSystems};
 use crate::scene::Camera as SceneCamera;
 
@@ -14,7 +15,6 @@ pub struct FlyCameraPlugin;
 impl Plugin for FlyCameraPlugin {
     fn build(&self, app: &mut App) {
         app.add_plugins(FreeCameraPlugin)
-            .init_resource::<CameraInputBlocked>()
             .add_systems(PreUpdate, place_at_scene_camera.after(SceneSystems))
             .add_systems(PreUpdate, gate_camera_input);
     }
@@ -23,10 +23,6 @@ impl Plugin for FlyCameraPlugin {
 /// Marks the camera that flies (the trace camera).
 #[derive(Component, Default)]
 pub struct FlyCamera;
-
-/// Set by the inspector while it has the pointer or the keyboard: the camera ignores input.
-#[derive(Resource, Default)]
-pub struct CameraInputBlocked(pub bool);
 
 /// The transform and projection that show `camera` as the scene file describes it.
 pub fn pose_of(camera: &SceneCamera) -> (Transform, Projection) {
@@ -86,11 +82,12 @@ fn place_at_scene_camera(
 }
 
 fn gate_camera_input(
-    blocked: Res<CameraInputBlocked>,
+    focus: Res<UiFocus>,
     mut states: Query<&mut FreeCameraState, With<FlyCamera>>,
 ) {
     for mut s in &mut states {
-        let enabled = !blocked.0;
+        // The inspector has the pointer or the keyboard: the camera leaves them to it.
+        let enabled = !(focus.pointer || focus.keyboard);
         if s.enabled != enabled {
             s.enabled = enabled;
         }

@@ -15,10 +15,7 @@ use crate::bvh::Bvh;
 use crate::camera::CameraRays;
 use crate::render::heatmap::{cost_row, cost_summary, heatmap_rgba8, overlap_row};
 use crate::render::progressive::StepReport;
-use crate::render::{
-    EnvironmentMap, Progressive, RayCounts, RenderPlan, RenderSettings, SampleRange, Tracer,
-    trace_row,
-};
+use crate::render::{EnvironmentMap, Progressive, RayCounts, RenderPlan, RenderSettings, Tracer};
 use crate::sampling::SamplerKind;
 use crate::scene::{Environment, Scene};
 
@@ -491,35 +488,29 @@ fn step_mode(
     max_passes: u32,
 ) -> StepReport {
     match settings.mode {
-        RenderMode::Shaded => film.step(budget, max_passes, |y, pass, sums| {
-            let samples = SampleRange {
-                sampler: settings.sampler,
-                seed: settings.seed,
-                first: pass,
-                count: 1,
-            };
-            trace_row(tracer, cam, &samples, y, sums)
-        }),
-        RenderMode::TraversalCost => film.step(budget, max_passes.min(1), |y, _, sums| {
-            cost_row(bvh, cam, y, sums);
-            (
-                RayCounts {
+        RenderMode::Shaded => film.step_shaded(
+            tracer,
+            cam,
+            settings.sampler,
+            settings.seed,
+            budget,
+            max_passes,
+        ),
+        RenderMode::TraversalCost | RenderMode::Overlap => {
+            // One pass: the counts are exact, more samples would not change them.
+            film.step(budget, max_passes.min(1), |y, _, sums| {
+                if settings.mode == RenderMode::Overlap {
+                    overlap_row(bvh, cam, settings.level, y, sums);
+                } else {
+                    cost_row(bvh, cam, y, sums);
+                }
+                let rays = RayCounts {
                     camera: sums.len() as u64,
                     ..Default::default()
-                },
-                0,
-            )
-        }),
-        RenderMode::Overlap => film.step(budget, max_passes.min(1), |y, _, sums| {
-            overlap_row(bvh, cam, settings.level, y, sums);
-            (
-                RayCounts {
-                    camera: sums.len() as u64,
-                    ..Default::default()
-                },
-                0,
-            )
-        }),
+                };
+                (rays, 0)
+            })
+        }
     }
 }
 
