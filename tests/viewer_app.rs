@@ -322,3 +322,43 @@ fn traced_image_equals_the_headless_render_of_the_same_view() {
         shown.len()
     );
 }
+
+#[test]
+fn the_camera_ignores_input_while_the_inspector_has_it() {
+    use bevy::camera_controller::free_camera::FreeCameraState;
+    use tracery::viewer::UiFocus;
+    use tracery::viewer::camera::{FlyCamera, FlyCameraPlugin};
+
+    let mut app = app(None);
+    app.add_plugins((bevy::input::InputPlugin, FlyCameraPlugin));
+    let cam = app
+        .world_mut()
+        .query_filtered::<Entity, With<TraceCamera>>()
+        .single(app.world())
+        .unwrap();
+    app.world_mut().entity_mut(cam).insert(FlyCamera);
+    app.update();
+    app.update();
+    let enabled = |app: &App| app.world().get::<FreeCameraState>(cam).unwrap().enabled;
+    assert!(enabled(&app), "free to fly with the inspector idle");
+    for focus in [
+        UiFocus {
+            pointer: true,
+            keyboard: false,
+        },
+        UiFocus {
+            pointer: false,
+            keyboard: true,
+        },
+    ] {
+        *app.world_mut().resource_mut::<UiFocus>() = focus;
+        app.update();
+        assert!(
+            !enabled(&app),
+            "{focus:?}: the camera leaves the input to the inspector"
+        );
+        *app.world_mut().resource_mut::<UiFocus>() = UiFocus::default();
+        app.update();
+        assert!(enabled(&app));
+    }
+}
