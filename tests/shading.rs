@@ -276,3 +276,42 @@ fn leaving_out_unneeded_features_changes_no_pixel_and_traces_none_of_them() {
     );
     assert_eq!(out.rays.reflection, 0);
 }
+
+#[test]
+fn capping_light_samples_traces_one_shadow_ray_per_area_light_and_keeps_the_mean() {
+    // A white floor under a square area light with 16 samples: the preview's cap of one
+    // sample traces 1/16 of the shadow rays, and averaged over many pixels gives the same light.
+    let light = Light::Rect {
+        corner: Vec3::new(-0.5, H, -0.5),
+        edge_u: Vec3::new(1.0, 0.0, 0.0),
+        edge_v: Vec3::new(0.0, 0.0, 1.0),
+        color: Vec3::ONE,
+        intensity: I,
+        samples: 16,
+    };
+    let mut s = scene(vec![(floor(), white())], vec![light], Environment::None);
+    s.camera.position = Vec3::new(0.0, 1.0, 1.0);
+    s.camera.look_at = Vec3::ZERO;
+    let bvh = Bvh::build(&s.mesh.triangles, &BuildOptions::sah());
+    let settings = RenderSettings {
+        width: 32,
+        height: 32,
+        spp: 4,
+        ..RenderSettings::default()
+    };
+    let full_plan = RenderPlan::new(&s, &settings);
+    let capped = RenderPlan {
+        max_light_samples: Some(1),
+        ..full_plan
+    };
+    let full = render_with_plan(&s, &bvh, &EnvironmentMap::None, &settings, full_plan, &|_| {});
+    let one = render_with_plan(&s, &bvh, &EnvironmentMap::None, &settings, capped, &|_| {});
+    assert!(full.rays.shadow > 0);
+    assert_eq!(full.rays.shadow, 16 * one.rays.shadow);
+    let mean = |f: &tracery::film::Film| {
+        let m = f.mean();
+        m.iter().map(|p| p.x + p.y + p.z).sum::<f32>() / m.len() as f32
+    };
+    let (a, b) = (mean(&full.film), mean(&one.film));
+    assert!(a > 0.0 && (a - b).abs() <= 0.03 * a, "{a} vs {b}");
+}

@@ -9,6 +9,7 @@ pub mod environment;
 pub mod heatmap;
 pub mod plan;
 pub mod progressive;
+pub mod resample;
 pub mod shade;
 
 pub use environment::{CubeMap, EnvironmentMap, LinearImage, sky};

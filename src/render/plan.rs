@@ -26,6 +26,9 @@ pub struct RenderPlan {
     pub absorption: bool,
     /// Camera rays start on a thin lens (else a pinhole).
     pub thin_lens: bool,
+    /// At most this many shadow samples per area light and shading point (`None`: each
+    /// light's own count). The viewer's moving preview takes 1: noisier, several times cheaper.
+    pub max_light_samples: Option<u32>,
 }
 
 impl RenderPlan {
@@ -45,6 +48,7 @@ impl RenderPlan {
             transmission: bounces && transparent,
             absorption: absorbing,
             thin_lens: scene.camera.lens_radius > 0.0,
+            max_light_samples: None,
         }
     }
 
@@ -58,6 +62,7 @@ impl RenderPlan {
             transmission: true,
             absorption: true,
             thin_lens: true,
+            max_light_samples: None,
         }
     }
 }

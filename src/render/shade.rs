@@ -145,6 +145,10 @@ impl Tracer<'_> {
                     let normal = edge_u.cross(edge_v);
                     let area = normal.length();
                     let ln = normal / area;
+                    let samples = self
+                        .plan
+                        .max_light_samples
+                        .map_or(samples, |cap| samples.min(cap.max(1)));
                     let mut acc = Vec3::ZERO;
                     for _ in 0..samples {
                         let u = rng.next_2d();

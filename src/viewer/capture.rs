@@ -113,6 +113,7 @@ struct Script {
     frame: u32,
     orbit_center: Option<Vec3>,
     moving_ms: Vec<f64>,
+    moving_trace_ms: Vec<f64>,
     still_ms: Vec<f64>,
     still_start: Option<(f64, u64, u32)>,
     screenshot_requested: bool,
@@ -140,7 +141,12 @@ fn orbit(
     }
 }
 
-fn measure(mut script: ResMut<Script>, time: Res<Time<Real>>, acc: Res<Accumulation>) {
+fn measure(
+    mut script: ResMut<Script>,
+    time: Res<Time<Real>>,
+    acc: Res<Accumulation>,
+    stats: Res<TraceStats>,
+) {
     script.frame += 1;
     let frame = script.frame;
     let orbit = script.script.orbit_frames;
@@ -151,6 +157,7 @@ fn measure(mut script: ResMut<Script>, time: Res<Time<Real>>, acc: Res<Accumulat
     if frame > 3 && frame <= orbit {
         let ms = time.delta_secs_f64() * 1e3;
         script.moving_ms.push(ms);
+        script.moving_trace_ms.push(stats.trace_ms);
     }
     if frame > orbit + 1 {
         let ms = time.delta_secs_f64() * 1e3;
@@ -240,12 +247,14 @@ fn report(script: &Script, acc: &Accumulation, stats: &TraceStats, time: &Time<R
         v.sort_by(f64::total_cmp);
         let mean = v.iter().sum::<f64>() / v.len() as f64;
         let p95 = v[((v.len() as f64 * 0.95) as usize).min(v.len() - 1)];
+        let trace = script.moving_trace_ms.iter().sum::<f64>() / v.len() as f64;
         println!(
-            "moving: {} frames, frame time mean {:.1} ms, p95 {:.1} ms, max {:.1} ms; preview {}x{} of {}x{}",
+            "moving: {} frames, frame time mean {:.1} ms, p95 {:.1} ms, max {:.1} ms (tracing {:.1} ms of it); preview {}x{} of {}x{}",
             v.len(),
             mean,
             p95,
             v[v.len() - 1],
+            trace,
             stats.preview_size.x,
             stats.preview_size.y,
             stats.size.x,

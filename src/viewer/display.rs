@@ -1,99 +1,91 @@
-//! Showing the traced image: a 2D camera draws it as a sprite stretched over the window, and
-//! a 3D camera above it (no clear) carries the view used for the rays and draws the gizmos,
-//! so lines land on the traced pixels. Files dropped on the window are opened.
+//! Showing the traced image. The picture is resized on the CPU to the window's size (a
+//! preview bilinear, a reduced resolution scale with square pixels) and uploaded to a
+//! texture; a render system copies that texture into the 3D camera's main texture before
+//! the camera draws, so the gizmos land on the traced pixels and no shader pass touches the
+//! picture (under a software Vulkan driver each full-window pass costs milliseconds).
+//! Files dropped on the window are opened.
 
 use bevy::asset::RenderAssetUsages;
-use bevy::camera::ClearColorConfig;
-use bevy::core_pipeline::tonemapping::Tonemapping;
-use bevy::image::{ImageFilterMode, ImageSampler};
+use bevy::camera::{CameraMainTextureUsages, ClearColorConfig};
+use bevy::core_pipeline::Core3dSystems;
+use bevy::core_pipeline::schedule::Core3d;
+use bevy::core_pipeline::tonemapping::{DebandDither, Tonemapping};
 use bevy::prelude::*;
-use bevy::render::render_resource::{Extent3d, TextureDimension, TextureFormat};
-use bevy::window::{FileDragAndDrop, PrimaryWindow};
+use bevy::render::RenderApp;
+use bevy::render::extract_component::{ExtractComponent, ExtractComponentPlugin};
+use bevy::render::render_asset::RenderAssets;
+use bevy::render::render_resource::{Extent3d, TextureDimension, TextureFormat, TextureUsages};
+use bevy::render::renderer::{RenderContext, ViewQuery};
+use bevy::render::texture::GpuImage;
+use bevy::render::view::ViewTarget;
+use bevy::window::FileDragAndDrop;
+use bevy::window::PrimaryWindow;
 
 use super::scene::LoadScene;
 use super::trace::{TraceCamera, TraceSystems, TracedImage, ViewportSize};
+use crate::render::resample::{Filter, resize_rgba8};
 
-/// The cameras, the sprite and the texture it shows.
+/// The camera, the texture the traced image is shown through, and the copy into the frame.
 pub struct DisplayPlugin;
 
 impl Plugin for DisplayPlugin {
     fn build(&self, app: &mut App) {
-        app.add_systems(Startup, spawn_view)
+        app.add_plugins(ExtractComponentPlugin::<TracedBackground>::default())
+            .add_systems(Startup, spawn_view)
             .add_systems(First, track_window_size)
             .add_systems(PreUpdate, open_dropped_files)
             .add_systems(Update, show_traced_image.after(TraceSystems));
+        if let Some(render_app) = app.get_sub_app_mut(RenderApp) {
+            render_app.add_systems(Core3d, copy_background.before(Core3dSystems::Prepass));
+        }
     }
 }
 
-/// The texture the traced image is copied into.
-#[derive(Resource)]
-pub struct DisplayImage {
-    /// Its handle.
-    pub handle: Handle<Image>,
-    shown: u64,
+/// On a camera: the texture copied into its frame before it draws.
+#[derive(Component, Clone, ExtractComponent)]
+pub struct TracedBackground(pub Handle<Image>);
+
+/// Which traced picture the display texture holds.
+#[derive(Resource, Default)]
+struct Shown {
+    version: u64,
 }
 
-/// Marks the sprite that shows the traced image.
-#[derive(Component)]
-pub struct TracedSprite;
-
-/// A black texture; a preview is filtered (it is stretched), the full image shown pixel for
-/// pixel.
-fn blank(width: u32, height: u32, preview: bool) -> Image {
+/// A black window-sized picture, uploaded to the GPU only (the main world keeps no copy).
+fn blank(size: UVec2) -> Image {
     let mut image = Image::new_fill(
         Extent3d {
-            width,
-            height,
+            width: size.x,
+            height: size.y,
             depth_or_array_layers: 1,
         },
         TextureDimension::D2,
         &[0, 0, 0, 255],
         TextureFormat::Rgba8UnormSrgb,
-        RenderAssetUsages::MAIN_WORLD | RenderAssetUsages::RENDER_WORLD,
+        RenderAssetUsages::RENDER_WORLD,
     );
-    image.sampler = if preview {
-        ImageSampler::linear()
-    } else {
-        ImageSampler::nearest()
-    };
+    image.texture_descriptor.usage =
+        TextureUsages::TEXTURE_BINDING | TextureUsages::COPY_DST | TextureUsages::COPY_SRC;
     image
 }
 
-fn spawn_view(mut commands: Commands, mut images: ResMut<Assets<Image>>) {
-    let handle = images.add(blank(1, 1, true));
-    commands.insert_resource(DisplayImage {
-        handle: handle.clone(),
-        shown: 0,
-    });
-    // The traced image is tone mapped and sRGB-encoded already: no tonemapping on either
-    // camera, or Bevy's post-processing would shift its colours.
-    commands.spawn((
-        Camera2d,
-        Camera {
-            order: 0,
-            ..default()
-        },
-        Tonemapping::None,
-        // Multisampling would only smooth the gizmo lines, at four times the fill cost of
-        // every pass (all on the CPU under a software Vulkan driver).
-        Msaa::Off,
-    ));
-    commands.spawn((
-        Sprite {
-            image: handle,
-            custom_size: Some(Vec2::ONE),
-            ..default()
-        },
-        TracedSprite,
-    ));
+fn spawn_view(mut commands: Commands, mut images: ResMut<Assets<Image>>, size: Res<ViewportSize>) {
+    let handle = images.add(blank(size.0));
+    commands.init_resource::<Shown>();
+    // The traced image is tone mapped and sRGB-encoded already: no tonemapping, or Bevy's
+    // post-processing would shift its colours. The copy covers the whole frame: no clear.
     commands.spawn((
         Camera3d::default(),
         Camera {
-            order: 1,
             clear_color: ClearColorConfig::None,
             ..default()
         },
+        CameraMainTextureUsages::default().with(TextureUsages::COPY_DST),
+        TracedBackground(handle),
         Tonemapping::None,
+        DebandDither::Disabled,
+        // Multisampling would only smooth the gizmo lines, at four times the fill cost of
+        // every pass (all on the CPU under a software Vulkan driver).
         Msaa::Off,
         Projection::Perspective(PerspectiveProjection::default()),
         Transform::IDENTITY,
@@ -105,41 +97,82 @@ fn spawn_view(mut commands: Commands, mut images: ResMut<Assets<Image>>) {
 fn track_window_size(
     window: Query<&Window, With<PrimaryWindow>>,
     mut viewport: ResMut<ViewportSize>,
-    mut sprite: Query<&mut Sprite, With<TracedSprite>>,
 ) {
     let Ok(window) = window.single() else {
         return;
     };
     let physical = UVec2::new(window.physical_width(), window.physical_height()).max(UVec2::ONE);
     viewport.set_if_neq(ViewportSize(physical));
-    for mut s in &mut sprite {
-        let logical = Some(window.size());
-        if s.custom_size != logical {
-            s.custom_size = logical;
-        }
-    }
 }
 
+/// Resizes the newest traced picture to the window and hands it to the display texture.
 fn show_traced_image(
     mut traced: ResMut<TracedImage>,
-    mut display: ResMut<DisplayImage>,
+    mut shown: ResMut<Shown>,
+    viewport: Res<ViewportSize>,
+    camera: Query<&TracedBackground>,
     mut images: ResMut<Assets<Image>>,
 ) {
-    if traced.version == display.shown || traced.rgba.is_empty() {
+    if traced.version == shown.version || traced.rgba.is_empty() {
         return;
     }
-    let first = display.shown == 0;
-    display.shown = traced.version;
-    let Some(mut image) = images.get_mut(&display.handle) else {
+    let Ok(background) = camera.single() else {
         return;
     };
-    let size = image.size();
-    let filtered = matches!(image.sampler, ImageSampler::Descriptor(ref d) if d.mag_filter == ImageFilterMode::Linear);
-    if first || size.x != traced.width || size.y != traced.height || filtered != traced.preview {
-        *image = blank(traced.width, traced.height, traced.preview);
+    let Some(mut image) = images.get_mut(&background.0) else {
+        return;
+    };
+    shown.version = traced.version;
+    let size = viewport.0;
+    if image.size() != size {
+        *image = blank(size);
     }
-    // The pixels move to the texture: the trace system writes a new buffer for the next image.
-    image.data = Some(std::mem::take(&mut traced.rgba));
+    let filter = if traced.preview {
+        Filter::Bilinear
+    } else {
+        Filter::Nearest
+    };
+    // The pixels move on: the trace system writes a new buffer for the next picture.
+    let rgba = std::mem::take(&mut traced.rgba);
+    image.data = Some(resize_rgba8(
+        rgba,
+        traced.width,
+        traced.height,
+        size.x,
+        size.y,
+        filter,
+    ));
+}
+
+/// Copies the display texture into the camera's main texture (same size and format) before
+/// anything is drawn into it.
+fn copy_background(
+    view: ViewQuery<(&ViewTarget, &TracedBackground)>,
+    images: Res<RenderAssets<GpuImage>>,
+    mut ctx: RenderContext,
+) {
+    let (target, background) = view.into_inner();
+    let Some(image) = images.get(&background.0) else {
+        return;
+    };
+    let main = target.main_texture();
+    let (from, to) = (image.texture_descriptor.size, main.size());
+    if image.texture_descriptor.format.remove_srgb_suffix()
+        != target.main_texture_format().remove_srgb_suffix()
+    {
+        return;
+    }
+    // While a resize is under way the two differ for a frame: copy what overlaps.
+    let size = Extent3d {
+        width: from.width.min(to.width),
+        height: from.height.min(to.height),
+        depth_or_array_layers: 1,
+    };
+    ctx.command_encoder().copy_texture_to_texture(
+        image.texture.as_image_copy(),
+        main.as_image_copy(),
+        size,
+    );
 }
 
 fn open_dropped_files(

@@ -25,6 +25,7 @@ use std::path::PathBuf;
 use bevy::app::TaskPoolThreadAssignmentPolicy;
 use bevy::prelude::*;
 use bevy::window::{PresentMode, WindowResolution};
+use bevy::winit::WinitSettings;
 use bevy_egui::{EguiGlobalSettings, EguiPlugin, PrimaryEguiContext};
 
 use crate::bvh::BuildOptions;
@@ -158,6 +159,9 @@ pub fn run(options: ViewOptions) -> anyhow::Result<()> {
         ..default()
     })
     .insert_resource(ClearColor(Color::BLACK))
+    // Keep refining at full speed when the window is not focused too (Bevy's default caps an
+    // unfocused window at 60 updates a second and lets updates wait for redraw requests).
+    .insert_resource(WinitSettings::continuous())
     .add_plugins(CorePlugins {
         scene: options.scene.clone(),
         bvh: options.bvh,

@@ -153,7 +153,7 @@ impl Default for ViewSettings {
             level: 0,
             heat_max: 0.0,
             frame_budget_ms: 20.0,
-            moving_budget_ms: 12.0,
+            moving_budget_ms: 10.0,
         }
     }
 }
@@ -609,10 +609,19 @@ fn trace(
         // The full image is cleared when tracing it resumes, not on every frame of a move.
         acc.full_stale = true;
         let cam = camera_rays(transform, projection, psize, &settings);
+        // One shadow ray per area light while things change: the preview is redone next
+        // frame anyway, and the time goes into resolution instead.
+        let preview_tracer = Tracer {
+            plan: RenderPlan {
+                max_light_samples: Some(1),
+                ..tracer.plan
+            },
+            ..tracer
+        };
         let r = step_mode(
             &mut acc.preview,
             &settings,
-            &tracer,
+            &preview_tracer,
             tree,
             &cam,
             Duration::MAX,
