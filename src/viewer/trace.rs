@@ -153,7 +153,7 @@ impl Default for ViewSettings {
             level: 0,
             heat_max: 0.0,
             frame_budget_ms: 20.0,
-            moving_budget_ms: 10.0,
+            moving_budget_ms: 8.0,
         }
     }
 }
