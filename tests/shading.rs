@@ -304,7 +304,14 @@ fn capping_light_samples_traces_one_shadow_ray_per_area_light_and_keeps_the_mean
         max_light_samples: Some(1),
         ..full_plan
     };
-    let full = render_with_plan(&s, &bvh, &EnvironmentMap::None, &settings, full_plan, &|_| {});
+    let full = render_with_plan(
+        &s,
+        &bvh,
+        &EnvironmentMap::None,
+        &settings,
+        full_plan,
+        &|_| {},
+    );
     let one = render_with_plan(&s, &bvh, &EnvironmentMap::None, &settings, capped, &|_| {});
     assert!(full.rays.shadow > 0);
     assert_eq!(full.rays.shadow, 16 * one.rays.shadow);

@@ -3,7 +3,7 @@
 use std::path::PathBuf;
 
 use anyhow::{Result, bail};
-use bevy::math::{UVec2, Vec2};
+use bevy::math::{UVec2, Vec2, Vec3};
 use clap::{Args, ValueEnum};
 use tracery::viewer::capture::CaptureScript;
 use tracery::viewer::gizmos::LeafView;
@@ -46,6 +46,13 @@ pub struct ViewArgs {
     /// Shoot a debug ray through this window pixel at start: X,Y.
     #[arg(long, value_parser = parse_pixel)]
     ray: Option<Vec2>,
+    /// Once the scene is up (and the --ray debug ray shot), move the camera here: X,Y,Z.
+    /// Shows a debug ray from the side.
+    #[arg(long, value_parser = parse_point, requires = "look_at")]
+    look_from: Option<Vec3>,
+    /// With --look-from: the point the camera then looks at, X,Y,Z.
+    #[arg(long, value_parser = parse_point, requires = "look_from")]
+    look_at: Option<Vec3>,
     /// Hide the inspector and status line (Tab shows them).
     #[arg(long)]
     no_ui: bool,
@@ -97,6 +104,17 @@ fn parse_pixel(s: &str) -> Result<Vec2, String> {
     Ok(Vec2::new(p(x)?, p(y)?))
 }
 
+fn parse_point(s: &str) -> Result<Vec3, String> {
+    let v: Vec<f32> = s
+        .split(',')
+        .map(|v| v.trim().parse::<f32>().map_err(|e| format!("`{v}`: {e}")))
+        .collect::<Result<_, _>>()?;
+    match v[..] {
+        [x, y, z] if v.iter().all(|c| c.is_finite()) => Ok(Vec3::new(x, y, z)),
+        _ => Err(format!("`{s}`: expected three finite numbers X,Y,Z")),
+    }
+}
+
 pub fn run(a: ViewArgs) -> Result<()> {
     if a.width == 0 || a.height == 0 {
         bail!("window size {}x{} has no pixels", a.width, a.height);
@@ -109,6 +127,11 @@ pub fn run(a: ViewArgs) -> Result<()> {
     }
     if a.frames.is_none() && (a.screenshot.is_some() || a.orbit > 0 || a.wait_spp) {
         bail!("--screenshot, --orbit and --wait-spp need --frames");
+    }
+    if let (Some(from), Some(at)) = (a.look_from, a.look_at)
+        && from == at
+    {
+        bail!("--look-from and --look-at are the same point: no view direction");
     }
     if let Some(p) = &a.scene
         && !p.exists()
@@ -146,6 +169,7 @@ pub fn run(a: ViewArgs) -> Result<()> {
             ..LeafView::default()
         },
         ray: a.ray,
+        look: a.look_from.zip(a.look_at),
         script: a.frames.map(|frames| CaptureScript {
             frames,
             samples: a.wait_spp.then_some(a.spp),

@@ -28,13 +28,19 @@ impl Plugin for DebugRayPlugin {
         if self.interactive {
             app.init_gizmo_group::<DebugRayGizmos>().add_systems(
                 Update,
-                (click, keys, shoot, draw).chain().after(TraceSystems),
+                (click, keys, shoot.in_set(DebugRaySystems), draw)
+                    .chain()
+                    .after(TraceSystems),
             );
         } else {
-            app.add_systems(Update, shoot.after(TraceSystems));
+            app.add_systems(Update, shoot.in_set(DebugRaySystems).after(TraceSystems));
         }
     }
 }
+
+/// The system that shoots debug rays, for ordering.
+#[derive(SystemSet, Debug, Clone, PartialEq, Eq, Hash)]
+pub struct DebugRaySystems;
 
 /// The debug-ray drawing (key R).
 #[derive(Default, Reflect, GizmoConfigGroup)]

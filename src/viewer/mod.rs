@@ -59,6 +59,8 @@ pub struct ViewOptions {
     pub leaves: gizmos::LeafView,
     /// Debug ray to shoot at start (window pixel).
     pub ray: Option<Vec2>,
+    /// Camera pose (eye, target) to take once the scene is up and the start ray is shot.
+    pub look: Option<(Vec3, Vec3)>,
     /// Scripted run (`--frames`).
     pub script: Option<capture::CaptureScript>,
 }
@@ -184,8 +186,10 @@ pub fn run(options: ViewOptions) -> anyhow::Result<()> {
     .insert_resource(StartState {
         gizmos: options.gizmos,
         ray: options.ray,
+        look: options.look,
     })
-    .add_systems(PostStartup, (egui_on_gizmo_camera, start_state));
+    .add_systems(PostStartup, (egui_on_gizmo_camera, start_state))
+    .add_systems(Update, start_pose.after(debug_ray::DebugRaySystems));
     match app.run() {
         AppExit::Success => Ok(()),
         AppExit::Error(code) => anyhow::bail!("the viewer exited with code {code}"),
@@ -196,6 +200,7 @@ pub fn run(options: ViewOptions) -> anyhow::Result<()> {
 struct StartState {
     gizmos: StartGizmos,
     ray: Option<Vec2>,
+    look: Option<(Vec3, Vec3)>,
 }
 
 /// The inspector draws on the top camera (the one with the gizmos), over everything.
@@ -217,4 +222,40 @@ fn start_state(
     if let Some(p) = start.ray {
         shoot.write(debug_ray::ShootRay(p));
     }
+}
+
+/// Takes the `--look-from/--look-at` pose once the scene is loaded with its BVH and the start
+/// ray (if any) has been shot through the scene's own camera.
+fn start_pose(
+    mut commands: Commands,
+    mut start: ResMut<StartState>,
+    current: Res<scene::CurrentScene>,
+    loading: Res<scene::SceneLoading>,
+    bvh: Res<bvh::SceneBvh>,
+    debug: Res<debug_ray::DebugRay>,
+    mut cameras: Query<(Entity, &mut Transform), With<camera::FlyCamera>>,
+) {
+    let Some((eye, target)) = start.look else {
+        return;
+    };
+    let ready = loading.current().is_none()
+        && bvh.for_scene(current.generation).is_some()
+        && (start.ray.is_none() || debug.pixel.is_some());
+    if !ready {
+        return;
+    }
+    let forward = (target - eye).normalize_or_zero();
+    let up = if forward.cross(Vec3::Y).length_squared() > 1e-6 {
+        Vec3::Y
+    } else {
+        Vec3::Z
+    };
+    for (entity, mut t) in &mut cameras {
+        *t = Transform::from_translation(eye).looking_at(target, up);
+        // The free camera takes its yaw and pitch from the new transform.
+        commands
+            .entity(entity)
+            .insert(bevy::camera_controller::free_camera::FreeCameraState::default());
+    }
+    start.look = None;
 }
