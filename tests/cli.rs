@@ -145,3 +145,31 @@ fn bad_input_fails_with_a_message_naming_the_file() {
         }
     }
 }
+
+#[cfg(feature = "viewer")]
+#[test]
+fn bad_viewer_camera_poses_fail_before_a_window_opens() {
+    for (args, says) in [
+        (
+            vec!["view", "--look-from=1,2", "--look-at=0,0,0"],
+            "expected three",
+        ),
+        (
+            vec!["view", "--look-from=1,1,1", "--look-at=1,1,1"],
+            "same point",
+        ),
+        (
+            vec!["view", "--look-from=nan,0,0", "--look-at=0,0,0"],
+            "finite",
+        ),
+        (vec!["view", "--look-from=1,1,1"], "--look-at"),
+    ] {
+        let o = tracery(&args);
+        assert!(!o.status.success(), "{args:?} should fail");
+        let e = text(&o.stderr);
+        assert!(
+            e.starts_with("error: ") && e.contains(says),
+            "{args:?}: {e}"
+        );
+    }
+}
