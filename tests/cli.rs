@@ -173,3 +173,37 @@ fn bad_viewer_camera_poses_fail_before_a_window_opens() {
         );
     }
 }
+
+#[test]
+fn check_mesh_exit_status_tells_clean_from_not_from_unreadable() {
+    let dir = tempfile::tempdir().unwrap();
+    // A closed tetrahedron: clean.
+    let tet = "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 3 2\nf 1 2 4\nf 2 3 4\nf 3 1 4\n";
+    let clean = dir.path().join("tet.obj");
+    std::fs::write(&clean, tet).unwrap();
+    let o = tracery(&["check-mesh", clean.to_str().unwrap()]);
+    let out = text(&o.stdout);
+    assert_eq!(o.status.code(), Some(0), "{out}");
+    assert!(
+        out.contains("4 triangles") && out.contains("clean"),
+        "{out}"
+    );
+    // The same with a repeated face, a collinear one and a NaN vertex: not clean, each named.
+    let dirty = dir.path().join("dirty.obj");
+    std::fs::write(
+        &dirty,
+        format!("{tet}v 2 0 0\nv nan 0 0\nf 3 2 1\nf 1 2 5\nf 1 6 2\n"),
+    )
+    .unwrap();
+    let o = tracery(&["check-mesh", "--json", dirty.to_str().unwrap()]);
+    assert_eq!(o.status.code(), Some(1));
+    let r: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(r["triangles"], 7);
+    assert_eq!(r["duplicates"]["examples"], serde_json::json!([4]));
+    assert_eq!(r["degenerate"]["examples"], serde_json::json!([5]));
+    assert_eq!(r["non_finite"]["examples"], serde_json::json!([6]));
+    // Unreadable: 2, with the file named.
+    let o = tracery(&["check-mesh", "/nonexistent/mesh.ply"]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(text(&o.stderr).contains("mesh.ply"));
+}

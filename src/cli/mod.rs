@@ -1,6 +1,7 @@
 //! Command-line parsing and the commands.
 
 mod bench;
+mod check_mesh;
 mod convergence;
 mod render;
 mod report;
@@ -9,6 +10,7 @@ mod stats;
 mod view;
 
 use std::path::{Path, PathBuf};
+use std::process::ExitCode;
 
 use anyhow::{Context, Result};
 use clap::{Args, Parser, Subcommand};
@@ -36,6 +38,9 @@ enum Command {
     Stats(stats::StatsArgs),
     /// Benchmark the builders and traversal on the canonical camera rays, against obvhs.
     Bench(bench::BenchArgs),
+    /// Check a mesh: bounds, counts, non-finite, degenerate, needle and duplicate triangles,
+    /// open and non-manifold edges. Exit status 0 clean, 1 not clean, 2 unreadable.
+    CheckMesh(check_mesh::CheckMeshArgs),
     /// Print the README's measurement tables (Markdown).
     Report(report::ReportArgs),
     /// Measure image error against render time per sampler; write a CSV and a log-log plot.
@@ -68,8 +73,9 @@ impl BvhArgs {
     }
 }
 
-/// Runs the parsed command.
-pub fn run(cli: Cli) -> Result<()> {
+/// Runs the parsed command; the exit status is success unless the command says otherwise.
+pub fn run(cli: Cli) -> Result<ExitCode> {
+    let ok = |r: Result<()>| r.map(|()| ExitCode::SUCCESS);
     match cli.command {
         #[cfg(feature = "viewer")]
         None => run(Cli::parse_from(["tracery", "view"])),
@@ -78,12 +84,13 @@ pub fn run(cli: Cli) -> Result<()> {
             "this build has no viewer (built without the `viewer` feature); try `tracery render`"
         ),
         #[cfg(feature = "viewer")]
-        Some(Command::View(a)) => view::run(*a),
-        Some(Command::Render(a)) => render::run(a),
-        Some(Command::Stats(a)) => stats::run(a),
-        Some(Command::Bench(a)) => bench::run(a),
-        Some(Command::Report(a)) => report::run(a),
-        Some(Command::Convergence(a)) => convergence::run(a),
+        Some(Command::View(a)) => ok(view::run(*a)),
+        Some(Command::Render(a)) => ok(render::run(a)),
+        Some(Command::Stats(a)) => ok(stats::run(a)),
+        Some(Command::CheckMesh(a)) => Ok(check_mesh::run(a)),
+        Some(Command::Bench(a)) => ok(bench::run(a)),
+        Some(Command::Report(a)) => ok(report::run(a)),
+        Some(Command::Convergence(a)) => ok(convergence::run(a)),
     }
 }
 

@@ -4,6 +4,7 @@
 //! ([`ply`]); or made in code ([`shapes`], [`Scene::cornell_box`]). Every loader reports errors
 //! as `file:line: message` where a line is known.
 
+pub mod check;
 pub mod file;
 pub mod obj;
 pub mod ply;
