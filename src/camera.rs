@@ -46,11 +46,7 @@ impl CameraRays {
             .unwrap_or(Vec3::X);
         let up = right.cross(forward);
         let vfov = camera.vfov_deg.clamp(1e-3, 179.0).to_radians();
-        let focus = if camera.focus_distance.is_finite() && camera.focus_distance > 0.0 {
-            camera.focus_distance
-        } else {
-            1.0
-        };
+        let focus = valid_focus(camera.focus_distance);
         Self {
             eye: camera.position,
             forward,
@@ -60,7 +56,7 @@ impl CameraRays {
             aspect: width.max(1) as f32 / height.max(1) as f32,
             width,
             height,
-            lens_radius: camera.lens_radius.max(0.0),
+            lens_radius: valid_lens(camera.lens_radius),
             focus_distance: focus,
         }
     }
@@ -98,16 +94,8 @@ impl CameraRays {
             aspect: width.max(1) as f32 / height.max(1) as f32,
             width,
             height,
-            lens_radius: if lens_radius.is_finite() {
-                lens_radius.max(0.0)
-            } else {
-                0.0
-            },
-            focus_distance: if focus_distance.is_finite() && focus_distance > 0.0 {
-                focus_distance
-            } else {
-                1.0
-            },
+            lens_radius: valid_lens(lens_radius),
+            focus_distance: valid_focus(focus_distance),
         }
     }
 
@@ -134,10 +122,13 @@ impl CameraRays {
             return self.pinhole(px, py);
         }
         let d = self.direction(px, py);
-        // The point in focus lies on the plane at focus_distance along `forward`.
-        let focus = self.eye + d * (self.focus_distance / d.dot(self.forward));
-        let origin = self.eye + self.lens_radius * (lens.x * self.right + lens.y * self.up);
-        Ray::new(origin, (focus - origin).normalize())
+        let offset = self.lens_radius * (lens.x * self.right + lens.y * self.up);
+        // Towards the point in focus, eye + d f / (d . forward), written divided by the focus
+        // distance f: a focus at infinity gives the pixel's own direction from every lens
+        // point (no inf - inf), and a huge lens stays finite.
+        let dir = d / d.dot(self.forward) - offset / self.focus_distance;
+        let dir = dir / dir.abs().max_element();
+        Ray::new(self.eye + offset, dir.normalize())
     }
 
     /// The rays through every pixel centre, row by row from the top (the benchmark rays).
@@ -150,4 +141,20 @@ impl CameraRays {
         }
         rays
     }
+}
+
+/// A lens radius the arithmetic can take: negative or NaN is a pinhole, and larger radii
+/// (even infinite) are held to 1e30 so lens points stay finite.
+fn valid_lens(r: f32) -> f32 {
+    if r.is_nan() || r <= 0.0 {
+        0.0
+    } else {
+        r.min(1e30)
+    }
+}
+
+/// A focus distance: positive, possibly infinite (everything far away in focus); zero,
+/// negative or NaN fall back to 1.
+fn valid_focus(f: f32) -> f32 {
+    if f > 0.0 { f } else { 1.0 }
 }

@@ -4,7 +4,9 @@ mod common;
 
 use glam::{Vec3, Vec3A};
 use tracery::bvh::{BruteForce, BuildOptions, Bvh};
-use tracery::geometry::{Aabb, PreparedRay, Ray, intersect_triangle_t, offset_ray_origin};
+use tracery::geometry::{
+    Aabb, PreparedRay, Ray, interpolation_error, intersect_triangle_t, offset_ray_origin,
+};
 use tracery::scene::shapes;
 
 fn unit_box() -> Aabb {
@@ -177,7 +179,7 @@ fn ray_through_a_fan_vertex_hits_exactly_one_triangle() {
 fn rays_from_inside_a_closed_icosphere_never_escape() {
     let sphere = shapes::icosphere(3);
     let bvh = Bvh::build(&sphere, &BuildOptions::sah());
-    let rays = common::random_rays(&sphere, 100_000, 99);
+    let rays = common::random_rays(&sphere, 1_000_000, 99);
     let mut rng = tracery::sampling::SplitMix64::new(1);
     for r in &rays {
         let o = Vec3::new(
@@ -229,19 +231,29 @@ fn origin_on_the_triangle_gives_no_hit_at_t_zero() {
 
 #[test]
 fn offset_origin_leaves_the_surface_at_every_magnitude() {
-    for scale in [1e-3f32, 1.0, 1e3, 1e5, 1e6] {
+    for scale in [1e-3f32, 1.0, 1e3, 1e5, 1e6, 1e7] {
         let c = Vec3::new(0.37, 0.61, 0.2) * scale;
         let quad = tri([-1.0, -1.0, 0.0], [1.0, -1.0, 0.0], [0.0, 1.0, 0.0]).map(|v| c + v * scale);
         let bf = BruteForce::new(&[quad]);
         let n = Vec3::Z;
-        for p in [c, c + Vec3::new(0.1, -0.2, 0.0) * scale] {
-            let o = offset_ray_origin(p, n);
+        // Points as the renderer makes them: interpolated from the vertices.
+        for b in [[0.25f32, 0.25, 0.5], [0.25, 0.35, 0.4], [0.9, 0.05, 0.05]] {
+            let p = quad[0] * b[0] + quad[1] * b[1] + quad[2] * b[2];
+            let o = offset_ray_origin(p, interpolation_error(&quad, b), n);
             assert!(o.z > p.z, "scale {scale}: not moved off the plane");
-            // Leaving the surface upward must not hit the surface itself.
-            let hits = bf.all_hits(&Ray::new(o, Vec3::new(0.3, 0.2, 1.0)), f32::INFINITY);
-            assert!(hits.is_empty(), "scale {scale}: self-hit {hits:?}");
-            // And the offset stays small relative to the magnitude.
-            assert!((o - p).length() <= 1e-3 * scale.max(1.0));
+            // Leaving the surface upward, steeply or grazing, must not hit the surface itself.
+            for d in [Vec3::new(0.3, 0.2, 1.0), Vec3::new(1.0, 0.5, 1e-3)] {
+                let hits = bf.all_hits(&Ray::new(o, d), f32::INFINITY);
+                assert!(hits.is_empty(), "scale {scale}, b {b:?}: self-hit {hits:?}");
+            }
+            // And the step is a few floats at the point's magnitude, not more.
+            let ulp =
+                (p.abs().max_element().next_up() - p.abs().max_element()).max(f32::MIN_POSITIVE);
+            assert!(
+                (o - p).length() <= 32.0 * ulp,
+                "scale {scale}: moved {}",
+                (o - p).length()
+            );
         }
     }
 }

@@ -6,15 +6,15 @@
 //!   so the BVH never culls a box that holds a triangle the ray hits.
 //! - The ray/triangle test ([`intersect_triangle`]) is watertight (Woop, Benthin and Wald 2013):
 //!   a ray through a shared edge or vertex hits exactly one of the triangles that meet there.
-//! - Secondary rays leave a surface from [`offset_ray_origin`] (Waechter and Binder 2019), an
-//!   offset that scales with the magnitude of the coordinates instead of a fixed epsilon.
+//! - Secondary rays leave a surface from [`offset_ray_origin`]: just past the hit point's
+//!   rounding-error bound ([`interpolation_error`], pbrt 3.9), never a fixed epsilon.
 
 mod aabb;
 mod ray;
 mod triangle;
 
 pub use aabb::Aabb;
-pub use ray::{PreparedRay, Ray, offset_ray_origin};
+pub use ray::{PreparedRay, Ray, interpolation_error, offset_ray_origin};
 pub use triangle::{TriangleHit, intersect_triangle, intersect_triangle_t, is_degenerate};
 
 /// `gamma(n)` of Higham / pbrt: a bound on the relative error of `n` chained f32 roundings.

@@ -157,17 +157,16 @@ impl Tracer<'_> {
         });
         let m = s.material;
         if m.diffuse != Vec3::ZERO || m.specular != Vec3::ZERO {
-            let origin = offset_ray_origin(s.p, s.ng);
+            let origin = offset_ray_origin(s.p, s.p_err, s.ng);
             for (li, light) in self.scene.lights.iter().enumerate() {
                 let (to_point, t_max) = match *light {
                     Light::Point { position, .. } => (position, 1.0),
                     Light::Rect { .. } => (light.center(), 1.0 - 1e-4),
                 };
-                let to = to_point - origin;
-                let transmittance = if s.ng.dot(to) <= 0.0 {
+                let transmittance = if s.ng.dot(to_point - s.p) <= 0.0 {
                     Vec3::ZERO // the light is behind the surface
                 } else {
-                    self.shadow(origin, to, t_max, &mut RayCounts::default())
+                    self.shadow(origin, to_point - origin, t_max, &mut RayCounts::default())
                 };
                 path.shadows.push(ShadowRay {
                     segment: index,
@@ -184,7 +183,7 @@ impl Tracer<'_> {
         if self.plan.reflections && m.is_mirror() {
             let r = reflect(ray.dir, s.n);
             if r.dot(s.ng) > 0.0 {
-                let bounce = Ray::new(offset_ray_origin(s.p, s.ng), r.normalize());
+                let bounce = Ray::new(offset_ray_origin(s.p, s.p_err, s.ng), r.normalize());
                 self.debug_segment(
                     &bounce,
                     SegmentKind::Reflection,
@@ -201,7 +200,7 @@ impl Tracer<'_> {
         };
         if alpha < 1.0 {
             let (dir, side) = transmit(ray.dir, &s);
-            let through = Ray::new(offset_ray_origin(s.p, side), dir.normalize());
+            let through = Ray::new(offset_ray_origin(s.p, s.p_err, side), dir.normalize());
             self.debug_segment(
                 &through,
                 SegmentKind::Transmission,

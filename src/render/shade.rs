@@ -7,9 +7,13 @@ use glam::Vec3;
 use super::environment::EnvironmentMap;
 use super::{RayCounts, RenderPlan};
 use crate::bvh::Bvh;
-use crate::geometry::{Ray, offset_ray_origin};
+use crate::geometry::{Ray, interpolation_error, offset_ray_origin};
 use crate::sampling::PathSampler;
 use crate::scene::{Light, Material, Scene, face_normal};
+
+/// What a ray that cannot be traced (zero, NaN or infinite direction or origin) returns:
+/// black, never NaN.
+pub const FALLBACK: Vec3 = Vec3::ZERO;
 
 /// Traces rays through a scene and returns the radiance they carry back.
 pub struct Tracer<'a> {
@@ -28,6 +32,8 @@ pub struct Tracer<'a> {
 /// Where a ray met a surface.
 pub(super) struct Surface<'a> {
     pub(super) p: Vec3,
+    /// Bound on the rounding error of `p`, per coordinate.
+    pub(super) p_err: Vec3,
     /// Geometric normal facing the incoming ray.
     pub(super) ng: Vec3,
     /// Shading normal on the same side as `ng`.
@@ -40,6 +46,10 @@ pub(super) struct Surface<'a> {
 impl Tracer<'_> {
     /// Radiance arriving at the ray's origin from along the ray.
     pub fn radiance(&self, ray: &Ray, rng: &mut PathSampler, counts: &mut RayCounts) -> Vec3 {
+        if !ray.is_valid() {
+            // A zero, NaN or infinite direction (or origin) has nowhere to go.
+            return FALLBACK;
+        }
         self.trace(ray, 0, rng, counts)
     }
 
@@ -55,7 +65,9 @@ impl Tracer<'_> {
         let scene = self.scene;
         let tri = &scene.mesh.triangles[prim as usize];
         let ns = &scene.mesh.normals[prim as usize];
-        let p = tri[0] * (1.0 - u - v) + tri[1] * u + tri[2] * v;
+        let b = [1.0 - u - v, u, v];
+        let p = tri[0] * b[0] + tri[1] * b[1] + tri[2] * b[2];
+        let p_err = interpolation_error(tri, b);
         let outward = face_normal(tri);
         let entering = outward.dot(ray.dir) < 0.0;
         let ng = if entering { outward } else { -outward };
@@ -67,6 +79,7 @@ impl Tracer<'_> {
         }
         Surface {
             p,
+            p_err,
             ng,
             n,
             entering,
@@ -92,14 +105,14 @@ impl Tracer<'_> {
             let r = reflect(ray.dir, s.n);
             if r.dot(s.ng) > 0.0 {
                 counts.reflection += 1;
-                let bounce = Ray::new(offset_ray_origin(s.p, s.ng), r);
+                let bounce = Ray::new(offset_ray_origin(s.p, s.p_err, s.ng), r);
                 l += alpha * m.mirror.min(Vec3::ONE) * self.trace(&bounce, depth + 1, rng, counts);
             }
         }
         if alpha < 1.0 && depth < self.max_depth {
             counts.transmission += 1;
             let (dir, side) = transmit(ray.dir, &s);
-            let through = Ray::new(offset_ray_origin(s.p, side), dir);
+            let through = Ray::new(offset_ray_origin(s.p, s.p_err, side), dir);
             let tint = (1.0 - alpha) * m.diffuse.min(Vec3::ONE);
             l += tint * self.trace(&through, depth + 1, rng, counts);
         }
@@ -116,7 +129,7 @@ impl Tracer<'_> {
         if m.diffuse == Vec3::ZERO && m.specular == Vec3::ZERO {
             return Vec3::ZERO;
         }
-        let origin = offset_ray_origin(s.p, s.ng);
+        let origin = offset_ray_origin(s.p, s.p_err, s.ng);
         let mut sum = Vec3::ZERO;
         for light in &self.scene.lights {
             sum += match *light {
@@ -125,13 +138,15 @@ impl Tracer<'_> {
                     color,
                     intensity,
                 } => {
-                    let to = position - origin;
+                    // The light's direction and distance from the surface point itself; only
+                    // the shadow ray starts from the offset origin.
+                    let to = position - s.p;
                     let d2 = to.length_squared();
                     let wi = to / d2.sqrt();
                     if s.n.dot(wi) <= 0.0 || s.ng.dot(to) <= 0.0 {
                         continue;
                     }
-                    let pass = self.shadow(origin, to, 1.0, counts);
+                    let pass = self.shadow(origin, position - origin, 1.0, counts);
                     brdf(m, s.n, wi, wo) * s.n.dot(wi) * color * intensity * pass / d2
                 }
                 Light::Rect {
@@ -153,7 +168,7 @@ impl Tracer<'_> {
                     for _ in 0..samples {
                         let u = rng.next_2d();
                         let q = corner + u.x * edge_u + u.y * edge_v;
-                        let to = q - origin;
+                        let to = q - s.p;
                         let d2 = to.length_squared();
                         let wi = to / d2.sqrt();
                         let cos_l = -ln.dot(wi);
@@ -161,7 +176,7 @@ impl Tracer<'_> {
                             continue;
                         }
                         // Stop just short of the light so its own quad does not shadow it.
-                        let pass = self.shadow(origin, to, 1.0 - 1e-4, counts);
+                        let pass = self.shadow(origin, q - origin, 1.0 - 1e-4, counts);
                         acc += brdf(m, s.n, wi, wo) * s.n.dot(wi) * cos_l * area / d2 * pass;
                     }
                     acc * color * intensity / samples as f32
