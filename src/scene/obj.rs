@@ -25,6 +25,23 @@ pub struct ObjData {
     pub warnings: Vec<String>,
 }
 
+/// Checks what tobj 4.0 does not: a colour (`Ka`, `Kd`, `Ks`, `Ke`) with fewer than three
+/// values makes its MTL parser panic, so such a line is reported here first, with its number.
+fn check_mtl(text: &[u8]) -> Result<(), (usize, String)> {
+    for (i, line) in String::from_utf8_lossy(text).lines().enumerate() {
+        let mut words = line.split_whitespace();
+        if let Some(key @ ("Ka" | "Kd" | "Ks" | "Ke")) = words.next()
+            && words.count() < 3
+        {
+            return Err((
+                i + 1,
+                format!("{key} needs three numbers: `{}`", line.trim()),
+            ));
+        }
+    }
+    Ok(())
+}
+
 /// Loads an OBJ file; MTL files are looked up next to it.
 pub fn load(path: &Path) -> Result<ObjData> {
     let bytes = read_file(path)?;
@@ -50,6 +67,10 @@ pub fn load_from(
             *mtl_error.borrow_mut() = Some(format!("{e:#}"));
             tobj::LoadError::OpenFileFailed
         })?;
+        if let Err((line, why)) = check_mtl(&text) {
+            *mtl_error.borrow_mut() = Some(format!("{}:{line}: {why}", mtl_path.display()));
+            return Err(tobj::LoadError::MaterialParseError);
+        }
         tobj::load_mtl_buf(&mut BufReader::new(&text[..])).inspect_err(|e| {
             *mtl_error.borrow_mut() = Some(format!("{}: {e}", mtl_path.display()));
         })
