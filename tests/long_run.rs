@@ -1,0 +1,172 @@
+//! The long run (issue 5): 10,000 frames of the viewer's windowless app (`MinimalPlugins` and
+//! the core plugins) with a random setting change every few frames: camera moves, resolution
+//! scale, samples per frame, bounce depth, shadows, sampler, depth of field, environment,
+//! render mode and level, BVH split, bins and leaf size, and scene switches including a bad
+//! file. Nothing may panic, every image must be finite, and memory must stay flat. The only
+//! test in its binary, so the resident memory it reads is its own.
+#![cfg(feature = "viewer")]
+
+use std::path::PathBuf;
+
+use bevy::prelude::*;
+use tracery::bvh::{BuildOptions, SplitMethod};
+use tracery::sampling::{SamplerKind, SplitMix64};
+use tracery::scene::Scene;
+use tracery::viewer::CorePlugins;
+use tracery::viewer::bvh::BvhSettings;
+use tracery::viewer::camera::pose_of;
+use tracery::viewer::scene::LoadScene;
+use tracery::viewer::trace::{
+    Accumulation, EnvChoice, RenderMode, TraceCamera, TracedImage, ViewSettings,
+};
+
+const FRAMES: u32 = 10_000;
+
+/// Resident memory of this process in KiB (Linux), if it can be read.
+fn rss_kib() -> Option<u64> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    let line = status.lines().find(|l| l.starts_with("VmRSS:"))?;
+    line.split_whitespace().nth(1)?.parse().ok()
+}
+
+fn scene_path(name: &str) -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("assets/scenes")
+        .join(name)
+}
+
+#[test]
+fn ten_thousand_frames_of_random_changes_run_flat() {
+    let mut app = App::new();
+    app.add_plugins(MinimalPlugins).add_plugins(CorePlugins {
+        scene: None,
+        bvh: BuildOptions::sah(),
+        settings: ViewSettings {
+            max_samples: 16,
+            // Short frames: the run is about state changes, not pictures.
+            frame_budget_ms: 2.0,
+            moving_budget_ms: 1.0,
+            ..ViewSettings::default()
+        },
+        viewport: UVec2::new(48, 32),
+        interactive: false,
+    });
+    let (t, p) = pose_of(&Scene::cornell_box().camera);
+    app.world_mut().spawn((t, p, TraceCamera));
+
+    let bad = tempfile::NamedTempFile::with_suffix(".obj").unwrap();
+    std::fs::write(bad.path(), "v 0 0 0\nv 1 0\nf 1 2 3\n").unwrap();
+    let scenes = [
+        scene_path("cornell_mirror_glass.toml"),
+        scene_path("transparent_shadow.toml"),
+        scene_path("cornell_box.toml"),
+        bad.path().to_path_buf(),
+    ];
+
+    let mut rng = SplitMix64::new(2026);
+    let mut pick = |n: u64| rng.next_u64() % n;
+    let mut baseline = None;
+    let mut peak = 0;
+    let mut images = 0u64;
+    let mut last_version = 0;
+    for frame in 0..FRAMES {
+        if frame % 7 == 0 {
+            let w = app.world_mut();
+            match pick(12) {
+                0 | 1 | 2 => {
+                    let mut q = w.query_filtered::<&mut Transform, With<TraceCamera>>();
+                    for mut t in q.iter_mut(w) {
+                        let step = Vec3::new(
+                            pick(21) as f32 - 10.0,
+                            pick(21) as f32 - 10.0,
+                            pick(21) as f32 - 10.0,
+                        ) * 0.05;
+                        t.translation += step;
+                        t.rotate_y((pick(9) as f32 - 4.0) * 0.05);
+                    }
+                }
+                3 => {
+                    let mut s = w.resource_mut::<ViewSettings>();
+                    s.scale = [0.25, 0.5, 1.0][pick(3) as usize];
+                    s.samples_per_frame = 1 + pick(4) as u32;
+                }
+                4 => {
+                    let mut s = w.resource_mut::<ViewSettings>();
+                    s.max_depth = pick(7) as u32;
+                    s.shadows = pick(4) != 0;
+                    s.transparent_shadows = pick(2) == 0;
+                    s.sampler = [SamplerKind::Sobol, SamplerKind::Random][pick(2) as usize];
+                }
+                5 => {
+                    let mut s = w.resource_mut::<ViewSettings>();
+                    s.depth_of_field = pick(2) == 0;
+                    s.lens_radius = [0.0, 0.05, 0.5, 1e3][pick(4) as usize];
+                    s.focus_distance = [0.5, 5.0, 1e6, f32::INFINITY][pick(4) as usize];
+                }
+                6 => {
+                    let mut s = w.resource_mut::<ViewSettings>();
+                    s.environment =
+                        [EnvChoice::FromScene, EnvChoice::None, EnvChoice::Sky][pick(3) as usize]
+                            .clone();
+                    s.env_intensity = [0.0, 0.5, 4.0][pick(3) as usize];
+                    s.env_rotation_deg = pick(360) as f32;
+                }
+                7 => {
+                    let mut s = w.resource_mut::<ViewSettings>();
+                    s.mode = [
+                        RenderMode::Shaded,
+                        RenderMode::TraversalCost,
+                        RenderMode::Overlap,
+                    ][pick(3) as usize];
+                    s.level = pick(12) as u32;
+                    s.exposure = [0.25, 1.0, 8.0][pick(3) as usize];
+                }
+                8 | 9 => {
+                    let mut b = w.resource_mut::<BvhSettings>();
+                    b.0.split = [SplitMethod::Sah, SplitMethod::Median][pick(2) as usize];
+                    b.0.bins = 2 + pick(63) as u32;
+                    b.0.max_leaf_size = 1 + pick(16) as u32;
+                }
+                10 => {
+                    let p = scenes[pick(scenes.len() as u64) as usize].clone();
+                    w.write_message(LoadScene(p));
+                }
+                _ => {} // a few frames of plain accumulation
+            }
+        }
+        app.update();
+
+        let image = app.world().resource::<TracedImage>();
+        if image.version != last_version {
+            last_version = image.version;
+            images += 1;
+            assert!(
+                image.rgba.is_empty()
+                    || image.rgba.len() == (image.width * image.height * 4) as usize,
+                "frame {frame}: image buffer does not match its size"
+            );
+        }
+        let acc = app.world().resource::<Accumulation>();
+        if let Some(full) = acc.full() {
+            assert!(full.rejected == 0 || full.passes() > 0, "frame {frame}");
+        }
+        if frame == 1_000 {
+            baseline = rss_kib();
+        }
+        if frame > 1_000
+            && let Some(r) = rss_kib()
+        {
+            peak = peak.max(r);
+        }
+    }
+    assert!(images > 500, "only {images} images over {FRAMES} frames");
+    if let Some(base) = baseline {
+        let growth = peak.saturating_sub(base);
+        println!("resident memory: {base} KiB at frame 1000, peak {peak} KiB after it");
+        // Flat: the films, BVHs and scenes of one state are freed when the next replaces them.
+        assert!(
+            growth < 64 * 1024,
+            "memory grew by {growth} KiB between frame 1000 and {FRAMES}"
+        );
+    }
+}
