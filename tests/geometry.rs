@@ -153,17 +153,8 @@ fn ray_through_a_shared_edge_hits_exactly_one_triangle() {
 
 #[test]
 fn ray_through_a_fan_vertex_hits_exactly_one_triangle() {
-    let n = 7;
     let c = Vec3::new(0.25, 0.5, 0.0);
-    // The ring points are computed once and shared, so neighbours meet exactly.
-    let ring: Vec<Vec3> = (0..n)
-        .map(|i| {
-            let a = i as f32 / n as f32 * std::f32::consts::TAU;
-            c + Vec3::new(a.cos(), a.sin(), 0.0)
-        })
-        .collect();
-    let fan: Vec<[Vec3; 3]> = (0..n).map(|i| [c, ring[i], ring[(i + 1) % n]]).collect();
-    let bf = BruteForce::new(&fan);
+    let bf = BruteForce::new(&common::fan(7, c));
     for d in [
         Vec3::Z,
         -Vec3::Z,

@@ -105,9 +105,9 @@ fn ten_thousand_frames_of_random_changes_run_flat() {
                 }
                 6 => {
                     let mut s = w.resource_mut::<ViewSettings>();
-                    s.environment =
-                        [EnvChoice::FromScene, EnvChoice::None, EnvChoice::Sky][pick(3) as usize]
-                            .clone();
+                    s.environment = [EnvChoice::FromScene, EnvChoice::None, EnvChoice::Sky]
+                        [pick(3) as usize]
+                        .clone();
                     s.env_intensity = [0.0, 0.5, 4.0][pick(3) as usize];
                     s.env_rotation_deg = pick(360) as f32;
                 }

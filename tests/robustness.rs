@@ -64,15 +64,8 @@ fn a_shared_edge_swept_one_ulp_at_a_time_is_hit_once_and_shadows_once() {
 
 #[test]
 fn a_fan_vertex_swept_one_ulp_at_a_time_is_hit_once() {
-    let n = 9;
     let c = Vec3::new(0.3, 0.6, 0.0);
-    let ring: Vec<Vec3> = (0..n)
-        .map(|i| {
-            let a = i as f32 / n as f32 * std::f32::consts::TAU;
-            c + Vec3::new(a.cos(), a.sin(), 0.0)
-        })
-        .collect();
-    let fan: Vec<[Vec3; 3]> = (0..n).map(|i| [c, ring[i], ring[(i + 1) % n]]).collect();
+    let fan = common::fan(9, c);
     let bf = BruteForce::new(&fan);
     let bvh = Bvh::build(&fan, &BuildOptions::sah());
     for kx in -12..=12 {
@@ -638,18 +631,7 @@ fn a_zero_or_nan_ray_direction_gives_the_fallback_colour() {
 #[test]
 fn a_thousand_stacked_transparent_layers_pass_exactly_the_product() {
     let t = 0.99f32;
-    let layers: Vec<[Vec3; 3]> = (1..=1000)
-        .flat_map(|i| {
-            let z = i as f32 * 0.01;
-            let (a, b, c, d) = (
-                Vec3::new(0.0, 0.0, z),
-                Vec3::new(1.0, 0.0, z),
-                Vec3::new(1.0, 1.0, z),
-                Vec3::new(0.0, 1.0, z),
-            );
-            [[a, b, c], [a, c, d]]
-        })
-        .collect();
+    let layers = common::layers(1000, 0.01);
     let expected = (0..1000).fold(1.0f32, |acc, _| acc * t);
     for options in common::both_builders() {
         let bvh = Bvh::build(&layers, &options);

@@ -44,20 +44,8 @@ fn for_each_hit_reports_every_hit_once() {
     }
 }
 
-/// `k` unit squares (two triangles each) stacked along z, at z = 1, 2, ..., k.
 fn layers(k: usize) -> Vec<[Vec3; 3]> {
-    (1..=k)
-        .flat_map(|i| {
-            let z = i as f32;
-            let (a, b, c, d) = (
-                Vec3::new(0.0, 0.0, z),
-                Vec3::new(1.0, 0.0, z),
-                Vec3::new(1.0, 1.0, z),
-                Vec3::new(0.0, 1.0, z),
-            );
-            [[a, b, c], [a, c, d]]
-        })
-        .collect()
+    common::layers(k, 1.0)
 }
 
 #[test]

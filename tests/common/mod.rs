@@ -112,3 +112,32 @@ pub fn assert_matches_brute_force(what: &str, tris: &[[Vec3; 3]], bvhs: &[&Bvh],
 pub fn both_builders() -> [BuildOptions; 2] {
     [BuildOptions::sah(), BuildOptions::median()]
 }
+
+/// `n` triangles fanned around the vertex `c` in the plane z = c.z, out to radius 1. The ring
+/// points are computed once and shared, so neighbours meet exactly.
+pub fn fan(n: usize, c: Vec3) -> Vec<[Vec3; 3]> {
+    let ring: Vec<Vec3> = (0..n)
+        .map(|i| {
+            let a = i as f32 / n as f32 * std::f32::consts::TAU;
+            c + Vec3::new(a.cos(), a.sin(), 0.0)
+        })
+        .collect();
+    (0..n).map(|i| [c, ring[i], ring[(i + 1) % n]]).collect()
+}
+
+/// `k` unit squares (two triangles each, sharing the diagonal x = y) stacked along z at
+/// z = dz, 2 dz, ..., k dz.
+pub fn layers(k: usize, dz: f32) -> Vec<[Vec3; 3]> {
+    (1..=k)
+        .flat_map(|i| {
+            let z = i as f32 * dz;
+            let (a, b, c, d) = (
+                Vec3::new(0.0, 0.0, z),
+                Vec3::new(1.0, 0.0, z),
+                Vec3::new(1.0, 1.0, z),
+                Vec3::new(0.0, 1.0, z),
+            );
+            [[a, b, c], [a, c, d]]
+        })
+        .collect()
+}
