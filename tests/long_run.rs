@@ -13,9 +13,9 @@ use tracery::bvh::{BuildOptions, SplitMethod};
 use tracery::sampling::{SamplerKind, SplitMix64};
 use tracery::scene::Scene;
 use tracery::viewer::CorePlugins;
-use tracery::viewer::bvh::BvhSettings;
+use tracery::viewer::bvh::{BvhSettings, SceneBvh};
 use tracery::viewer::camera::pose_of;
-use tracery::viewer::scene::LoadScene;
+use tracery::viewer::scene::{CurrentScene, LoadScene, ViewerStatus};
 use tracery::viewer::trace::{
     Accumulation, EnvChoice, RenderMode, TraceCamera, TracedImage, ViewSettings,
 };
@@ -68,6 +68,8 @@ fn ten_thousand_frames_of_random_changes_run_flat() {
     let mut baseline = None;
     let mut peak = 0;
     let mut images = 0u64;
+    let mut errors = 0u32;
+    let mut scenes_seen = std::collections::HashSet::new();
     let mut last_version = 0;
     for frame in 0..FRAMES {
         if frame % 7 == 0 {
@@ -146,6 +148,14 @@ fn ten_thousand_frames_of_random_changes_run_flat() {
                 "frame {frame}: image buffer does not match its size"
             );
         }
+        if let Some(e) = &app.world().resource::<ViewerStatus>().error {
+            assert!(
+                e.contains(".obj"),
+                "frame {frame}: an error that names no file: {e}"
+            );
+            errors += 1;
+        }
+        scenes_seen.insert(app.world().resource::<CurrentScene>().scene.name.clone());
         let acc = app.world().resource::<Accumulation>();
         if let Some(full) = acc.full() {
             assert!(full.rejected == 0 || full.passes() > 0, "frame {frame}");
@@ -160,12 +170,19 @@ fn ten_thousand_frames_of_random_changes_run_flat() {
         }
     }
     assert!(images > 500, "only {images} images over {FRAMES} frames");
+    let builds = app.world().resource::<SceneBvh>().builds;
+    println!(
+        "{images} images, {builds} BVH builds, scenes {scenes_seen:?}, {errors} frames showing an error"
+    );
+    assert!(builds > 20, "only {builds} BVH builds");
+    assert!(scenes_seen.len() >= 3, "scenes seen: {scenes_seen:?}");
+    assert!(errors > 0, "the broken file never showed its error");
     if let Some(base) = baseline {
         let growth = peak.saturating_sub(base);
         println!("resident memory: {base} KiB at frame 1000, peak {peak} KiB after it");
         // Flat: the films, BVHs and scenes of one state are freed when the next replaces them.
         assert!(
-            growth < 64 * 1024,
+            growth < 16 * 1024,
             "memory grew by {growth} KiB between frame 1000 and {FRAMES}"
         );
     }
