@@ -75,7 +75,7 @@ fn ten_thousand_frames_of_random_changes_run_flat() {
         if frame % 7 == 0 {
             let w = app.world_mut();
             match pick(12) {
-                0 | 1 | 2 => {
+                0..=2 => {
                     let mut q = w.query_filtered::<&mut Transform, With<TraceCamera>>();
                     for mut t in q.iter_mut(w) {
                         let step = Vec3::new(
