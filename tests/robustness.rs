@@ -151,6 +151,8 @@ fn directions_of_length_1e_minus_3_and_1e3_give_the_same_hits_with_t_scaled() {
 
 #[test]
 fn tmax_zero_infinite_negative_and_nan_are_consistent() {
+    // The queries take hits with 0 < t < t_max: t_min is 0, so "t_min > t_max" is a negative
+    // (or -0, -inf, NaN) t_max, and every query must then report nothing.
     let tris = shapes::icosphere(2);
     let bvh = Bvh::build(&tris, &BuildOptions::sah());
     let bf = BruteForce::new(&tris);
