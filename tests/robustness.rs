@@ -310,16 +310,23 @@ fn cube_on_floor(offset: Vec3) -> Scene {
     }
 }
 
-fn render_mean(scene: &Scene, w: u32, h: u32, spp: u32) -> Vec<Vec3> {
-    let bvh = Bvh::build(&scene.mesh.triangles, &BuildOptions::sah());
-    let settings = RenderSettings {
+/// Render settings of a `w`x`h` image with `spp` samples, the rest default.
+fn settings(w: u32, h: u32, spp: u32) -> RenderSettings {
+    RenderSettings {
         width: w,
         height: h,
         spp,
         ..RenderSettings::default()
-    };
-    let out = render(scene, &bvh, &settings, &|_| {}).unwrap();
-    out.film.mean()
+    }
+}
+
+/// The mean film of `scene` rendered over its own SAH BVH.
+fn render_mean(scene: &Scene, w: u32, h: u32, spp: u32) -> Vec<Vec3> {
+    let bvh = Bvh::build(&scene.mesh.triangles, &BuildOptions::sah());
+    render(scene, &bvh, &settings(w, h, spp), &|_| {})
+        .unwrap()
+        .film
+        .mean()
 }
 
 #[test]
@@ -446,13 +453,7 @@ fn a_box_resting_on_a_plane_leaks_no_light_at_the_contact() {
 fn cornell(w: u32, h: u32, spp: u32) -> (Scene, Bvh, RenderSettings) {
     let s = Scene::cornell_box();
     let bvh = Bvh::build(&s.mesh.triangles, &BuildOptions::sah());
-    let settings = RenderSettings {
-        width: w,
-        height: h,
-        spp,
-        ..RenderSettings::default()
-    };
-    (s, bvh, settings)
+    (s, bvh, settings(w, h, spp))
 }
 
 #[test]
@@ -543,19 +544,8 @@ fn a_camera_inside_a_closed_mesh_sees_only_the_inside() {
     for r in c.pixel_center_rays() {
         assert!(bvh.intersect(&r, f32::INFINITY).is_some(), "escaped: {r:?}");
     }
-    let settings = RenderSettings {
-        width: 64,
-        height: 48,
-        spp: 2,
-        ..RenderSettings::default()
-    };
-    let out = render(&s, &bvh, &settings, &|_| {}).unwrap();
-    assert!(
-        out.film
-            .mean()
-            .iter()
-            .all(|p| p.is_finite() && p.max_element() > 0.0)
-    );
+    let image = render_mean(&s, 64, 48, 2);
+    assert!(image.iter().all(|p| p.is_finite() && p.max_element() > 0.0));
 }
 
 #[test]
