@@ -248,3 +248,64 @@ fn offset_origin_leaves_the_surface_at_every_magnitude() {
         }
     }
 }
+
+/// Rays leaving a surface from [`offset_ray_origin`] in every direction of the hemisphere
+/// (steep and grazing, with the plane's normal the major axis or not) never hit the surface
+/// they leave: planes through 0 on each axis (where the point has no rounding error and the
+/// origin moves a single float) and planes away from it. Before the distance error bound in the
+/// triangle test, rays whose major axis was not the plane's normal hit the plane at `x = 0`
+/// through the rounding of the sheared coordinates (the Cornell box's green wall).
+#[test]
+fn rays_leaving_a_surface_never_hit_it_whatever_their_major_axis() {
+    let mut rng = 0x9e3779b97f4a7c15u64;
+    let mut next = move || {
+        rng ^= rng << 13;
+        rng ^= rng >> 7;
+        rng ^= rng << 17;
+        (rng >> 40) as f32 / (1u64 << 24) as f32
+    };
+    let mut rays = 0;
+    for axis in 0..3 {
+        for offset in [0.0f32, 5.592, -3.3e-3, 1e4] {
+            for sign in [1.0f32, -1.0] {
+                // A triangle in the plane `p[axis] = offset`, wound so its normal is `sign`.
+                let corner = |a: f32, b: f32| {
+                    let mut v = Vec3::ZERO;
+                    v[axis] = offset;
+                    v[(axis + 1) % 3] = a;
+                    v[(axis + 2) % 3] = b;
+                    v
+                };
+                let mut t = [corner(0.0, 0.0), corner(5.488, 0.0), corner(0.0, 5.592)];
+                let mut n = Vec3::ZERO;
+                n[axis] = sign;
+                if tracery::scene::face_normal(&t).dot(n) < 0.0 {
+                    t.swap(1, 2);
+                }
+                let bf = BruteForce::new(&[t]);
+                for _ in 0..2000 {
+                    let (u, v) = (next(), next());
+                    let (u, v) = if u + v > 1.0 {
+                        (1.0 - u, 1.0 - v)
+                    } else {
+                        (u, v)
+                    };
+                    let b = [1.0 - u - v, u, v];
+                    let p = t[0] * b[0] + t[1] * b[1] + t[2] * b[2];
+                    let o = offset_ray_origin(p, interpolation_error(&t, b), n);
+                    // A direction on the side of n, from grazing (1e-4) to along the normal.
+                    let mut d =
+                        Vec3::new(next() * 2.0 - 1.0, next() * 2.0 - 1.0, next() * 2.0 - 1.0);
+                    d[axis] = sign * (next() * next()).max(1e-4) * 1.5;
+                    let hits = bf.all_hits(&Ray::new(o, d), f32::INFINITY);
+                    assert!(
+                        hits.is_empty(),
+                        "plane {axis} = {offset} ({sign}): ray from {o} along {d} hits it at {hits:?}"
+                    );
+                    rays += 1;
+                }
+            }
+        }
+    }
+    assert_eq!(rays, 3 * 4 * 2 * 2000);
+}

@@ -51,15 +51,106 @@ fn obj_polygons_are_fan_triangulated_with_negative_indices_and_computed_normals(
     let t = &s.mesh.triangles;
     assert_eq!(t[0], [Vec3::ZERO, Vec3::X, Vec3::new(1.0, 1.0, 0.0)]);
     assert_eq!(t[1], [Vec3::ZERO, Vec3::new(1.0, 1.0, 0.0), Vec3::Y]);
-    // Missing normals are computed, unit length, shared vertices averaged.
-    for n in s.mesh.normals.iter().flatten() {
-        assert!((n.length() - 1.0).abs() < 1e-5);
+    // Without normals or smoothing groups in the file, every face is flat.
+    for (t, n) in s.mesh.triangles.iter().zip(&s.mesh.normals) {
+        assert_eq!(*n, [tracery::scene::face_normal(t); 3]);
     }
-    assert_eq!(s.mesh.normals[0][2], Vec3::Z);
+    assert_eq!(s.mesh.normals[0], [Vec3::Z; 3]);
+}
+
+/// A unit cube's six faces as OBJ quads sharing its eight corners, after `header`.
+fn cube_obj(header: &str) -> String {
+    let mut text = String::from(header);
+    for v in [
+        [0, 0, 0],
+        [1, 0, 0],
+        [1, 1, 0],
+        [0, 1, 0],
+        [0, 0, 1],
+        [1, 0, 1],
+        [1, 1, 1],
+        [0, 1, 1],
+    ] {
+        text += &format!("v {} {} {}\n", v[0], v[1], v[2]);
+    }
+    for f in [
+        "1 4 3 2", "5 6 7 8", "1 2 6 5", "4 8 7 3", "1 5 8 4", "2 3 7 6",
+    ] {
+        text += &format!("f {f}\n");
+    }
+    text
+}
+
+/// True when every corner's normal is its face's (to rounding: scene files transform normals).
+fn all_flat(s: &Scene) -> bool {
+    s.mesh.triangles.iter().zip(&s.mesh.normals).all(|(t, n)| {
+        let f = tracery::scene::face_normal(t);
+        n.iter().all(|c| (*c - f).length() < 1e-6)
+    })
+}
+
+#[test]
+fn obj_faces_are_flat_unless_a_smoothing_group_asks() {
+    let dir = tempfile::tempdir().unwrap();
+    // No `s`, `s off`, `s 0`: a box keeps its edges.
+    for header in ["", "s off\n", "s 0\n"] {
+        let s = Scene::load(&write(dir.path(), "c.obj", cube_obj(header).as_bytes())).unwrap();
+        assert_eq!(s.triangle_count(), 12);
+        assert!(all_flat(&s), "header {header:?}");
+    }
+    // `s 1`: the corners average the three faces that meet there.
+    let s = Scene::load(&write(dir.path(), "c.obj", cube_obj("s 1\n").as_bytes())).unwrap();
+    let corner = s.mesh.normals[0][0];
     assert!(
-        s.mesh.normals[0][0].z < 1.0 && s.mesh.normals[0][0].y < 0.0,
-        "averaged with the side face"
+        (corner - Vec3::splat(-1.0).normalize()).length() < 1e-5,
+        "{corner}"
     );
+    assert!(!all_flat(&s));
+    // A group switched off half way: the faces after `s off` are flat again.
+    let mut text = cube_obj("s 1\n");
+    let cut = text.match_indices("f ").nth(3).unwrap().0;
+    text.insert_str(cut, "s off\n");
+    let s = Scene::load(&write(dir.path(), "c.obj", text.as_bytes())).unwrap();
+    for (i, (t, n)) in s.mesh.triangles.iter().zip(&s.mesh.normals).enumerate() {
+        let flat = [tracery::scene::face_normal(t); 3];
+        assert_eq!(*n == flat, i >= 6, "triangle {i}");
+    }
+}
+
+#[test]
+fn ply_without_normals_keeps_edges_above_the_crease_angle() {
+    // A box edge (90 degrees) stays sharp; a fold of 10 degrees is smoothed.
+    let fold = |deg: f32| {
+        let (s, c) = deg.to_radians().sin_cos();
+        format!(
+            "ply\nformat ascii 1.0\nelement vertex 4\nproperty float x\nproperty float y\nproperty float z\nelement face 2\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n0 1 0\n-1 0 0\n{c} 0 {s}\n3 0 1 2\n3 0 3 1\n"
+        )
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let s = Scene::load(&write(dir.path(), "box.ply", fold(90.0).as_bytes())).unwrap();
+    assert!(all_flat(&s));
+    let s = Scene::load(&write(dir.path(), "fold.ply", fold(10.0).as_bytes())).unwrap();
+    assert!(!all_flat(&s));
+    // The shared edge's corners agree on both faces.
+    assert_eq!(s.mesh.normals[0][0], s.mesh.normals[1][0]);
+    assert_eq!(s.mesh.normals[0][1], s.mesh.normals[1][2]);
+    // A scene file's crease angle overrides the rule either way.
+    write(dir.path(), "box.ply", fold(90.0).as_bytes());
+    let scene = |angle: f32| {
+        let toml = format!("[[meshes]]\npath = \"box.ply\"\ncrease_angle = {angle:?}\n");
+        Scene::load(&write(dir.path(), "s.toml", toml.as_bytes())).unwrap()
+    };
+    assert!(!all_flat(&scene(120.0)));
+    assert!(all_flat(&scene(0.0)));
+    let toml = "[[meshes]]\npath = \"box.ply\"\ncrease_angle = 200.0\n";
+    let e = err(Scene::load(&write(dir.path(), "s.toml", toml.as_bytes())));
+    assert!(e.contains("s.toml:3") && e.contains("crease_angle"), "{e}");
+}
+
+#[test]
+fn cornell_box_faces_are_flat() {
+    // Its OBJ has no normals and no smoothing groups: the blocks keep their edges.
+    assert!(all_flat(&Scene::cornell_box()));
 }
 
 #[test]

@@ -80,7 +80,8 @@ fn sheared<const KX: usize, const KY: usize, const KZ: usize>(
     if !cfg!(feature = "no-watertight-fallback") && (u == 0.0) | (v == 0.0) | (w == 0.0) {
         return intersect_exact(
             [(ax, ay), (bx, by), (cx, cy)],
-            [a_z * sz, b_z * sz, c_z * sz],
+            [a_z, b_z, c_z],
+            ray.shear,
             t_max,
         );
     }
@@ -99,13 +100,66 @@ fn sheared<const KX: usize, const KY: usize, const KZ: usize>(
     if !(t > 0.0 && t < t_max) {
         return None;
     }
+    if t <= t_error_bound(
+        [ax, bx, cx],
+        [ay, by, cy],
+        [a_z, b_z, c_z],
+        ray.shear,
+        [u, v, w],
+        inv,
+    ) {
+        return None;
+    }
     Some((t, v * inv, w * inv))
+}
+
+/// Bound on the rounding error of the test's distance `t` (Pharr, Jakob and Humphreys, pbrt
+/// 3rd ed., 3.9.6): a hit closer than this may lie at `t <= 0`, so it is not taken. Without
+/// it, a ray leaving a surface (the offset origin of a shadow ray is a single float off a plane
+/// at `x = 0`) could hit the surface it leaves through the rounding of the sheared
+/// coordinates, when the surface's normal is not the ray's major axis: the lower half of the
+/// Cornell box's green wall shadowed itself for a quarter of its shadow rays that way.
+///
+/// `x`, `y` are the sheared vertex coordinates, `z` the unscaled ones along the ray's major
+/// axis, `shear` the ray's `[sx, sy, sz]`, `e` the edge functions and `inv_det` their sum's
+/// reciprocal. pbrt bounds the sheared coordinates' error by `gamma(5) (max|x| + max|z|)`; the
+/// `z` part comes from the shear `x - sx z`, so it is weighted here by `|sx|` (twice: the
+/// difference `v - o` before the shear is rounded too). An axis-aligned ray (`sx = sy = 0`)
+/// then keeps a tight bound, and a needle of aspect 1e6 hit head-on is not rejected.
+#[inline(always)]
+fn t_error_bound(
+    x: [f32; 3],
+    y: [f32; 3],
+    z: [f32; 3],
+    shear: [f32; 3],
+    e: [f32; 3],
+    inv_det: f32,
+) -> f32 {
+    use super::gamma;
+    let max3 = |a: [f32; 3]| a[0].abs().max(a[1].abs()).max(a[2].abs());
+    let [sx, sy, sz] = shear;
+    let max_z = max3(z);
+    let max_zt = max_z * sz.abs();
+    let max_x = max3(x);
+    let max_y = max3(y);
+    let delta_z = gamma(3) * max_zt;
+    let delta_x = gamma(5) * (max_x + 2.0 * sx.abs() * max_z);
+    let delta_y = gamma(5) * (max_y + 2.0 * sy.abs() * max_z);
+    let delta_e = 2.0 * (gamma(2) * max_x * max_y + delta_y * max_x + delta_x * max_y);
+    let max_e = max3(e);
+    3.0 * (gamma(3) * max_e * max_zt + delta_e * max_zt + delta_z * max_e) * inv_det.abs()
 }
 
 /// The rare path: some edge function was exactly zero in f32.
 #[cold]
 #[inline(never)]
-fn intersect_exact(p: [(f32, f32); 3], z: [f32; 3], t_max: f32) -> Option<(f32, f32, f32)> {
+fn intersect_exact(
+    p: [(f32, f32); 3],
+    z_unscaled: [f32; 3],
+    shear: [f32; 3],
+    t_max: f32,
+) -> Option<(f32, f32, f32)> {
+    let z = z_unscaled.map(|z| z * shear[2]);
     // Edge functions in the same form as the fast path: the edge opposite vertex i.
     let edge = |i: usize| {
         let (q, r) = (p[(i + 1) % 3], p[(i + 2) % 3]);
@@ -137,6 +191,12 @@ fn intersect_exact(p: [(f32, f32); 3], z: [f32; 3], t_max: f32) -> Option<(f32, 
     let t = (e[0] * z[0] as f64 + e[1] * z[1] as f64 + e[2] * z[2] as f64) / det;
     let t = t as f32;
     if !(t > 0.0 && t < t_max) {
+        return None;
+    }
+    // The edge functions are exact here, the sheared coordinates are not: the same bound.
+    let (x, y) = (p.map(|q| q.0), p.map(|q| q.1));
+    let ef = e.map(|v| v as f32);
+    if t <= t_error_bound(x, y, z_unscaled, shear, ef, (1.0 / det) as f32) {
         return None;
     }
     Some((t, (e[1] / det) as f32, (e[2] / det) as f32))

@@ -20,6 +20,10 @@
 //! scale = 0.3
 //! material = "white"
 //!
+//! [[meshes]]
+//! path = "bunny.obj"
+//! crease_angle = 60.0        # computed normals smooth below 60 degrees (default: the file's rule)
+//!
 //! [[lights]]
 //! kind = "rect"
 //! corner = [-0.25, 1.98, -0.25]
@@ -41,8 +45,8 @@ use serde::Deserialize;
 use toml::Spanned;
 
 use super::{
-    Camera, Environment, Light, Material, Mesh, Scene, line_of, name_of, obj, ply, read_file,
-    shapes,
+    Camera, Environment, Light, Material, Mesh, NormalRule, Scene, line_of, name_of, obj, ply,
+    read_file, shapes,
 };
 
 #[derive(Deserialize)]
@@ -108,6 +112,9 @@ struct MeshDef {
     rotate: Option<[f32; 3]>,
     scale: Option<ScaleDef>,
     material: Option<Spanned<String>>,
+    /// Normals the mesh file does not give: smooth across edges below this angle (degrees;
+    /// 0 is flat), instead of the file type's own rule.
+    crease_angle: Option<Spanned<f32>>,
 }
 
 #[derive(Deserialize)]
@@ -222,12 +229,29 @@ pub fn parse(path: &Path, text: &str, read: ReadFn, check_files: bool) -> Result
         let (mut part, part_materials) = match (&m.path, m.shape) {
             (Some(p), None) => {
                 let file = resolve(p.get_ref());
-                let loaded = load_mesh_file(&file, read)
+                let rule = match &m.crease_angle {
+                    Some(a) if !(0.0..=180.0).contains(a.get_ref()) => {
+                        return Err(at(
+                            a.span().start,
+                            format!("crease_angle {} is not in 0..=180 degrees", a.get_ref()),
+                        ));
+                    }
+                    Some(a) => Some(NormalRule::Crease(*a.get_ref())),
+                    None => None,
+                };
+                let loaded = load_mesh_file(&file, read, rule)
                     .map_err(|e| at(p.span().start, format!("mesh `{}`: {e:#}", p.get_ref())))?;
                 warnings.extend(loaded.2);
                 (loaded.0, loaded.1)
             }
             (None, Some(shape)) => {
+                if let Some(a) = &m.crease_angle {
+                    return Err(at(
+                        a.span().start,
+                        "crease_angle applies to mesh files; generated shapes have their own normals"
+                            .into(),
+                    ));
+                }
                 let tris = match shape {
                     ShapeDef::Sphere => shapes::icosphere(m.subdivisions.unwrap_or(3).min(7)),
                     ShapeDef::Cube => shapes::cube(),
@@ -349,7 +373,11 @@ pub fn parse(path: &Path, text: &str, read: ReadFn, check_files: bool) -> Result
 }
 
 /// Loads an OBJ or PLY through `read`: mesh, its materials, warnings.
-fn load_mesh_file(file: &Path, read: ReadFn) -> Result<(Mesh, Vec<Material>, Vec<String>)> {
+fn load_mesh_file(
+    file: &Path,
+    read: ReadFn,
+    rule: Option<NormalRule>,
+) -> Result<(Mesh, Vec<Material>, Vec<String>)> {
     let ext = file
         .extension()
         .and_then(|e| e.to_str())
@@ -358,11 +386,11 @@ fn load_mesh_file(file: &Path, read: ReadFn) -> Result<(Mesh, Vec<Material>, Vec
     match ext.as_deref() {
         Some("obj") => {
             let dir = file.parent().unwrap_or(Path::new("")).to_path_buf();
-            let d = obj::load_from(file, &bytes, &|m: &Path| read(&dir.join(m)))?;
+            let d = obj::load_from(file, &bytes, &|m: &Path| read(&dir.join(m)), rule)?;
             Ok((d.mesh, d.materials, d.warnings))
         }
         Some("ply") => Ok((
-            ply::load_from(file, Cursor::new(bytes))?,
+            ply::load_from(file, Cursor::new(bytes), rule)?,
             vec![Material::default()],
             Vec::new(),
         )),

@@ -6,6 +6,7 @@
 
 pub mod check;
 pub mod file;
+pub mod normals;
 pub mod obj;
 pub mod ply;
 pub mod shapes;
@@ -16,6 +17,7 @@ use anyhow::{Context, Result, bail};
 use glam::Vec3;
 
 use crate::geometry::Aabb;
+pub use normals::NormalRule;
 
 /// Surface properties, following the MTL file's fields.
 #[derive(Clone, Debug, PartialEq)]
@@ -216,29 +218,26 @@ impl Mesh {
             .extend(other.material_ids.into_iter().map(|m| m + material_offset));
     }
 
-    /// Builds a mesh from an indexed triangle list, with area-weighted vertex normals computed
-    /// over shared vertices. Indices must be in range.
-    pub fn from_indexed(positions: &[Vec3], indices: &[[u32; 3]], material: u32) -> Mesh {
-        let mut vn = vec![Vec3::ZERO; positions.len()];
-        for f in indices {
-            let [a, b, c] = f.map(|i| positions[i as usize]);
-            let n = (b - a).cross(c - a);
-            if n.is_finite() {
-                for &i in f {
-                    vn[i as usize] += n;
-                }
-            }
+    /// Builds a mesh from an indexed triangle list, with normals computed by `rule`
+    /// ([`normals`]; `groups` holds each face's smoothing group for [`NormalRule::Groups`]).
+    /// Indices must be in range.
+    pub fn from_indexed(
+        positions: &[Vec3],
+        indices: &[[u32; 3]],
+        material: u32,
+        rule: NormalRule,
+        groups: &[u32],
+    ) -> Mesh {
+        let normals = normals::corner_normals(positions, indices, rule, groups);
+        let triangles = indices
+            .iter()
+            .map(|f| f.map(|i| positions[i as usize]))
+            .collect();
+        Mesh {
+            triangles,
+            normals,
+            material_ids: vec![material; indices.len()],
         }
-        let mut mesh = Mesh::default();
-        for f in indices {
-            let tri = f.map(|i| positions[i as usize]);
-            let face_n = face_normal(&tri);
-            mesh.triangles.push(tri);
-            mesh.normals
-                .push(f.map(|i| vn[i as usize].try_normalize().unwrap_or(face_n)));
-            mesh.material_ids.push(material);
-        }
-        mesh
     }
 
     /// Builds a mesh from a triangle soup with flat normals.

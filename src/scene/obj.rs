@@ -1,8 +1,8 @@
 //! Wavefront OBJ with MTL materials, through `tobj`.
 //!
 //! Polygons are fan-triangulated as `(0, k, k + 1)` in file order (the benchmark convention),
-//! negative (relative) indices are resolved by `tobj`, missing normals are computed from the
-//! faces around each vertex, and the MTL fields `Kd Ks Ns Ke d Tr Ni illum` become a
+//! negative (relative) indices are resolved by `tobj`, missing normals follow the file's
+//! smoothing groups (`s`; flat outside them, see [`super::normals`]), and the MTL fields `Kd Ks Ns Ke d Tr Ni illum` become a
 //! [`Material`]. `tobj` reports what went wrong but not where; the loader then finds the first
 //! offending line itself so that the error reads `file:line: message`.
 
@@ -12,6 +12,7 @@ use std::path::Path;
 use anyhow::{Result, anyhow};
 use glam::Vec3;
 
+use super::normals::NormalRule;
 use super::{Material, Mesh, face_normal, read_file};
 
 /// What an OBJ load produced: triangles, materials, and warnings (a missing MTL file, say)
@@ -46,14 +47,50 @@ fn check_mtl(text: &[u8]) -> Result<(), (usize, String)> {
 pub fn load(path: &Path) -> Result<ObjData> {
     let bytes = read_file(path)?;
     let dir = path.parent().unwrap_or(Path::new(".")).to_path_buf();
-    load_from(path, &bytes, &|mtl: &Path| read_file(&dir.join(mtl)))
+    load_from(path, &bytes, &|mtl: &Path| read_file(&dir.join(mtl)), None)
 }
 
-/// Loads OBJ text named `path` (for messages), reading MTL files through `read_mtl`.
+/// The smoothing group of every face with three or more corners, in file order: `s off` and
+/// `s 0` are group 0 (flat), `s 1`, `s 2`, ... their number; any other word gets a number of
+/// its own. tobj ignores `s` lines, so the loader reads them here.
+fn smoothing_groups(text: &str) -> Vec<u32> {
+    let mut named: Vec<String> = Vec::new();
+    let mut current = 0u32;
+    let mut groups = Vec::new();
+    for line in text.lines() {
+        let mut words = line.split_whitespace();
+        match words.next() {
+            Some("s") => {
+                current = match words.next() {
+                    None | Some("off") | Some("0") => 0,
+                    Some(w) => match w.parse::<u32>() {
+                        Ok(n) => n,
+                        Err(_) => {
+                            let at = named.iter().position(|n| n == w).unwrap_or_else(|| {
+                                named.push(w.to_string());
+                                named.len() - 1
+                            });
+                            // Named groups above every numbered one a file is likely to use.
+                            u32::MAX - at as u32
+                        }
+                    },
+                };
+            }
+            // tobj reads `l` lines like `f` ones: a triangle or polygon either way.
+            Some("f" | "l") if line.split_whitespace().count() >= 4 => groups.push(current),
+            _ => {}
+        }
+    }
+    groups
+}
+
+/// Loads OBJ text named `path` (for messages), reading MTL files through `read_mtl`. Normals
+/// the file does not give follow `rule`, or the file's smoothing groups when it is `None`.
 pub fn load_from(
     path: &Path,
     bytes: &[u8],
     read_mtl: &dyn Fn(&Path) -> Result<Vec<u8>>,
+    rule: Option<NormalRule>,
 ) -> Result<ObjData> {
     let options = tobj::LoadOptions {
         single_index: false,
@@ -101,6 +138,27 @@ pub fn load_from(
     let default_id = mats.len() as u32;
     let mut need_default = false;
 
+    let mut groups = smoothing_groups(&String::from_utf8_lossy(bytes));
+    let face_count: usize = models
+        .iter()
+        .map(|m| match m.mesh.face_arities.len() {
+            0 => m.mesh.indices.len() / 3,
+            n => n,
+        })
+        .sum();
+    if groups.len() != face_count {
+        if groups.iter().any(|&g| g != 0) {
+            warnings.push(format!(
+                "{}: smoothing groups ignored ({} faces read, {} found by tobj); faces are flat",
+                path.display(),
+                groups.len(),
+                face_count
+            ));
+        }
+        groups = vec![0; face_count];
+    }
+    let mut next_face = 0usize;
+
     let mut mesh = Mesh::default();
     for model in &models {
         let m = &model.mesh;
@@ -125,6 +183,7 @@ pub fn load_from(
 
         // Fan-triangulate every face: (0, k, k + 1).
         let mut faces: Vec<[usize; 3]> = Vec::new(); // corners as offsets into m.indices
+        let mut face_groups: Vec<u32> = Vec::new(); // the smoothing group of each triangle
         let mut offset = 0usize;
         let arities: Box<dyn Iterator<Item = usize>> = if m.face_arities.is_empty() {
             Box::new(std::iter::repeat_n(3, m.indices.len() / 3))
@@ -132,8 +191,11 @@ pub fn load_from(
             Box::new(m.face_arities.iter().map(|&a| a as usize))
         };
         for arity in arities {
+            let group = groups.get(next_face).copied().unwrap_or(0);
+            next_face += 1;
             for k in 1..arity.saturating_sub(1) {
                 faces.push([offset, offset + k, offset + k + 1]);
+                face_groups.push(group);
             }
             offset += arity;
         }
@@ -154,7 +216,11 @@ pub fn load_from(
             }
         } else {
             let idx: Vec<[u32; 3]> = faces.iter().map(|f| f.map(|c| m.indices[c])).collect();
-            mesh.append(Mesh::from_indexed(&positions, &idx, material), 0);
+            let rule = rule.unwrap_or(NormalRule::Groups);
+            mesh.append(
+                Mesh::from_indexed(&positions, &idx, material, rule, &face_groups),
+                0,
+            );
         }
     }
     if need_default || mats.is_empty() {

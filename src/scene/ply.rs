@@ -2,7 +2,8 @@
 //!
 //! Reads `vertex` elements (`x y z` of any numeric type, optional `nx ny nz`) and `face`
 //! elements (`vertex_indices` or `vertex_index`, any integer list type); other elements are
-//! read and dropped. Polygons are fan-triangulated as `(0, k, k + 1)`.
+//! read and dropped. Polygons are fan-triangulated as `(0, k, k + 1)`. Without normals in the
+//! file, faces are smoothed across edges below a crease angle ([`super::normals`]).
 
 use std::io::BufReader;
 use std::path::Path;
@@ -12,6 +13,7 @@ use glam::Vec3;
 use ply_rs_bw::parser::{Parser, Reader};
 use ply_rs_bw::ply::{DefaultElement, Property, PropertyAccess, PropertyAccessResult};
 
+use super::normals::{DEFAULT_CREASE_DEG, NormalRule};
 use super::{Mesh, face_normal};
 
 fn scalar(p: &Property) -> Option<f64> {
@@ -92,11 +94,16 @@ impl PropertyAccess for Face {
 pub fn load(path: &Path) -> Result<Mesh> {
     let file = std::fs::File::open(path)
         .map_err(|e| anyhow!("{}: cannot open file: {e}", path.display()))?;
-    load_from(path, BufReader::new(file))
+    load_from(path, BufReader::new(file), None)
 }
 
-/// Parses PLY data named `path` (for messages).
-pub fn load_from(path: &Path, data: impl std::io::BufRead) -> Result<Mesh> {
+/// Parses PLY data named `path` (for messages). Normals the file does not give follow `rule`,
+/// or a crease of [`DEFAULT_CREASE_DEG`] when it is `None`.
+pub fn load_from(
+    path: &Path,
+    data: impl std::io::BufRead,
+    rule: Option<NormalRule>,
+) -> Result<Mesh> {
     let at = |e: ply_rs_bw::parser::ParseError| match e.line() {
         // The error's own text already says "Line N"; put it in the file:line form.
         Some(line) => anyhow!("{}:{line}: {}", path.display(), strip_line(&e.to_string())),
@@ -179,7 +186,8 @@ pub fn load_from(path: &Path, data: impl std::io::BufRead) -> Result<Mesh> {
         }
         Ok(mesh)
     } else {
-        Ok(Mesh::from_indexed(&positions, &tris, 0))
+        let rule = rule.unwrap_or(NormalRule::Crease(DEFAULT_CREASE_DEG));
+        Ok(Mesh::from_indexed(&positions, &tris, 0, rule, &[]))
     }
 }
 
