@@ -43,6 +43,32 @@ impl Film {
         out
     }
 
+    /// Writes the image by the file's extension ([`OutputKind`]): `.exr` (32-bit float) and
+    /// `.hdr` (Radiance RGBE) hold the mean linear radiance, unscaled; `.png` the tone-mapped
+    /// picture after `exposure`.
+    pub fn save(&self, path: &std::path::Path, exposure: f32) -> anyhow::Result<()> {
+        match OutputKind::of(path)? {
+            OutputKind::Linear => self.save_linear(path),
+            OutputKind::ToneMapped => self.save_png(path, exposure),
+        }
+    }
+
+    /// Writes the mean linear radiance as EXR or HDR (by the extension); non-finite values
+    /// (never added, but a film can be built by hand) are written as 0.
+    pub fn save_linear(&self, path: &std::path::Path) -> anyhow::Result<()> {
+        use anyhow::Context;
+        let data: Vec<f32> = self
+            .mean()
+            .iter()
+            .flat_map(|v| v.to_array())
+            .map(|x| if x.is_finite() { x.max(0.0) } else { 0.0 })
+            .collect();
+        image::Rgb32FImage::from_raw(self.width, self.height, data)
+            .context("film size does not match its pixels")?
+            .save(path)
+            .with_context(|| format!("{}: cannot write linear image", path.display()))
+    }
+
     /// Writes the tone-mapped image as PNG.
     pub fn save_png(&self, path: &std::path::Path, exposure: f32) -> anyhow::Result<()> {
         use anyhow::Context;
@@ -54,6 +80,31 @@ impl Film {
             image::ColorType::Rgba8,
         )
         .with_context(|| format!("{}: cannot write PNG", path.display()))
+    }
+}
+
+/// What an output file holds, by its extension.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum OutputKind {
+    /// `.png`: tone mapped and sRGB encoded, 8 bits.
+    ToneMapped,
+    /// `.exr` or `.hdr`: linear radiance in floats.
+    Linear,
+}
+
+impl OutputKind {
+    /// The kind of `path`, or an error naming it when the extension is none of these (checked
+    /// before a render starts, so a long render is not lost to a typo).
+    pub fn of(path: &std::path::Path) -> anyhow::Result<OutputKind> {
+        let ext = path.extension().and_then(|e| e.to_str());
+        match ext.map(|e| e.to_ascii_lowercase()).as_deref() {
+            Some("png") => Ok(OutputKind::ToneMapped),
+            Some("exr" | "hdr") => Ok(OutputKind::Linear),
+            _ => anyhow::bail!(
+                "{}: unknown image type (expected .png, .exr or .hdr)",
+                path.display()
+            ),
+        }
     }
 }
 

@@ -40,6 +40,67 @@ fn render_writes_the_png_it_names() {
 }
 
 #[test]
+fn render_to_exr_and_hdr_writes_the_linear_radiance_of_the_same_render() {
+    use tracery::bvh::{BuildOptions, Bvh};
+    use tracery::render::{RenderSettings, render};
+    let dir = tempfile::tempdir().unwrap();
+    let scene = Scene::cornell_box();
+    let settings = RenderSettings {
+        width: 24,
+        height: 18,
+        spp: 3,
+        ..RenderSettings::default()
+    };
+    let bvh = Bvh::build(&scene.mesh.triangles, &BuildOptions::sah());
+    let expected = render(&scene, &bvh, &settings, &|_| {})
+        .unwrap()
+        .film
+        .mean();
+    assert!(
+        expected.iter().any(|v| v.max_element() > 1.0),
+        "the light is brighter than 1"
+    );
+    for (name, rel) in [("cb.exr", 0.0), ("cb.hdr", 1.0 / 128.0)] {
+        let out = dir.path().join(name);
+        let o = tracery(&[
+            "render",
+            "-o",
+            out.to_str().unwrap(),
+            "--width",
+            "24",
+            "--height",
+            "18",
+            "--spp",
+            "3",
+        ]);
+        assert!(o.status.success(), "{}", text(&o.stderr));
+        let img = image::open(&out).unwrap().into_rgb32f();
+        assert_eq!((img.width(), img.height()), (24, 18));
+        for (px, want) in img.pixels().zip(&expected) {
+            for c in 0..3 {
+                // EXR holds the f32 values exactly; RGBE keeps 8 bits of mantissa under the
+                // exponent of the pixel's largest component.
+                let tol = rel * want.max_element();
+                assert!(
+                    (px[c] - want[c]).abs() <= tol,
+                    "{name}: {} vs {}",
+                    px[c],
+                    want[c]
+                );
+            }
+        }
+    }
+    // An unknown extension is refused before anything is rendered.
+    let o = tracery(&["render", "-o", dir.path().join("x.tiff").to_str().unwrap()]);
+    assert!(!o.status.success());
+    assert!(
+        text(&o.stderr).contains("x.tiff: unknown image type"),
+        "{}",
+        text(&o.stderr)
+    );
+}
+
+#[test]
 fn stats_json_has_both_builders() {
     let o = tracery(&["stats", "--json"]);
     assert!(o.status.success(), "{}", text(&o.stderr));
@@ -128,8 +189,9 @@ fn bad_input_fails_with_a_message_naming_the_file() {
     let dir = tempfile::tempdir().unwrap();
     let bad = dir.path().join("broken.obj");
     std::fs::write(&bad, "v 0 0 0\nv 1 0\nf 1 2 3\n").unwrap();
+    let out = dir.path().join("never.png");
     for args in [
-        vec!["render", bad.to_str().unwrap(), "-o", "/dev/null"],
+        vec!["render", bad.to_str().unwrap(), "-o", out.to_str().unwrap()],
         vec!["stats", "/nonexistent/mesh.ply"],
         vec!["render", "--width", "0"],
         vec!["stats", "--bins", "1"],

@@ -32,7 +32,8 @@ enum Command {
     /// default): fly the camera, watch the image refine, inspect the BVH.
     #[cfg(feature = "viewer")]
     View(Box<view::ViewArgs>),
-    /// Render a scene (TOML scene file, OBJ or PLY; the built-in Cornell box by default) to PNG.
+    /// Render a scene (TOML scene file, OBJ or PLY; the built-in Cornell box by default) to PNG, or
+    /// to EXR / HDR in linear radiance.
     Render(render::RenderArgs),
     /// Build the BVH of a mesh or scene and print its statistics (median and SAH side by side).
     Stats(stats::StatsArgs),

@@ -1,4 +1,5 @@
-//! `tracery render`: render a scene to PNG on all cores, with a progress bar.
+//! `tracery render`: render a scene to PNG (tone mapped) or EXR / HDR (linear radiance) on all
+//! cores, with a progress bar.
 
 use std::path::PathBuf;
 use std::time::Instant;
@@ -16,7 +17,8 @@ use super::{BvhArgs, ensure_parent, load_scene, set_threads};
 pub struct RenderArgs {
     /// Scene file (TOML), OBJ or PLY; the built-in Cornell box when left out.
     scene: Option<PathBuf>,
-    /// Output PNG.
+    /// Output image: `.png` (tone mapped, after `--exposure`), `.exr` or `.hdr` (linear
+    /// radiance, no exposure or tone mapping).
     #[arg(short, long, default_value = "out/render.png")]
     output: PathBuf,
     /// Image width in pixels.
@@ -61,6 +63,7 @@ pub fn run(a: RenderArgs) -> Result<()> {
         sampler: a.sampler,
     };
     settings.validate().map_err(anyhow::Error::msg)?;
+    tracery::film::OutputKind::of(&a.output)?;
     let options = a.bvh.options()?;
     let scene = load_scene(a.scene.as_deref())?;
     if a.explain {
@@ -100,7 +103,7 @@ pub fn run(a: RenderArgs) -> Result<()> {
     let took = start.elapsed();
     bar.finish_and_clear();
     let path = ensure_parent(&a.output)?;
-    out.film.save_png(&path, a.exposure)?;
+    out.film.save(&path, a.exposure)?;
     let secs = took.as_secs_f64();
     let r = &out.rays;
     println!(
