@@ -1,5 +1,6 @@
-//! Both builders against brute force: 100,000 random rays and the canonical camera rays on the
-//! Cornell box, the generated meshes and (fetched) the Stanford dragon.
+//! Both builders, with every traversal kernel the CPU runs (scalar, SSE2, AVX2), against brute
+//! force: 100,000 random rays and the canonical camera rays on the Cornell box, the generated
+//! meshes and (fetched) the Stanford dragon.
 
 mod common;
 
@@ -15,16 +16,17 @@ fn check_mesh(name: &str, tris: &[[Vec3; 3]], random: usize, canonical_step: usi
         .into_iter()
         .step_by(canonical_step)
         .collect();
-    let bvhs = common::both_builders().map(|o| Bvh::build(tris, &o));
-    let bvhs = [&bvhs[0], &bvhs[1]];
+    let all = common::all_bvhs(tris);
+    let bvhs: Vec<&Bvh> = all.iter().map(|(_, b)| b).collect();
+    let names: Vec<&str> = all.iter().map(|(n, _)| n.as_str()).collect();
     common::assert_matches_brute_force(
-        &format!("{name}, sah and median, random rays"),
+        &format!("{name}, {names:?}, random rays"),
         tris,
         &bvhs,
         &rays,
     );
     common::assert_matches_brute_force(
-        &format!("{name}, sah and median, canonical rays"),
+        &format!("{name}, {names:?}, canonical rays"),
         tris,
         &bvhs,
         &camera,
@@ -70,7 +72,9 @@ fn other_leaf_sizes_and_bins_match_brute_force() {
             };
             let bvh = Bvh::build(&tris, &o);
             assert!(bvh.stats.max_leaf_size <= leaf);
-            common::assert_matches_brute_force(&format!("{o:?}"), &tris, &[&bvh], &rays);
+            let all = common::every_kernel(&bvh);
+            let bvhs: Vec<&Bvh> = all.iter().map(|(_, b)| b).collect();
+            common::assert_matches_brute_force(&format!("{o:?}"), &tris, &bvhs, &rays);
         }
     }
 }
@@ -97,15 +101,14 @@ fn ties_in_t_go_to_the_lowest_index() {
     tris.insert(17, dup);
     tris.insert(300, dup);
     tris.push(dup);
-    for options in common::both_builders() {
-        let bvh = Bvh::build(&tris, &options);
+    for (name, bvh) in common::all_bvhs(&tris) {
         let hit = bvh
             .intersect(
                 &tracery::geometry::Ray::new(Vec3::new(0.0, -0.2, 10.0), Vec3::NEG_Z),
                 f32::INFINITY,
             )
             .expect("hits the duplicated triangle");
-        assert_eq!(hit.prim, 17, "{:?}", options.split);
+        assert_eq!(hit.prim, 17, "{name}");
     }
 }
 
@@ -126,6 +129,7 @@ fn rays_aimed_at_vertices_and_edges_match_brute_force() {
             }
         }
     }
-    let bvhs = common::both_builders().map(|o| Bvh::build(&tris, &o));
-    common::assert_matches_brute_force("vertex rays", &tris, &[&bvhs[0], &bvhs[1]], &rays);
+    let all = common::all_bvhs(&tris);
+    let bvhs: Vec<&Bvh> = all.iter().map(|(_, b)| b).collect();
+    common::assert_matches_brute_force("vertex rays", &tris, &bvhs, &rays);
 }

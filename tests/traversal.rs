@@ -12,14 +12,13 @@ fn occluded_agrees_with_brute_force() {
     let tris = shapes::random_soup(2000, 0.15, 21);
     let bf = BruteForce::new(&tris);
     let rays = common::random_rays(&tris, 20_000, 3);
-    for options in common::both_builders() {
-        let bvh = Bvh::build(&tris, &options);
+    for (name, bvh) in common::all_bvhs(&tris) {
         for (i, r) in rays.iter().enumerate() {
             let t_max = 0.05 + (i % 10) as f32 * 0.1;
             assert_eq!(
                 bvh.occluded(r, t_max),
                 !bf.all_hits(r, t_max).is_empty(),
-                "ray {i}"
+                "{name}, ray {i}"
             );
         }
     }
@@ -30,8 +29,7 @@ fn for_each_hit_reports_every_hit_once() {
     let tris = shapes::random_soup(1500, 0.2, 5);
     let bf = BruteForce::new(&tris);
     let rays = common::random_rays(&tris, 5000, 17);
-    for options in common::both_builders() {
-        let bvh = Bvh::build(&tris, &options);
+    for (name, bvh) in common::all_bvhs(&tris) {
         for r in &rays {
             let mut got = Vec::new();
             bvh.for_each_hit(r, f32::INFINITY, |p, t| {
@@ -39,7 +37,7 @@ fn for_each_hit_reports_every_hit_once() {
                 true
             });
             got.sort_by_key(|h| h.0);
-            assert_eq!(got, bf.all_hits(r, f32::INFINITY));
+            assert_eq!(got, bf.all_hits(r, f32::INFINITY), "{name}");
         }
     }
 }

@@ -74,9 +74,9 @@ pub(super) fn build(triangles: &[[Vec3; 3]], options: &BuildOptions) -> Bvh {
         .iter()
         .map(|&i| triangles[i as usize].map(Vec3A::from))
         .collect();
-    let pairs = super::pairs::pair_layout(&nodes);
+    let wide = super::wide::collapse(&nodes, &tris, &prim_ids);
     let mut bvh = Bvh {
-        pairs,
+        wide,
         nodes,
         tris,
         prim_ids,
@@ -318,7 +318,8 @@ impl Builder<'_> {
             if count == 0 || right_count[p] == 0 {
                 continue;
             }
-            let cost = count as f64 * acc.half_area() + right_count[p] as f64 * right_area[p];
+            let cost = sah::blocks(count as usize) * acc.half_area()
+                + sah::blocks(right_count[p] as usize) * right_area[p];
             if best.is_none_or(|(c, _)| cost < c) {
                 best = Some((cost, p));
             }
@@ -329,7 +330,7 @@ impl Builder<'_> {
         // Compare un-normalized costs so that a flat node (zero area) does not divide by zero.
         let area = task.bounds.half_area();
         let split_cost = sah::C_TRAVERSE * area + sah::C_INTERSECT * cost;
-        let leaf_cost = sah::C_INTERSECT * n as f64 * area;
+        let leaf_cost = sah::C_INTERSECT * sah::blocks(n) * area;
         if n <= max_leaf && split_cost >= leaf_cost {
             return None;
         }

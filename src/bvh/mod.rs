@@ -9,17 +9,18 @@
 //!
 //! Layout: node 0 is the root, slot 1 is unused, and the two children of an inner node sit side
 //! by side at an even index, so a pair of siblings shares one 64-byte cache line. Triangles are
-//! copied into leaf order; [`Bvh::prim_ids`] maps a leaf slot back to the caller's index.
+//! copied into leaf order; [`Bvh::prim_ids`] maps a leaf slot back to the caller's index. The
+//! queries walk a layout derived from this tree: 8-wide nodes with the triangles in blocks of
+//! four ([`wide`]).
 
 mod build;
-mod pairs;
 mod reference;
 mod stats;
 mod traverse;
+pub mod wide;
 
 use glam::{Vec3, Vec3A};
 
-pub use pairs::PairNode;
 pub use reference::BruteForce;
 pub use stats::BvhStats;
 pub use traverse::{Hit, Visit};
@@ -61,12 +62,20 @@ impl std::str::FromStr for SplitMethod {
 
 /// Cost constants of the surface area heuristic, used by the SAH builder and in the stats.
 ///
-/// `cost = C_TRAVERSE * sum(A(inner)) / A(root) + C_INTERSECT * sum(A(leaf) * n(leaf)) / A(root)`
+/// `cost = C_TRAVERSE * sum(A(inner)) / A(root) + C_INTERSECT * sum(A(leaf) * blocks(leaf)) / A(root)`
+///
+/// A leaf's triangles are tested four at a time ([`wide::BLOCK`]), so a leaf costs its number of
+/// blocks, not of triangles: a leaf of 1 to 4 triangles costs one test.
 pub mod sah {
-    /// Cost of visiting an inner node (testing its two children's boxes).
+    /// Cost of visiting a binary inner node (one of the levels an 8-wide node merges).
     pub const C_TRAVERSE: f64 = 1.0;
-    /// Cost of one ray/triangle test.
+    /// Cost of testing one block of four triangles.
     pub const C_INTERSECT: f64 = 1.0;
+
+    /// Blocks of [`super::wide::BLOCK`] triangles a leaf of `n` triangles needs.
+    pub fn blocks(n: usize) -> f64 {
+        n.div_ceil(super::wide::BLOCK) as f64
+    }
 }
 
 /// Build settings. The defaults are the ones the quality report in the README chose.
@@ -182,8 +191,8 @@ pub struct Bvh {
     pub tris: Vec<[Vec3A; 3]>,
     /// For each leaf slot, the index of the triangle in the caller's list.
     pub prim_ids: Vec<u32>,
-    /// The traversal layout derived from `nodes` (see [`PairNode`]).
-    pub pairs: Vec<PairNode>,
+    /// The traversal layout derived from `nodes` (see [`wide`]).
+    pub wide: wide::WideBvh,
     /// What the build produced and how long it took.
     pub stats: BvhStats,
     /// The options it was built with.
@@ -196,6 +205,17 @@ impl Bvh {
     /// [`BvhStats::degenerate`]. Never panics or loops, whatever the input.
     pub fn build(triangles: &[[Vec3; 3]], options: &BuildOptions) -> Bvh {
         build::build(triangles, options)
+    }
+
+    /// The SIMD kernel the queries use ([`wide::Kernel::detect`] by default).
+    pub fn kernel(&self) -> wide::Kernel {
+        self.wide.kernel()
+    }
+
+    /// Chooses the kernel the queries use; an error when this CPU cannot run it. Every kernel
+    /// gives the same hits; tests and benchmarks compare them.
+    pub fn set_kernel(&mut self, kernel: wide::Kernel) -> Result<(), String> {
+        self.wide.set_kernel(kernel)
     }
 
     /// Number of triangles in the tree (excluded ones not counted).

@@ -56,7 +56,7 @@ impl BvhStats {
                 s.leaves += 1;
                 s.min_leaf_size = s.min_leaf_size.min(n.count);
                 s.max_leaf_size = s.max_leaf_size.max(n.count);
-                leaf_area += a * n.count as f64;
+                leaf_area += a * sah::blocks(n.count as usize);
             } else {
                 inner_area += a;
             }
@@ -70,7 +70,7 @@ impl BvhStats {
             (sah::C_TRAVERSE * inner_area + sah::C_INTERSECT * leaf_area) / root_area
         } else {
             // A flat or point-like scene: every ray meeting the root tests everything.
-            sah::C_INTERSECT * s.triangles as f64
+            sah::C_INTERSECT * sah::blocks(s.triangles)
         };
         s
     }

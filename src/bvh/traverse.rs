@@ -1,9 +1,9 @@
-//! Stack-based traversal: closest hit (nearer child first), any hit, transmittance, and a
-//! visiting variant that reports what it touched.
+//! The queries: closest hit, any hit, transmittance and every hit over the 8-wide layout
+//! ([`super::wide`]), and a visiting variant over the binary tree of record that reports what
+//! it touched.
 
 use glam::Vec3;
 
-use super::pairs::{RayLanes, by_octant, hits, test_pair};
 use super::{Bvh, BvhNode, MAX_DEPTH};
 use crate::geometry::{PreparedRay, Ray, intersect_triangle, intersect_triangle_t};
 
@@ -39,10 +39,7 @@ pub enum Visit {
     },
 }
 
-/// Boxes are culled only when they start clearly beyond the best hit so far: the slack keeps a
-/// box whose entry distance rounds a hair past an equally distant hit, so ties in `t` still go
-/// to the lowest triangle index exactly as brute force decides them.
-const CULL_SLACK: f32 = 1.0 + 1.0 / 65536.0;
+use super::wide::traverse::CULL_SLACK;
 
 /// Entry distance of the box if the ray meets it before `limit`, else `+inf`.
 #[inline(always)]
@@ -65,35 +62,27 @@ impl Bvh {
     }
 
     /// [`Bvh::intersect`] for a ray already prepared (saves the setup when one ray is traced
-    /// against several structures).
+    /// against several structures). A ray with a NaN or infinite origin or direction, or a zero
+    /// direction, hits nothing and walks no tree.
     #[inline]
     pub fn intersect_prepared(&self, ray: &PreparedRay, t_max: f32) -> Option<Hit> {
-        if self.tris.is_empty() || t_max.is_nan() || t_max <= 0.0 {
+        if self.tris.is_empty() || t_max.is_nan() || t_max <= 0.0 || !ray.is_valid() {
             return None;
         }
-        if enter(&self.nodes[0], ray, t_max) == f32::INFINITY {
+        let best = self.wide.closest(ray, t_max);
+        if best.prim == u32::MAX || best.t.is_nan() || best.t >= t_max {
             return None;
         }
-        let mut best = Best {
-            t: t_max,
-            slot: usize::MAX,
-            id: u32::MAX,
-        };
-        if self.pairs.is_empty() {
-            self.closest_in_leaf(ray, 0, self.tris.len() as u32, &mut best);
-        } else {
-            by_octant!(ray.neg_mask, closest_pairs, self, ray, &mut best);
-        }
-        self.finish(ray, &best, t_max)
+        Some(Hit {
+            t: best.t,
+            prim: best.prim,
+            u: best.u,
+            v: best.v,
+        })
     }
 
-    /// Tests a leaf's triangles, keeping the closest (lowest index on ties).
-    #[inline(always)]
-    fn closest_in_leaf(&self, ray: &PreparedRay, first: u32, count: u32, best: &mut Best) {
-        self.closest_in_leaf_seen(ray, first, count, best, &mut |_, _| {});
-    }
-
-    /// [`Bvh::closest_in_leaf`], telling `seen(prim, hit)` about every triangle tested.
+    /// Tests a leaf's triangles, keeping the closest (lowest index on ties), telling
+    /// `seen(prim, hit)` about every triangle tested.
     #[inline(always)]
     fn closest_in_leaf_seen(
         &self,
@@ -244,147 +233,18 @@ impl Bvh {
     }
 
     /// Calls `f(prim, t)` for every triangle hit at `0 < t < t_max`, in no particular order,
-    /// until `f` returns false.
+    /// until `f` returns false. A NaN, infinite or zero ray hits nothing.
     pub fn for_each_hit(&self, ray: &Ray, t_max: f32, mut f: impl FnMut(u32, f32) -> bool) {
-        if self.tris.is_empty() || t_max.is_nan() || t_max <= 0.0 {
+        if self.tris.is_empty() || t_max.is_nan() || t_max <= 0.0 || !ray.is_valid() {
             return;
         }
-        let ray = PreparedRay::new(ray);
-        if enter(&self.nodes[0], &ray, t_max) == f32::INFINITY {
-            return;
-        }
-        if self.pairs.is_empty() {
-            self.hits_in_leaf(&ray, 0, self.tris.len() as u32, t_max, &mut f);
-        } else {
-            by_octant!(ray.neg_mask, all_hits_pairs, self, &ray, t_max, &mut f);
-        }
-    }
-
-    /// Reports a leaf's hits; false when `f` asked to stop.
-    #[inline(always)]
-    fn hits_in_leaf(
-        &self,
-        ray: &PreparedRay,
-        first: u32,
-        count: u32,
-        t_max: f32,
-        f: &mut impl FnMut(u32, f32) -> bool,
-    ) -> bool {
-        for slot in first as usize..(first + count) as usize {
-            let t = intersect_triangle_t(ray, &self.tris[slot], t_max);
-            if t < t_max && !f(self.prim_ids[slot], t) {
-                return false;
-            }
-        }
-        true
+        self.wide.each_hit(&PreparedRay::new(ray), t_max, &mut f);
     }
 }
 
-/// The best hit so far of a closest-hit traversal.
+/// The best hit so far of the visiting traversal.
 struct Best {
     t: f32,
     slot: usize,
     id: u32,
-}
-
-/// Closest hit over the pair layout, nearer child first (the root box was already entered).
-/// Stack entries are children still to visit, inner or leaf, with their entry distance.
-#[inline(always)]
-fn closest_pairs<const NX: bool, const NY: bool, const NZ: bool>(
-    bvh: &Bvh,
-    ray: &PreparedRay,
-    best: &mut Best,
-) {
-    let lanes = RayLanes::new(ray);
-    let pairs = &bvh.pairs[..];
-    // Entries name a child by its parent pair and slot (`pair * 2 + slot`), with its entry
-    // distance: 8 bytes, so the stack a ray starts with is small to set up.
-    let mut stack = [(0u32, 0.0f32); MAX_DEPTH];
-    let mut sp = 0usize;
-    let mut current = 0u32;
-    'descend: loop {
-        let n = &pairs[current as usize];
-        let acc = test_pair::<NX, NY, NZ>(n, &lanes, best.t * CULL_SLACK);
-        let (d0, d1) = (acc.x, acc.y);
-        let pick = match hits(acc) {
-            0 => None,
-            1 => Some(0),
-            2 => Some(1),
-            _ => {
-                let (near, far, far_d) = if d1 < d0 { (1, 0, d0) } else { (0, 1, d1) };
-                stack[sp] = (current * 2 + far, far_d);
-                sp += 1;
-                Some(near as usize)
-            }
-        };
-        if let Some(k) = pick {
-            if n.count[k] == 0 {
-                current = n.child[k];
-                continue 'descend;
-            }
-            bvh.closest_in_leaf(ray, n.child[k], n.count[k], best);
-        }
-        // Pop, skipping entries that now start beyond the best hit; leaves are tested here.
-        loop {
-            if sp == 0 {
-                return;
-            }
-            sp -= 1;
-            let (entry, dist) = stack[sp];
-            if dist > best.t * CULL_SLACK {
-                continue;
-            }
-            let parent = &pairs[(entry / 2) as usize];
-            let k = (entry & 1) as usize;
-            if parent.count[k] == 0 {
-                current = parent.child[k];
-                continue 'descend;
-            }
-            bvh.closest_in_leaf(ray, parent.child[k], parent.count[k], best);
-        }
-    }
-}
-
-/// Every hit over the pair layout; stops when `f` returns false.
-#[inline(always)]
-fn all_hits_pairs<const NX: bool, const NY: bool, const NZ: bool>(
-    bvh: &Bvh,
-    ray: &PreparedRay,
-    t_max: f32,
-    f: &mut impl FnMut(u32, f32) -> bool,
-) {
-    let lanes = RayLanes::new(ray);
-    let pairs = &bvh.pairs[..];
-    let mut stack = [0u32; MAX_DEPTH];
-    let mut sp = 0usize;
-    let mut current = 0u32;
-    loop {
-        let n = &pairs[current as usize];
-        let mask = hits(test_pair::<NX, NY, NZ>(n, &lanes, t_max));
-        let mut next = u32::MAX;
-        for k in 0..2 {
-            if mask & (1 << k) == 0 {
-                continue;
-            }
-            if n.count[k] > 0 {
-                if !bvh.hits_in_leaf(ray, n.child[k], n.count[k], t_max, f) {
-                    return;
-                }
-            } else if next == u32::MAX {
-                next = n.child[k];
-            } else {
-                stack[sp] = n.child[k];
-                sp += 1;
-            }
-        }
-        if next != u32::MAX {
-            current = next;
-            continue;
-        }
-        if sp == 0 {
-            return;
-        }
-        sp -= 1;
-        current = stack[sp];
-    }
 }

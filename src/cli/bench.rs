@@ -1,4 +1,5 @@
-//! `tracery bench`: build and trace the canonical camera rays with our builders and obvhs.
+//! `tracery bench`: build and trace the canonical camera rays with our BVH, Embree (with the
+//! `embree` feature) and obvhs.
 
 use std::path::{Path, PathBuf};
 
@@ -26,9 +27,12 @@ pub struct BenchArgs {
     /// Largest leaf size for our builders.
     #[arg(long, default_value_t = BuildOptions::DEFAULT_LEAF_SIZE)]
     leaf_size: u32,
-    /// Leave out the obvhs peer.
+    /// Leave out every peer (Embree and obvhs).
     #[arg(long)]
     no_peers: bool,
+    /// Leave out the obvhs peer.
+    #[arg(long)]
+    no_obvhs: bool,
     /// Print a JSON array (one object per engine and thread count) instead of tables.
     #[arg(long)]
     json: bool,
@@ -72,8 +76,15 @@ pub fn run(a: BenchArgs) -> Result<()> {
         threads,
         repeat: a.repeat,
         ours: BenchConfig::ours(options),
-        peers: !a.no_peers,
+        obvhs: !a.no_peers && !a.no_obvhs,
+        embree: !a.no_peers,
     };
+    if config.embree && !BenchConfig::embree_available() {
+        eprintln!(
+            "note: built without the `embree` feature, so Embree is not measured \
+             (apt-get install libembree-dev, then cargo build --release --features embree)"
+        );
+    }
 
     let sources: Vec<Option<PathBuf>> = if a.meshes.is_empty() {
         vec![None]
@@ -100,16 +111,21 @@ pub fn run(a: BenchArgs) -> Result<()> {
             bench::write_rays(&p, &rays)?;
             eprintln!("wrote rays to {}", p.display());
         }
-        let out = bench::run(&scene.name, tris, &rays, &config, &mut |line| {
-            eprintln!("  {line}")
-        });
+        let out = bench::run(
+            &scene.name,
+            tris,
+            &rays,
+            bench::CANONICAL_SIZE as usize,
+            &config,
+            &mut |line| eprintln!("  {line}"),
+        )?;
         if let Some(p) = &a.hits_out {
             let p = ensure_parent(&per_mesh(p, &scene.name, several))?;
             bench::write_hits(&p, &out.sah_hits)?;
             eprintln!("wrote tracery-sah hits to {}", p.display());
         }
         if !a.json {
-            print_table(&scene.name, tris.len(), &out.results);
+            print_table(&scene.name, tris.len(), out.excluded, &out.results);
         }
         all_results.extend(out.results);
     }
@@ -119,8 +135,16 @@ pub fn run(a: BenchArgs) -> Result<()> {
     Ok(())
 }
 
-fn print_table(mesh: &str, triangles: usize, rows: &[EngineResult]) {
-    println!("\n{mesh} ({triangles} triangles), canonical camera 1024x1024, best of runs");
+fn print_table(mesh: &str, triangles: usize, excluded: usize, rows: &[EngineResult]) {
+    let left_out = if excluded > 0 {
+        format!(", {excluded} with NaN or infinite vertices left out for every engine")
+    } else {
+        String::new()
+    };
+    println!(
+        "\n{mesh} ({triangles} triangles{left_out}), canonical camera 1024x1024, best of runs; tracery kernel {}",
+        tracery::bvh::wide::Kernel::detect()
+    );
     println!(
         "{:<15} {:>7} {:>9} {:>7} {:>8} {:>9} {:>13} {:>14} {:>9}",
         "engine",
@@ -163,11 +187,16 @@ fn print_table(mesh: &str, triangles: usize, rows: &[EngineResult]) {
         t.dedup();
         t
     };
-    for peer in ["obvhs-bvh2", "obvhs-cwbvh"] {
+    for (ours, peer) in [
+        ("tracery-sah", "embree"),
+        ("tracery-packet", "embree-packet16"),
+        ("tracery-sah", "obvhs-bvh2"),
+        ("tracery-sah", "obvhs-cwbvh"),
+    ] {
         for &t in &threads {
-            if let (Some(us), Some(them)) = (find("tracery-sah", t), find(peer, t)) {
+            if let (Some(us), Some(them)) = (find(ours, t), find(peer, t)) {
                 println!(
-                    "tracery-sah / {peer} ({t} thread{}): build time {:.2}x, closest {:.2}x, occluded {:.2}x",
+                    "{ours} / {peer} ({t} thread{}): build time {:.2}x, closest {:.2}x, occluded {:.2}x",
                     if t == 1 { "" } else { "s" },
                     us.build_ms / them.build_ms,
                     us.closest_mrays / them.closest_mrays,

@@ -50,12 +50,13 @@ pub fn run(a: ReportArgs) -> Result<()> {
 }
 
 /// Runs the benchmark on the scene's canonical camera rays, progress on stderr.
-fn measure(scene: &Scene, config: &BenchConfig) -> bench::MeshBench {
+fn measure(scene: &Scene, config: &BenchConfig) -> Result<bench::MeshBench> {
     let rays = bench::canonical_rays(&scene.mesh.bounds());
     bench::run(
         &scene.name,
         &scene.mesh.triangles,
         &rays,
+        bench::CANONICAL_SIZE as usize,
         config,
         &mut |l| eprintln!("  {l}"),
     )
@@ -82,10 +83,11 @@ fn splits(meshes: Vec<PathBuf>, repeat: usize) -> Result<()> {
             threads: vec![1, cores],
             repeat,
             ours: BenchConfig::ours(BuildOptions::sah()),
-            peers: false,
+            obvhs: false,
+            embree: false,
         };
         eprintln!("{}: measuring", scene.name);
-        let out = measure(&scene, &config);
+        let out = measure(&scene, &config)?;
         for split in [SplitMethod::Median, SplitMethod::Sah] {
             let engine = format!("tracery-{split}");
             let row = |t: usize| {
@@ -149,9 +151,10 @@ fn bins_table(mesh: PathBuf, bins: Vec<u32>, repeat: usize) -> Result<()> {
         threads: vec![1],
         repeat,
         ours,
-        peers: false,
+        obvhs: false,
+        embree: false,
     };
-    let out = measure(&scene, &config);
+    let out = measure(&scene, &config)?;
     println!("| bins | build ms | SAH cost | levels | leaves | closest Mrays/s (1 thread) |");
     println!("|---:|---:|---:|---:|---:|---:|");
     for (b, r) in bins.iter().zip(&out.results) {

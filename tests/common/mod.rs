@@ -75,9 +75,9 @@ pub fn random_rays(tris: &[[Vec3; 3]], count: usize, seed: u64) -> Vec<Ray> {
         .collect()
 }
 
-/// Checks BVHs against brute force on every ray: same hit or miss, same triangle, `t` equal
-/// within 1e-6 relative. Brute force runs once per ray for all the BVHs. Panics with the
-/// first few differences.
+/// Checks BVHs against brute force on every ray: same hit or miss, same triangle, and the same
+/// `t`, `u` and `v` bit for bit (every kernel computes the reference test's operations).
+/// Brute force runs once per ray for all the BVHs. Panics with the first few differences.
 pub fn assert_matches_brute_force(what: &str, tris: &[[Vec3; 3]], bvhs: &[&Bvh], rays: &[Ray]) {
     let reference = BruteForce::new(tris);
     let bad: Vec<(usize, usize, Option<Hit>, Option<Hit>)> = rays
@@ -91,7 +91,9 @@ pub fn assert_matches_brute_force(what: &str, tris: &[[Vec3; 3]], bvhs: &[&Bvh],
                     (None, None) => true,
                     (Some(a), Some(b)) => {
                         a.prim == b.prim
-                            && (a.t - b.t).abs() <= 1e-6 * b.t.abs().max(f32::MIN_POSITIVE)
+                            && a.t.to_bits() == b.t.to_bits()
+                            && a.u.to_bits() == b.u.to_bits()
+                            && a.v.to_bits() == b.v.to_bits()
                     }
                     _ => false,
                 };
@@ -111,6 +113,26 @@ pub fn assert_matches_brute_force(what: &str, tris: &[[Vec3; 3]], bvhs: &[&Bvh],
 /// Both builders with their default settings.
 pub fn both_builders() -> [BuildOptions; 2] {
     [BuildOptions::sah(), BuildOptions::median()]
+}
+
+/// The BVH once per kernel this CPU runs (scalar, SSE2, AVX2), named for messages.
+pub fn every_kernel(bvh: &Bvh) -> Vec<(String, Bvh)> {
+    tracery::bvh::wide::Kernel::available()
+        .into_iter()
+        .map(|k| {
+            let mut b = bvh.clone();
+            b.set_kernel(k).expect("an available kernel");
+            (format!("{:?}/{k}", bvh.options.split), b)
+        })
+        .collect()
+}
+
+/// Both builders, each with every kernel.
+pub fn all_bvhs(tris: &[[Vec3; 3]]) -> Vec<(String, Bvh)> {
+    both_builders()
+        .iter()
+        .flat_map(|o| every_kernel(&Bvh::build(tris, o)))
+        .collect()
 }
 
 /// `n` triangles fanned around the vertex `c` in the plane z = c.z, out to radius 1. The ring

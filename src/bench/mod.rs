@@ -1,5 +1,15 @@
 //! The benchmark of DESIGN.md: canonical camera rays, the rays and hits file formats, and our
-//! builders traced side by side with the `obvhs` crate on the same rays.
+//! BVH traced side by side with the engines users would pick instead, on the same rays:
+//! Embree 3 ([`embree`], single rays and its own coherent 16-ray packets; cargo feature
+//! `embree`) and the `obvhs` crate ([`obvhs`]).
+//!
+//! Triangles with a NaN or infinite vertex are left out before any engine sees them (some
+//! peers would index out of bounds on them), and counted.
+
+#[cfg(feature = "embree")]
+pub mod embree;
+mod engines;
+mod obvhs;
 
 use std::io::{BufReader, BufWriter, Read, Write};
 use std::path::Path;
@@ -7,13 +17,13 @@ use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result, bail};
 use glam::Vec3;
-use rayon::prelude::*;
 use serde::Serialize;
 
 use crate::bvh::{BuildOptions, Bvh, BvhStats, SplitMethod};
 use crate::camera::CameraRays;
 use crate::geometry::{Aabb, Ray};
 use crate::scene::Camera;
+use engines::Engine;
 
 /// Side of the square benchmark image.
 pub const CANONICAL_SIZE: u32 = 1024;
@@ -104,11 +114,11 @@ pub fn write_hits(path: &Path, hits: &[HitRecord]) -> Result<()> {
 /// One engine's figures on one mesh at one thread count.
 #[derive(Clone, Debug, Serialize)]
 pub struct EngineResult {
-    /// `tracery-sah`, `tracery-median`, `obvhs-bvh2` or `obvhs-cwbvh`.
+    /// `tracery-sah`, `tracery-median`, `embree`, `embree-packet16`, `obvhs-bvh2`, ...
     pub engine: String,
     /// Mesh name (file stem).
     pub mesh: String,
-    /// Triangles in the mesh.
+    /// Triangles the engines were given (the mesh's finite triangles).
     pub triangles: usize,
     /// Threads used for tracing (builds are single-threaded for every engine).
     pub threads: usize,
@@ -136,7 +146,10 @@ pub struct BenchConfig {
     /// Our engines: a name and the build options of each (see [`BenchConfig::ours`]).
     pub ours: Vec<(String, BuildOptions)>,
     /// Also measure the `obvhs` crate.
-    pub peers: bool,
+    pub obvhs: bool,
+    /// Also measure Embree (single rays and 16-ray packets); ignored without the `embree`
+    /// feature.
+    pub embree: bool,
 }
 
 impl BenchConfig {
@@ -147,91 +160,11 @@ impl BenchConfig {
             .map(|s| (format!("tracery-{s}"), options.with_split(s)))
             .into()
     }
-}
 
-/// A ray tracing engine under test: built once, traced many times.
-trait Engine: Sync + Send {
-    fn closest(&self, ray: &Ray) -> HitRecord;
-    fn occluded(&self, ray: &Ray) -> bool;
-}
-
-impl Engine for Bvh {
-    fn closest(&self, ray: &Ray) -> HitRecord {
-        match self.intersect(ray, f32::INFINITY) {
-            Some(h) => HitRecord {
-                t: h.t,
-                prim: h.prim,
-            },
-            None => HitRecord::MISS,
-        }
+    /// True when this build can measure Embree.
+    pub fn embree_available() -> bool {
+        cfg!(feature = "embree")
     }
-    fn occluded(&self, ray: &Ray) -> bool {
-        Bvh::occluded(self, ray, f32::INFINITY)
-    }
-}
-
-mod peers {
-    //! The `obvhs` crate's BVH2 and CWBVH, each with triangles reordered into leaf order (as
-    //! its examples recommend) and its own Möller-Trumbore triangle test.
-    use glam_obvhs::Vec3A;
-    use obvhs::ray::{Ray as ORay, RayHit};
-    use obvhs::triangle::Triangle as OTri;
-
-    use super::{Engine, HitRecord, Ray};
-
-    pub(super) fn to_otris(tris: &[[glam::Vec3; 3]]) -> Vec<OTri> {
-        let v = |p: glam::Vec3| Vec3A::new(p.x, p.y, p.z);
-        tris.iter()
-            .map(|t| OTri {
-                v0: v(t[0]),
-                v1: v(t[1]),
-                v2: v(t[2]),
-            })
-            .collect()
-    }
-
-    fn oray(r: &Ray) -> ORay {
-        ORay::new_inf(
-            Vec3A::new(r.origin.x, r.origin.y, r.origin.z),
-            Vec3A::new(r.dir.x, r.dir.y, r.dir.z),
-        )
-    }
-
-    /// An obvhs BVH with its triangles in leaf order. Both kinds have the same traversal
-    /// methods but no shared trait, hence the macro.
-    macro_rules! obvhs_engine {
-        ($name:ident, $bvh:ty) => {
-            pub(super) struct $name {
-                pub bvh: $bvh,
-                pub tris: Vec<OTri>,
-            }
-
-            impl Engine for $name {
-                fn closest(&self, ray: &Ray) -> HitRecord {
-                    let mut hit = RayHit::none();
-                    if self
-                        .bvh
-                        .ray_traverse(oray(ray), &mut hit, |r, id| self.tris[id].intersect(r))
-                    {
-                        HitRecord {
-                            t: hit.t,
-                            prim: self.bvh.primitive_indices[hit.primitive_id as usize],
-                        }
-                    } else {
-                        HitRecord::MISS
-                    }
-                }
-                fn occluded(&self, ray: &Ray) -> bool {
-                    !self
-                        .bvh
-                        .ray_traverse_miss(oray(ray), |r, id| self.tris[id].intersect(r))
-                }
-            }
-        };
-    }
-
-    obvhs_engine!(Bvh2, obvhs::bvh2::Bvh2);
-    obvhs_engine!(Cwbvh, obvhs::cwbvh::CwBvh);
 }
 
 fn pool(threads: usize) -> rayon::ThreadPool {
@@ -239,25 +172,6 @@ fn pool(threads: usize) -> rayon::ThreadPool {
         .num_threads(threads)
         .build()
         .expect("a thread pool can be made")
-}
-
-/// Closest hits of all rays on the current rayon pool.
-fn trace_closest(engine: &dyn Engine, rays: &[Ray]) -> Vec<HitRecord> {
-    let mut out = vec![HitRecord::MISS; rays.len()];
-    out.par_chunks_mut(1024)
-        .zip(rays.par_chunks(1024))
-        .for_each(|(o, r)| {
-            for (o, r) in o.iter_mut().zip(r) {
-                *o = engine.closest(r);
-            }
-        });
-    out
-}
-
-fn trace_occluded(engine: &dyn Engine, rays: &[Ray]) -> usize {
-    rays.par_chunks(1024)
-        .map(|r| r.iter().filter(|r| engine.occluded(r)).count())
-        .sum()
 }
 
 fn agreement(a: &[HitRecord], b: &[HitRecord]) -> f64 {
@@ -271,8 +185,11 @@ fn agreement(a: &[HitRecord], b: &[HitRecord]) -> f64 {
 pub struct MeshBench {
     /// One row per engine and thread count.
     pub results: Vec<EngineResult>,
-    /// The first engine's closest hits on the canonical rays (`tracery-sah` by default).
+    /// The first engine's closest hits on the canonical rays (`tracery-sah` by default), with
+    /// triangle indices of the caller's list.
     pub sah_hits: Vec<HitRecord>,
+    /// Triangles left out before the engines were built (a NaN or infinite vertex).
+    pub excluded: usize,
 }
 
 /// A built engine under test and its best build time.
@@ -283,10 +200,12 @@ struct Entry {
     engine: Box<dyn Engine>,
 }
 
-/// Builds one engine: its name, the engine, its stats (ours only).
-type Builder<'a> = Box<dyn Fn() -> (Box<dyn Engine>, Option<BvhStats>) + Send + Sync + 'a>;
+/// Builds one engine: the engine and its stats (ours only); an error when a peer cannot be
+/// built (Embree's library refusing the CPU, say).
+type Builder<'a> = Box<dyn Fn() -> Result<(Box<dyn Engine>, Option<BvhStats>)> + Send + Sync + 'a>;
 
-/// Builds every engine over `triangles` and traces `rays` with each thread count.
+/// Builds every engine over the finite triangles of `triangles` and traces `rays` (a row-major
+/// image `width` rays wide, which packet engines trace in tiles) with each thread count.
 /// `progress` receives a line per step.
 ///
 /// Measurements are interleaved: each round builds every engine once, then traces with every
@@ -297,9 +216,25 @@ pub fn run(
     mesh_name: &str,
     triangles: &[[Vec3; 3]],
     rays: &[Ray],
+    width: usize,
     config: &BenchConfig,
     progress: &mut dyn FnMut(&str),
-) -> MeshBench {
+) -> Result<MeshBench> {
+    // Only finite triangles reach the engines; `ids` maps their indices back.
+    let (finite, ids): (Vec<[Vec3; 3]>, Vec<u32>) = triangles
+        .iter()
+        .enumerate()
+        .filter(|(_, t)| t.iter().all(|v| v.is_finite()))
+        .map(|(i, t)| (*t, i as u32))
+        .unzip();
+    let excluded = triangles.len() - finite.len();
+    if excluded > 0 {
+        progress(&format!(
+            "{mesh_name}: {excluded} triangles with NaN or infinite vertices left out for every engine"
+        ));
+    }
+    let tris = &finite[..];
+
     let one = pool(1);
     let mut builders: Vec<(String, Builder)> = Vec::new();
     for (name, options) in &config.ours {
@@ -307,53 +242,45 @@ pub fn run(
         builders.push((
             name.clone(),
             Box::new(move || {
-                let bvh = Bvh::build(triangles, &options);
+                let bvh = Bvh::build(tris, &options);
                 let stats = bvh.stats;
-                (Box::new(bvh) as Box<dyn Engine>, Some(stats))
+                Ok((Box::new(bvh) as Box<dyn Engine>, Some(stats)))
             }),
         ));
     }
-    if config.peers {
-        let otris = std::sync::Arc::new(peers::to_otris(triangles));
-        // Each obvhs kind: build with the medium preset, then put its triangles in leaf order.
-        macro_rules! peer {
-            ($name:literal, $build:path, $engine:ident) => {{
-                let o = otris.clone();
-                builders.push((
-                    $name.into(),
-                    Box::new(move || {
-                        let bvh = $build(
-                            &o,
-                            obvhs::BvhBuildParams::medium_build(),
-                            &mut Duration::default(),
-                        );
-                        let tris = bvh
-                            .primitive_indices
-                            .iter()
-                            .map(|&i| o[i as usize])
-                            .collect();
-                        (
-                            Box::new(peers::$engine { bvh, tris }) as Box<dyn Engine>,
-                            None,
-                        )
-                    }),
-                ));
-            }};
-        }
-        peer!(
-            "obvhs-bvh2",
-            obvhs::bvh2::builder::build_bvh2_from_tris,
-            Bvh2
-        );
-        peer!(
-            "obvhs-cwbvh",
-            obvhs::cwbvh::builder::build_cwbvh_from_tris,
-            Cwbvh
-        );
+    #[cfg(feature = "embree")]
+    if config.embree {
+        builders.push((
+            "embree".into(),
+            Box::new(move || {
+                Ok((
+                    Box::new(embree::Embree::build(tris)?) as Box<dyn Engine>,
+                    None,
+                ))
+            }),
+        ));
+        builders.push((
+            "embree-packet16".into(),
+            Box::new(move || {
+                let e = embree::EmbreePackets(embree::Embree::build(tris)?);
+                Ok((Box::new(e) as Box<dyn Engine>, None))
+            }),
+        ));
+    }
+    if config.obvhs {
+        builders.push((
+            "obvhs-bvh2".into(),
+            Box::new(move || Ok((Box::new(obvhs::Bvh2::build(tris)) as Box<dyn Engine>, None))),
+        ));
+        builders.push((
+            "obvhs-cwbvh".into(),
+            Box::new(move || Ok((Box::new(obvhs::Cwbvh::build(tris)) as Box<dyn Engine>, None))),
+        ));
     }
 
-    // Builds, on one thread, interleaved. The obvhs build time is the builder call alone;
-    // ours includes copying the triangles into leaf order.
+    // Builds, on one thread, interleaved. A peer's build time is its builder call (plus
+    // putting its triangles in leaf order for obvhs); ours includes copying the triangles into
+    // leaf order and the 8-wide layout.
     let mut entries: Vec<Entry> = Vec::new();
     for round in 0..config.repeat.max(1) {
         for (k, (name, build)) in builders.iter().enumerate() {
@@ -362,7 +289,7 @@ pub fn run(
                 round + 1
             ));
             let start = Instant::now();
-            let (engine, stats) = one.install(build);
+            let (engine, stats) = one.install(build)?;
             let ms = start.elapsed().as_secs_f64() * 1e3;
             match entries.get_mut(k) {
                 Some(e) => {
@@ -393,17 +320,26 @@ pub fn run(
                 let k = e * pools.len() + p;
                 let engine = &*entry.engine;
                 let start = Instant::now();
-                let h = pool.install(|| trace_closest(engine, rays));
+                let h = pool.install(|| engines::trace_closest(engine, rays, width));
                 closest[k] = closest[k].min(start.elapsed());
                 hits[k] = Some(h);
                 let start = Instant::now();
-                pool.install(|| trace_occluded(engine, rays));
+                pool.install(|| engines::trace_occluded(engine, rays, width));
                 occluded[k] = occluded[k].min(start.elapsed());
             }
         }
     }
 
-    let reference = hits[0].clone().unwrap_or_default();
+    // Hits name triangles of the caller's list.
+    let map_back = |h: &[HitRecord]| -> Vec<HitRecord> {
+        h.iter()
+            .map(|r| match ids.get(r.prim as usize) {
+                Some(&id) => HitRecord { t: r.t, prim: id },
+                None => *r,
+            })
+            .collect()
+    };
+    let reference = map_back(hits[0].as_deref().unwrap_or_default());
     let mut results = Vec::new();
     for (e, entry) in entries.iter().enumerate() {
         for (p, (threads, _)) in pools.iter().enumerate() {
@@ -415,18 +351,22 @@ pub fn run(
             results.push(EngineResult {
                 engine: entry.name.clone(),
                 mesh: mesh_name.to_string(),
-                triangles: triangles.len(),
+                triangles: finite.len(),
                 threads: *threads,
                 build_ms: entry.build_ms,
                 closest_mrays: rays.len() as f64 / closest[k].as_secs_f64() / 1e6,
                 occluded_mrays: rays.len() as f64 / occluded[k].as_secs_f64() / 1e6,
-                agreement: agreement(&reference, hits[k].as_deref().unwrap_or_default()),
+                agreement: agreement(
+                    &reference,
+                    &map_back(hits[k].as_deref().unwrap_or_default()),
+                ),
                 stats,
             });
         }
     }
-    MeshBench {
+    Ok(MeshBench {
         results,
         sah_hits: reference,
-    }
+        excluded,
+    })
 }

@@ -1,0 +1,401 @@
+//! Embree 3 (Debian's `libembree-dev`), the engine users would pick instead, through the few
+//! functions a benchmark needs: a device, a scene of one triangle geometry at medium build
+//! quality, `rtcIntersect1` / `rtcOccluded1` for single rays and `rtcIntersect16` /
+//! `rtcOccluded16` for coherent 4x4-pixel packets.
+//!
+//! Only the `embree` cargo feature compiles this module (it links `libembree3`). The struct
+//! layouts follow `embree3/rtcore_ray.h` and `rtcore_common.h` of Embree 3.13 with
+//! `RTC_MAX_INSTANCE_LEVEL_COUNT` 1 and `RTC_MIN_WIDTH` 0, Debian's configuration; a test checks
+//! the hits against brute force.
+#![allow(
+    unsafe_code,
+    reason = "FFI to the Embree C library, each call's contract noted"
+)]
+
+use std::ffi::{c_char, c_int, c_uint, c_void};
+
+use anyhow::{Result, bail};
+use glam::Vec3;
+
+use super::HitRecord;
+use super::engines::Engine;
+use crate::geometry::Ray;
+
+type RtcDevice = *mut c_void;
+type RtcScene = *mut c_void;
+type RtcGeometry = *mut c_void;
+
+const RTC_INVALID_GEOMETRY_ID: c_uint = u32::MAX;
+const RTC_GEOMETRY_TYPE_TRIANGLE: c_int = 0;
+const RTC_BUFFER_TYPE_INDEX: c_int = 0;
+const RTC_BUFFER_TYPE_VERTEX: c_int = 1;
+const RTC_FORMAT_UINT3: c_int = 0x5003;
+const RTC_FORMAT_FLOAT3: c_int = 0x9003;
+const RTC_BUILD_QUALITY_MEDIUM: c_int = 1;
+const RTC_INTERSECT_CONTEXT_FLAG_INCOHERENT: c_int = 0;
+const RTC_INTERSECT_CONTEXT_FLAG_COHERENT: c_int = 1;
+
+/// `struct RTCRay`.
+#[repr(C, align(16))]
+#[derive(Clone, Copy, Default)]
+struct RtcRay {
+    org: [f32; 3],
+    tnear: f32,
+    dir: [f32; 3],
+    time: f32,
+    tfar: f32,
+    mask: c_uint,
+    id: c_uint,
+    flags: c_uint,
+}
+
+/// `struct RTCHit`.
+#[repr(C, align(16))]
+#[derive(Clone, Copy, Default)]
+struct RtcHit {
+    ng: [f32; 3],
+    u: f32,
+    v: f32,
+    prim_id: c_uint,
+    geom_id: c_uint,
+    inst_id: [c_uint; 1],
+}
+
+/// `struct RTCRayHit`.
+#[repr(C)]
+#[derive(Clone, Copy, Default)]
+struct RtcRayHit {
+    ray: RtcRay,
+    hit: RtcHit,
+}
+
+/// `struct RTCRay16`.
+#[repr(C, align(64))]
+struct RtcRay16 {
+    org: [[f32; 16]; 3],
+    tnear: [f32; 16],
+    dir: [[f32; 16]; 3],
+    time: [f32; 16],
+    tfar: [f32; 16],
+    mask: [c_uint; 16],
+    id: [c_uint; 16],
+    flags: [c_uint; 16],
+}
+
+/// `struct RTCHit16`.
+#[repr(C, align(64))]
+struct RtcHit16 {
+    ng: [[f32; 16]; 3],
+    u: [f32; 16],
+    v: [f32; 16],
+    prim_id: [c_uint; 16],
+    geom_id: [c_uint; 16],
+    inst_id: [[c_uint; 16]; 1],
+}
+
+/// `struct RTCRayHit16`.
+#[repr(C)]
+struct RtcRayHit16 {
+    ray: RtcRay16,
+    hit: RtcHit16,
+}
+
+/// `struct RTCIntersectContext` (as `rtcInitIntersectContext` fills it).
+#[repr(C)]
+struct RtcIntersectContext {
+    flags: c_int,
+    filter: Option<unsafe extern "C" fn(*const c_void)>,
+    inst_id: [c_uint; 1],
+}
+
+impl RtcIntersectContext {
+    fn new(flags: c_int) -> Self {
+        Self {
+            flags,
+            filter: None,
+            inst_id: [RTC_INVALID_GEOMETRY_ID],
+        }
+    }
+}
+
+#[link(name = "embree3")]
+unsafe extern "C" {
+    fn rtcNewDevice(config: *const c_char) -> RtcDevice;
+    fn rtcReleaseDevice(device: RtcDevice);
+    fn rtcGetDeviceError(device: RtcDevice) -> c_int;
+    fn rtcNewScene(device: RtcDevice) -> RtcScene;
+    fn rtcReleaseScene(scene: RtcScene);
+    fn rtcSetSceneBuildQuality(scene: RtcScene, quality: c_int);
+    fn rtcNewGeometry(device: RtcDevice, kind: c_int) -> RtcGeometry;
+    fn rtcSetNewGeometryBuffer(
+        geometry: RtcGeometry,
+        kind: c_int,
+        slot: c_uint,
+        format: c_int,
+        byte_stride: usize,
+        item_count: usize,
+    ) -> *mut c_void;
+    fn rtcCommitGeometry(geometry: RtcGeometry);
+    fn rtcAttachGeometry(scene: RtcScene, geometry: RtcGeometry) -> c_uint;
+    fn rtcReleaseGeometry(geometry: RtcGeometry);
+    fn rtcCommitScene(scene: RtcScene);
+    fn rtcIntersect1(scene: RtcScene, context: *mut RtcIntersectContext, rayhit: *mut RtcRayHit);
+    fn rtcOccluded1(scene: RtcScene, context: *mut RtcIntersectContext, ray: *mut RtcRay);
+    fn rtcIntersect16(
+        valid: *const c_int,
+        scene: RtcScene,
+        context: *mut RtcIntersectContext,
+        rayhit: *mut RtcRayHit16,
+    );
+    fn rtcOccluded16(
+        valid: *const c_int,
+        scene: RtcScene,
+        context: *mut RtcIntersectContext,
+        ray: *mut RtcRay16,
+    );
+}
+
+/// An Embree device and a committed scene over a triangle list (one thread for the build, as
+/// our builds are measured; tracing runs on whatever threads call it).
+pub struct Embree {
+    device: RtcDevice,
+    scene: RtcScene,
+}
+
+// SAFETY: Embree documents a committed scene as safe to trace from any number of threads at
+// once, and the device and scene handles are only released in `drop`.
+unsafe impl Send for Embree {}
+// SAFETY: as above; `&Embree` only reaches the thread-safe trace calls.
+unsafe impl Sync for Embree {}
+
+impl Embree {
+    /// Builds the scene at medium quality on one thread. Triangles must be finite (the
+    /// benchmark leaves out the others before any engine sees them).
+    pub fn build(triangles: &[[Vec3; 3]]) -> Result<Embree> {
+        let config = c"threads=1";
+        // SAFETY: `config` is a NUL-terminated string that outlives the call.
+        let device = unsafe { rtcNewDevice(config.as_ptr()) };
+        if device.is_null() {
+            bail!("Embree: rtcNewDevice failed (is libembree3 installed and the CPU supported?)");
+        }
+        // From here `Drop` releases the device (and the scene once it is set).
+        let mut e = Embree {
+            device,
+            scene: std::ptr::null_mut(),
+        };
+        // SAFETY: `device` is a live device handle.
+        e.scene = unsafe { rtcNewScene(device) };
+        if e.scene.is_null() {
+            bail!("Embree: rtcNewScene failed ({})", e.error());
+        }
+        // SAFETY: `e.scene` is a live scene handle.
+        unsafe { rtcSetSceneBuildQuality(e.scene, RTC_BUILD_QUALITY_MEDIUM) };
+        let n = triangles.len();
+        // SAFETY: `device` is live; the geometry is released below after attaching.
+        let geometry = unsafe { rtcNewGeometry(device, RTC_GEOMETRY_TYPE_TRIANGLE) };
+        if geometry.is_null() {
+            bail!("Embree: rtcNewGeometry failed ({})", e.error());
+        }
+        // SAFETY: `geometry` is live; Embree allocates (with its own padding) and returns
+        // buffers of `3 n` float3 and `n` uint3 items, or null on failure.
+        let (vertices, indices) = unsafe {
+            (
+                rtcSetNewGeometryBuffer(
+                    geometry,
+                    RTC_BUFFER_TYPE_VERTEX,
+                    0,
+                    RTC_FORMAT_FLOAT3,
+                    12,
+                    3 * n,
+                ) as *mut f32,
+                rtcSetNewGeometryBuffer(geometry, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3, 12, n)
+                    as *mut u32,
+            )
+        };
+        if n > 0 && (vertices.is_null() || indices.is_null()) {
+            // SAFETY: `geometry` is live and not attached.
+            unsafe { rtcReleaseGeometry(geometry) };
+            bail!(
+                "Embree: cannot allocate buffers for {n} triangles ({})",
+                e.error()
+            );
+        }
+        if n > 0 {
+            // SAFETY: the buffers hold exactly `9 n` floats and `3 n` u32 (allocated above
+            // with those item counts and strides), are suitably aligned by Embree, and nothing
+            // else refers to them yet.
+            let (v, i) = unsafe {
+                (
+                    std::slice::from_raw_parts_mut(vertices, 9 * n),
+                    std::slice::from_raw_parts_mut(indices, 3 * n),
+                )
+            };
+            for (k, t) in triangles.iter().enumerate() {
+                for c in 0..3 {
+                    v[9 * k + 3 * c..9 * k + 3 * c + 3].copy_from_slice(&t[c].to_array());
+                    i[3 * k + c] = (3 * k + c) as u32;
+                }
+            }
+        }
+        // SAFETY: `geometry` and `e.scene` are live; the scene keeps its own reference to the
+        // geometry, so ours is released at once.
+        unsafe {
+            rtcCommitGeometry(geometry);
+            rtcAttachGeometry(e.scene, geometry);
+            rtcReleaseGeometry(geometry);
+            rtcCommitScene(e.scene);
+        }
+        match e.error() {
+            0 => Ok(e),
+            code => bail!("Embree: the scene build failed (error {code})"),
+        }
+    }
+
+    fn error(&self) -> c_int {
+        // SAFETY: `self.device` is live until `drop`.
+        unsafe { rtcGetDeviceError(self.device) }
+    }
+}
+
+impl Drop for Embree {
+    fn drop(&mut self) {
+        // SAFETY: both handles are live (or null, which is checked) and released once.
+        unsafe {
+            if !self.scene.is_null() {
+                rtcReleaseScene(self.scene);
+            }
+            rtcReleaseDevice(self.device);
+        }
+    }
+}
+
+fn rtc_ray(r: &Ray) -> RtcRay {
+    RtcRay {
+        org: r.origin.to_array(),
+        tnear: 0.0,
+        dir: r.dir.to_array(),
+        time: 0.0,
+        tfar: f32::INFINITY,
+        mask: u32::MAX,
+        id: 0,
+        flags: 0,
+    }
+}
+
+impl Engine for Embree {
+    fn closest(&self, ray: &Ray) -> HitRecord {
+        let mut rh = RtcRayHit {
+            ray: rtc_ray(ray),
+            hit: RtcHit {
+                geom_id: RTC_INVALID_GEOMETRY_ID,
+                inst_id: [RTC_INVALID_GEOMETRY_ID],
+                ..RtcHit::default()
+            },
+        };
+        let mut ctx = RtcIntersectContext::new(RTC_INTERSECT_CONTEXT_FLAG_INCOHERENT);
+        // SAFETY: the scene is committed and live; `ctx` and `rh` are valid, aligned and
+        // exclusively borrowed for the call.
+        unsafe { rtcIntersect1(self.scene, &mut ctx, &mut rh) };
+        if rh.hit.geom_id == RTC_INVALID_GEOMETRY_ID {
+            HitRecord::MISS
+        } else {
+            HitRecord {
+                t: rh.ray.tfar,
+                prim: rh.hit.prim_id,
+            }
+        }
+    }
+
+    fn occluded(&self, ray: &Ray) -> bool {
+        let mut r = rtc_ray(ray);
+        let mut ctx = RtcIntersectContext::new(RTC_INTERSECT_CONTEXT_FLAG_INCOHERENT);
+        // SAFETY: as in `closest`.
+        unsafe { rtcOccluded1(self.scene, &mut ctx, &mut r) };
+        r.tfar == f32::NEG_INFINITY
+    }
+}
+
+/// Embree's own coherent packets: `rtcIntersect16` / `rtcOccluded16` on 4x4-pixel tiles with
+/// the coherent context flag.
+pub struct EmbreePackets(pub Embree);
+
+/// A packet of up to 16 rays (the rest of the lanes invalid).
+fn packet(rays: &[Ray]) -> (RtcRayHit16, [c_int; 16]) {
+    let mut p = RtcRayHit16 {
+        ray: RtcRay16 {
+            org: [[0.0; 16]; 3],
+            tnear: [0.0; 16],
+            dir: [[0.0; 16]; 3],
+            time: [0.0; 16],
+            tfar: [f32::INFINITY; 16],
+            mask: [u32::MAX; 16],
+            id: [0; 16],
+            flags: [0; 16],
+        },
+        hit: RtcHit16 {
+            ng: [[0.0; 16]; 3],
+            u: [0.0; 16],
+            v: [0.0; 16],
+            prim_id: [0; 16],
+            geom_id: [RTC_INVALID_GEOMETRY_ID; 16],
+            inst_id: [[RTC_INVALID_GEOMETRY_ID; 16]],
+        },
+    };
+    let mut valid = [0 as c_int; 16];
+    for (k, r) in rays.iter().enumerate().take(16) {
+        for a in 0..3 {
+            p.ray.org[a][k] = r.origin[a];
+            p.ray.dir[a][k] = r.dir[a];
+        }
+        valid[k] = -1;
+    }
+    (p, valid)
+}
+
+impl Engine for EmbreePackets {
+    fn closest(&self, ray: &Ray) -> HitRecord {
+        self.0.closest(ray)
+    }
+
+    fn occluded(&self, ray: &Ray) -> bool {
+        self.0.occluded(ray)
+    }
+
+    fn tile(&self) -> Option<u32> {
+        Some(4)
+    }
+
+    fn closest_tile(&self, rays: &[Ray], out: &mut [HitRecord]) {
+        for (rays, out) in rays.chunks(16).zip(out.chunks_mut(16)) {
+            let (mut p, valid) = packet(rays);
+            let mut ctx = RtcIntersectContext::new(RTC_INTERSECT_CONTEXT_FLAG_COHERENT);
+            // SAFETY: the scene is committed; `valid`, `ctx` and the 64-byte aligned packet are
+            // live and exclusively borrowed for the call; unused lanes are 0 in `valid`.
+            unsafe { rtcIntersect16(valid.as_ptr(), self.0.scene, &mut ctx, &mut p) };
+            for (k, o) in out.iter_mut().enumerate() {
+                *o = if p.hit.geom_id[k] == RTC_INVALID_GEOMETRY_ID {
+                    HitRecord::MISS
+                } else {
+                    HitRecord {
+                        t: p.ray.tfar[k],
+                        prim: p.hit.prim_id[k],
+                    }
+                };
+            }
+        }
+    }
+
+    fn occluded_tile(&self, rays: &[Ray]) -> usize {
+        let mut n = 0;
+        for rays in rays.chunks(16) {
+            let (mut p, valid) = packet(rays);
+            let mut ctx = RtcIntersectContext::new(RTC_INTERSECT_CONTEXT_FLAG_COHERENT);
+            // SAFETY: as in `closest_tile`; `rtcOccluded16` reads and writes the ray part only.
+            unsafe { rtcOccluded16(valid.as_ptr(), self.0.scene, &mut ctx, &mut p.ray) };
+            n += (0..rays.len())
+                .filter(|&k| p.ray.tfar[k] == f32::NEG_INFINITY)
+                .count();
+        }
+        n
+    }
+}

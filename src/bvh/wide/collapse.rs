@@ -1,0 +1,104 @@
+//! From the binary tree to 8-wide nodes, in one pass over the binary nodes (linear time).
+//!
+//! Each wide node starts from a binary inner node's two children and repeatedly opens the
+//! inner child with the largest surface area (the one a random ray is likeliest to enter),
+//! until it has eight children or only leaves are left. Binary leaves become wide leaves, their
+//! triangles cut into blocks of four. Siblings' nodes and blocks are stored side by side, and
+//! subtrees depth first.
+
+use glam::Vec3A;
+
+use super::{BLOCK, Kernel, TriBlock, WIDTH, WideBvh, WideNode};
+use crate::bvh::BvhNode;
+
+/// Collapses `nodes` (the binary tree, root at 0) over `tris` (leaf order) and `prim_ids`.
+pub fn collapse(nodes: &[BvhNode], tris: &[[Vec3A; 3]], prim_ids: &[u32]) -> WideBvh {
+    let mut out = WideBvh::default();
+    out.set_kernel(Kernel::detect())
+        .expect("the detected kernel runs here");
+    if tris.is_empty() {
+        return out;
+    }
+    let root = &nodes[0];
+    if root.is_leaf() {
+        let first = push_blocks(&mut out.blocks, root, tris, prim_ids);
+        out.root_leaf = Some((first, out.blocks.len() as u32 - first));
+        return out;
+    }
+    out.nodes.reserve(nodes.len() / 4);
+    out.blocks.reserve(tris.len() / BLOCK + nodes.len() / 8);
+    out.nodes.push(WideNode::EMPTY);
+    // (wide node to fill, binary inner node it stands for)
+    let mut stack = vec![(0usize, 0usize)];
+    let mut kids: Vec<usize> = Vec::with_capacity(WIDTH);
+    while let Some((wide, binary)) = stack.pop() {
+        let b = &nodes[binary];
+        kids.clear();
+        kids.extend([b.first as usize, b.first as usize + 1]);
+        while kids.len() < WIDTH {
+            // The inner child with the largest surface area.
+            let open = kids
+                .iter()
+                .enumerate()
+                .filter(|(_, c)| !nodes[**c].is_leaf())
+                .max_by(|a, b| {
+                    let area = |i: usize| nodes[i].aabb().half_area();
+                    area(*a.1).total_cmp(&area(*b.1))
+                })
+                .map(|(k, _)| k);
+            let Some(k) = open else { break };
+            let c = &nodes[kids[k]];
+            kids[k] = c.first as usize;
+            kids.insert(k + 1, c.first as usize + 1);
+        }
+        let mut node = WideNode::EMPTY;
+        let mut inner = [(0usize, 0usize); WIDTH];
+        let mut inner_count = 0;
+        for (lane, &c) in kids.iter().enumerate() {
+            let n = &nodes[c];
+            for axis in 0..3 {
+                node.planes[2 * axis][lane] = n.min[axis];
+                node.planes[2 * axis + 1][lane] = n.max[axis];
+            }
+            if n.is_leaf() {
+                let first = push_blocks(&mut out.blocks, n, tris, prim_ids);
+                node.child[lane] = first;
+                node.blocks[lane] = out.blocks.len() as u32 - first;
+            } else {
+                let index = out.nodes.len();
+                out.nodes.push(WideNode::EMPTY);
+                node.child[lane] = index as u32;
+                inner[inner_count] = (index, c);
+                inner_count += 1;
+            }
+        }
+        out.nodes[wide] = node;
+        // Depth first, the first child next.
+        stack.extend(inner[..inner_count].iter().rev());
+    }
+    out
+}
+
+/// Appends the blocks of a binary leaf; returns the index of its first block.
+fn push_blocks(
+    blocks: &mut Vec<TriBlock>,
+    leaf: &BvhNode,
+    tris: &[[Vec3A; 3]],
+    prim_ids: &[u32],
+) -> u32 {
+    let first = blocks.len() as u32;
+    let (start, end) = (leaf.first as usize, (leaf.first + leaf.count) as usize);
+    for chunk in (start..end).step_by(BLOCK) {
+        let mut block = TriBlock::EMPTY;
+        for (lane, slot) in (chunk..(chunk + BLOCK).min(end)).enumerate() {
+            for (vertex, p) in tris[slot].iter().enumerate() {
+                for axis in 0..3 {
+                    block.v[vertex][axis][lane] = p[axis];
+                }
+            }
+            block.prim[lane] = prim_ids[slot];
+        }
+        blocks.push(block);
+    }
+    first
+}

@@ -1,0 +1,211 @@
+//! The two tests the traversal loop needs, behind one interface with three implementations:
+//! eight child boxes against a ray ([`Lanes::node`]) and four triangles against a ray
+//! ([`Lanes::block`]).
+//!
+//! - [`scalar`]: plain Rust, one lane at a time, calling the reference triangle test. It is the
+//!   readable specification and the fallback on any target.
+//! - `x86` (x86-64 only): SSE2, which every x86-64 CPU has, and AVX2 + FMA, chosen at run time.
+//!
+//! The rules every implementation keeps, written out rather than left to what an instruction
+//! does with NaN:
+//! - Box test: `near = (plane - origin) * (1 / dir)` per axis, the near plane picked by the
+//!   sign bit of the direction (so `-0` is negative), the far distance scaled by
+//!   `1 + 2 gamma(4)` (Ize 2013, the scale folded into the reciprocal). A NaN distance arises
+//!   only as `0 * inf`, an origin on the plane of a slab the ray runs parallel to; such a slab
+//!   constrains nothing (a NaN near distance counts as `-inf`, a NaN far one as `+inf`). Rays
+//!   whose reciprocal direction is finite cannot produce NaN (boxes are finite or the empty
+//!   `+-inf` box), so the fast path skips that fix; the others take the `SAFE` path.
+//! - Triangle test: the operations of [`crate::geometry::intersect_triangle`] in the same
+//!   order, without fused multiply-adds, so every lane's `t` has the same bits as the scalar
+//!   test's; lanes where an edge function is exactly zero are handed to the scalar test (its
+//!   exact f64 path and tie rule).
+
+mod scalar;
+pub(crate) mod stack;
+#[cfg(target_arch = "x86_64")]
+mod x86;
+
+use super::{BLOCK, TriBlock, WIDTH, WideNode};
+use crate::geometry::{PreparedRay, gamma};
+
+/// Which implementation the traversal uses.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Kernel {
+    /// Plain scalar code, one lane at a time (any target).
+    #[default]
+    Scalar,
+    /// SSE2: each 8-wide node as two 4-wide halves (every x86-64 CPU).
+    Sse2,
+    /// AVX2 with FMA: one 8-wide node test per instruction sequence.
+    Avx2,
+}
+
+impl Kernel {
+    /// The kernel new BVHs use: the fastest this CPU runs, or the one the environment variable
+    /// `TRACERY_KERNEL` names (`scalar`, `sse2` or `avx2`; tests run whole suites on each, and
+    /// it helps to compare them). A name this CPU cannot run is reported once on stderr and the
+    /// fastest kernel is used.
+    pub fn detect() -> Kernel {
+        static CHOSEN: std::sync::OnceLock<Kernel> = std::sync::OnceLock::new();
+        *CHOSEN.get_or_init(|| {
+            let best = Self::available().last().copied().unwrap_or(Kernel::Scalar);
+            let Ok(name) = std::env::var("TRACERY_KERNEL") else {
+                return best;
+            };
+            match name.parse::<Kernel>() {
+                Ok(k) if Self::available().contains(&k) => k,
+                Ok(k) => {
+                    eprintln!("TRACERY_KERNEL={name}: this CPU cannot run {k}; using {best}");
+                    best
+                }
+                Err(e) => {
+                    eprintln!("TRACERY_KERNEL={name}: {e}; using {best}");
+                    best
+                }
+            }
+        })
+    }
+
+    /// Every kernel this CPU runs, slowest first.
+    pub fn available() -> Vec<Kernel> {
+        let mut k = vec![Kernel::Scalar];
+        #[cfg(target_arch = "x86_64")]
+        {
+            k.push(Kernel::Sse2);
+            if x86::Avx2Cpu::detect().is_some() {
+                k.push(Kernel::Avx2);
+            }
+        }
+        k
+    }
+
+    /// Short name for reports.
+    pub fn name(self) -> &'static str {
+        match self {
+            Kernel::Scalar => "scalar",
+            Kernel::Sse2 => "sse2",
+            Kernel::Avx2 => "avx2",
+        }
+    }
+}
+
+impl std::str::FromStr for Kernel {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s.to_ascii_lowercase().as_str() {
+            "scalar" => Ok(Kernel::Scalar),
+            "sse2" => Ok(Kernel::Sse2),
+            "avx2" => Ok(Kernel::Avx2),
+            other => Err(format!(
+                "unknown kernel `{other}` (expected scalar, sse2 or avx2)"
+            )),
+        }
+    }
+}
+
+impl std::fmt::Display for Kernel {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+/// Far distances are scaled up by this (Ize 2013); one more rounding than the scalar slab test
+/// because the scale is folded into the reciprocal, hence `gamma(4)`.
+pub(crate) const FAR_SCALE: f32 = if cfg!(feature = "no-conservative-slab") {
+    1.0
+} else {
+    1.0 + 2.0 * gamma(4)
+};
+
+/// What the box test needs of a ray, computed once per ray.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct NodeRay {
+    pub origin: [f32; 3],
+    pub inv: [f32; 3],
+    /// `inv * FAR_SCALE`.
+    pub inv_far: [f32; 3],
+    /// Per axis, the index into [`WideNode::planes`] of the near plane (`2 axis + 1` when the
+    /// direction's sign bit is set); the far plane is the other one (`near ^ 1`).
+    pub near: [usize; 3],
+}
+
+impl NodeRay {
+    pub fn new(ray: &PreparedRay) -> Self {
+        let inv = ray.inv_dir.to_array();
+        let neg = ray.neg_mask.bitmask();
+        Self {
+            origin: ray.origin.to_array(),
+            inv,
+            inv_far: inv.map(|i| i * FAR_SCALE),
+            near: std::array::from_fn(|a| 2 * a + ((neg >> a) & 1) as usize),
+        }
+    }
+}
+
+/// What the triangle test needs of a ray.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct TriRay {
+    /// The ray, for the scalar test.
+    pub ray: PreparedRay,
+    pub origin: [f32; 3],
+    /// The axis permutation `[kx, ky, kz]` of the watertight test.
+    pub k: [usize; 3],
+    /// `[sx, sy, sz]`.
+    pub shear: [f32; 3],
+}
+
+impl TriRay {
+    pub fn new(ray: &PreparedRay) -> Self {
+        Self {
+            ray: *ray,
+            origin: ray.origin.to_array(),
+            k: ray.k,
+            shear: ray.shear,
+        }
+    }
+}
+
+/// The two tests, for one kernel.
+pub(crate) trait Lanes {
+    /// The box test's ray data in this kernel's registers.
+    type NodeRay: Copy;
+    /// The triangle test's ray data in this kernel's registers.
+    type TriRay: Copy;
+
+    fn node_ray(r: &NodeRay) -> Self::NodeRay;
+    fn tri_ray(r: &TriRay) -> Self::TriRay;
+
+    /// Tests the eight child boxes of `n` against the ray for `0 <= t <= limit`: bit `k` of the
+    /// result is set when child `k` is entered, `near[k]` then holds its entry distance. With
+    /// `SAFE`, NaN distances follow the rule of the module docs.
+    fn node<const SAFE: bool>(
+        n: &WideNode,
+        r: &Self::NodeRay,
+        limit: f32,
+        near: &mut [f32; WIDTH],
+    ) -> u32;
+
+    /// The watertight test on the four lanes of `b` for `0 < t < limit`: returns the lanes hit
+    /// (their distances and barycentric coordinates in `out`) and the lanes the scalar test must
+    /// decide (an edge function was exactly zero).
+    fn block(b: &TriBlock, r: &Self::TriRay, limit: f32, out: &mut BlockHits) -> (u32, u32);
+}
+
+/// What [`Lanes::block`] found per lane: distance and the barycentric weights of the second
+/// and third vertex (valid in the lanes it reports hit).
+#[derive(Clone, Copy, Debug, Default)]
+pub(crate) struct BlockHits {
+    pub t: [f32; BLOCK],
+    pub u: [f32; BLOCK],
+    pub v: [f32; BLOCK],
+}
+
+pub(crate) use scalar::Scalar;
+#[cfg(target_arch = "x86_64")]
+pub(crate) use x86::{Avx2Cpu, Sse2, closest_avx2, each_hit_avx2};
+
+/// The constants of the distance error bound of [`crate::geometry::intersect_triangle`].
+pub(crate) const G2: f32 = gamma(2);
+pub(crate) const G3: f32 = gamma(3);
+pub(crate) const G5: f32 = gamma(5);

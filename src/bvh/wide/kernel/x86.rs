@@ -1,0 +1,391 @@
+//! The x86-64 kernels: SSE2 (every x86-64 CPU) and AVX2 + FMA (chosen at run time).
+//!
+//! Both share the triangle test ([`block_sse`], 4 lanes in 128-bit registers, VEX-encoded
+//! inside the AVX2 functions). The box test is 8 lanes in one 256-bit register with AVX2, two
+//! 128-bit halves with SSE2. The traversal loops are the generic ones of
+//! [`super::super::traverse`], instantiated inside `#[target_feature]` entry points so that
+//! the whole loop, helpers and intrinsics included, is compiled for the kernel's instruction
+//! set (the helpers are `#[inline(always)]` and carry no target features of their own).
+//!
+//! Every operation mirrors the scalar reference in order and kind: subtract then multiply in
+//! the box test (no FMA, so the conservative far scale stays valid), and in the triangle test
+//! exactly the multiplications, subtractions and the one division of
+//! [`crate::geometry::intersect_triangle`], so each lane's distance has the scalar bits.
+#![allow(
+    unsafe_code,
+    reason = "SIMD intrinsics: loads, stores and target-feature calls"
+)]
+
+use std::arch::x86_64::*;
+
+use super::{BlockHits, G2, G3, G5, Lanes, NodeRay, TriRay};
+use crate::bvh::wide::traverse::{self, Best};
+use crate::bvh::wide::{TriBlock, WIDTH, WideBvh, WideNode};
+use crate::geometry::PreparedRay;
+
+/// The triangle test's ray data, broadcast to 4 lanes.
+#[derive(Clone, Copy)]
+pub(crate) struct TriRay4 {
+    origin: [__m128; 3],
+    k: [usize; 3],
+    sx: __m128,
+    sy: __m128,
+    sz: __m128,
+    /// `|sz|`, `2 |sx|`, `2 |sy|` of the distance error bound.
+    abs_sz: __m128,
+    two_abs_sx: __m128,
+    two_abs_sy: __m128,
+}
+
+#[inline(always)]
+fn tri_ray4(r: &TriRay) -> TriRay4 {
+    // SAFETY: `_mm_set1_ps` only needs SSE, part of the x86-64 baseline.
+    let s = |x: f32| unsafe { _mm_set1_ps(x) };
+    let [sx, sy, sz] = r.shear;
+    TriRay4 {
+        origin: r.origin.map(s),
+        k: r.k,
+        sx: s(sx),
+        sy: s(sy),
+        sz: s(sz),
+        abs_sz: s(sz.abs()),
+        two_abs_sx: s(2.0 * sx.abs()),
+        two_abs_sy: s(2.0 * sy.abs()),
+    }
+}
+
+/// `|x|` per lane, as `f32::abs` (clears the sign bit).
+#[inline(always)]
+fn abs4(x: __m128) -> __m128 {
+    // SAFETY: SSE2 baseline operations on registers.
+    unsafe { _mm_andnot_ps(_mm_set1_ps(-0.0), x) }
+}
+
+/// `max(|a|, |b|, |c|)` per lane (the operands are never NaN where the result is used: a NaN
+/// coordinate makes the lane's `t` NaN, which fails its range test first).
+#[inline(always)]
+fn max3_abs(a: __m128, b: __m128, c: __m128) -> __m128 {
+    // SAFETY: SSE baseline operations on registers.
+    unsafe { _mm_max_ps(_mm_max_ps(abs4(a), abs4(b)), abs4(c)) }
+}
+
+/// The watertight test on a block's four lanes (see [`Lanes::block`]).
+#[inline(always)]
+fn block_sse(b: &TriBlock, r: &TriRay4, limit: f32, out: &mut BlockHits) -> (u32, u32) {
+    let valid = b.valid_mask();
+    let [kx, ky, kz] = r.k;
+    // SAFETY: SSE2 baseline operations; the loads read whole `[f32; 4]` rows of the block and
+    // the store writes the whole `[f32; 4]` output.
+    unsafe {
+        let ld = |vertex: usize, axis: usize| _mm_loadu_ps(b.v[vertex][axis].as_ptr());
+        // Vertices relative to the origin, then sheared: `a = v0 - o`, `ax = a[kx] - sx a[kz]`.
+        let sheared = |vertex: usize| {
+            let x = _mm_sub_ps(ld(vertex, kx), r.origin[kx]);
+            let y = _mm_sub_ps(ld(vertex, ky), r.origin[ky]);
+            let z = _mm_sub_ps(ld(vertex, kz), r.origin[kz]);
+            (
+                _mm_sub_ps(x, _mm_mul_ps(r.sx, z)),
+                _mm_sub_ps(y, _mm_mul_ps(r.sy, z)),
+                z,
+            )
+        };
+        let (ax, ay, az) = sheared(0);
+        let (bx, by, bz) = sheared(1);
+        let (cx, cy, cz) = sheared(2);
+        let u = _mm_sub_ps(_mm_mul_ps(cx, by), _mm_mul_ps(cy, bx));
+        let v = _mm_sub_ps(_mm_mul_ps(ax, cy), _mm_mul_ps(ay, cx));
+        let w = _mm_sub_ps(_mm_mul_ps(bx, ay), _mm_mul_ps(by, ax));
+        let zero = _mm_setzero_ps();
+        let exact = if cfg!(feature = "no-watertight-fallback") {
+            0
+        } else {
+            let z = _mm_or_ps(
+                _mm_or_ps(_mm_cmpeq_ps(u, zero), _mm_cmpeq_ps(v, zero)),
+                _mm_cmpeq_ps(w, zero),
+            );
+            _mm_movemask_ps(z) as u32 & valid
+        };
+        let neg = _mm_or_ps(
+            _mm_or_ps(_mm_cmplt_ps(u, zero), _mm_cmplt_ps(v, zero)),
+            _mm_cmplt_ps(w, zero),
+        );
+        let pos = _mm_or_ps(
+            _mm_or_ps(_mm_cmpgt_ps(u, zero), _mm_cmpgt_ps(v, zero)),
+            _mm_cmpgt_ps(w, zero),
+        );
+        let inside = !(_mm_movemask_ps(_mm_and_ps(neg, pos)) as u32) & valid & !exact & 0xf;
+        if inside == 0 {
+            return (0, exact);
+        }
+        let det = _mm_add_ps(_mm_add_ps(u, v), w);
+        let t_scaled = _mm_mul_ps(
+            _mm_add_ps(
+                _mm_add_ps(_mm_mul_ps(u, az), _mm_mul_ps(v, bz)),
+                _mm_mul_ps(w, cz),
+            ),
+            r.sz,
+        );
+        let inv = _mm_div_ps(_mm_set1_ps(1.0), det);
+        let t = _mm_mul_ps(t_scaled, inv);
+        let in_range = _mm_and_ps(
+            _mm_cmpneq_ps(det, zero),
+            _mm_and_ps(_mm_cmpgt_ps(t, zero), _mm_cmplt_ps(t, _mm_set1_ps(limit))),
+        );
+        // The distance error bound, in the order of `t_error_bound`.
+        let max_z = max3_abs(az, bz, cz);
+        let max_zt = _mm_mul_ps(max_z, r.abs_sz);
+        let max_x = max3_abs(ax, bx, cx);
+        let max_y = max3_abs(ay, by, cy);
+        let delta_z = _mm_mul_ps(_mm_set1_ps(G3), max_zt);
+        let delta_x = _mm_mul_ps(
+            _mm_set1_ps(G5),
+            _mm_add_ps(max_x, _mm_mul_ps(r.two_abs_sx, max_z)),
+        );
+        let delta_y = _mm_mul_ps(
+            _mm_set1_ps(G5),
+            _mm_add_ps(max_y, _mm_mul_ps(r.two_abs_sy, max_z)),
+        );
+        let delta_e = _mm_mul_ps(
+            _mm_set1_ps(2.0),
+            _mm_add_ps(
+                _mm_add_ps(
+                    _mm_mul_ps(_mm_mul_ps(_mm_set1_ps(G2), max_x), max_y),
+                    _mm_mul_ps(delta_y, max_x),
+                ),
+                _mm_mul_ps(delta_x, max_y),
+            ),
+        );
+        let max_e = max3_abs(u, v, w);
+        let bound = _mm_mul_ps(
+            _mm_mul_ps(
+                _mm_set1_ps(3.0),
+                _mm_add_ps(
+                    _mm_add_ps(
+                        _mm_mul_ps(_mm_mul_ps(_mm_set1_ps(G3), max_e), max_zt),
+                        _mm_mul_ps(delta_e, max_zt),
+                    ),
+                    _mm_mul_ps(delta_z, max_e),
+                ),
+            ),
+            abs4(inv),
+        );
+        // Kept unless `t <= bound` (a NaN bound keeps it, as in the scalar test).
+        let ok = _mm_and_ps(in_range, _mm_cmpnle_ps(t, bound));
+        _mm_storeu_ps(out.t.as_mut_ptr(), t);
+        _mm_storeu_ps(out.u.as_mut_ptr(), _mm_mul_ps(v, inv));
+        _mm_storeu_ps(out.v.as_mut_ptr(), _mm_mul_ps(w, inv));
+        (_mm_movemask_ps(ok) as u32 & inside, exact)
+    }
+}
+
+/// SSE2: each node as two 4-wide halves.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Sse2;
+
+/// The box test's ray data, broadcast to 4 lanes.
+#[derive(Clone, Copy)]
+pub(crate) struct NodeRay4 {
+    origin: [__m128; 3],
+    inv: [__m128; 3],
+    inv_far: [__m128; 3],
+    near: [usize; 3],
+}
+
+/// `x` with its NaN lanes replaced by `fill` (SSE2 has no blend: and / andnot / or).
+#[inline(always)]
+fn fix_nan4(x: __m128, fill: f32) -> __m128 {
+    // SAFETY: SSE2 baseline operations on registers.
+    unsafe {
+        let nan = _mm_cmpunord_ps(x, x);
+        _mm_or_ps(_mm_and_ps(nan, _mm_set1_ps(fill)), _mm_andnot_ps(nan, x))
+    }
+}
+
+impl Lanes for Sse2 {
+    type NodeRay = NodeRay4;
+    type TriRay = TriRay4;
+
+    #[inline(always)]
+    fn node_ray(r: &NodeRay) -> NodeRay4 {
+        // SAFETY: SSE baseline.
+        let s = |x: f32| unsafe { _mm_set1_ps(x) };
+        NodeRay4 {
+            origin: r.origin.map(s),
+            inv: r.inv.map(s),
+            inv_far: r.inv_far.map(s),
+            near: r.near,
+        }
+    }
+
+    #[inline(always)]
+    fn tri_ray(r: &TriRay) -> TriRay4 {
+        tri_ray4(r)
+    }
+
+    #[inline(always)]
+    fn node<const SAFE: bool>(
+        n: &WideNode,
+        r: &NodeRay4,
+        limit: f32,
+        near: &mut [f32; WIDTH],
+    ) -> u32 {
+        let mut mask = 0;
+        for half in 0..2 {
+            // SAFETY: SSE baseline; loads read 4 of the 8 floats of a plane row, the store
+            // writes 4 of the 8 floats of `near`.
+            unsafe {
+                let mut t_near = _mm_setzero_ps();
+                let mut t_far = _mm_set1_ps(limit);
+                for a in 0..3 {
+                    let lo = _mm_loadu_ps(n.planes[r.near[a]][4 * half..].as_ptr());
+                    let hi = _mm_loadu_ps(n.planes[r.near[a] ^ 1][4 * half..].as_ptr());
+                    let mut lo = _mm_mul_ps(_mm_sub_ps(lo, r.origin[a]), r.inv[a]);
+                    let mut hi = _mm_mul_ps(_mm_sub_ps(hi, r.origin[a]), r.inv_far[a]);
+                    if SAFE {
+                        lo = fix_nan4(lo, f32::NEG_INFINITY);
+                        hi = fix_nan4(hi, f32::INFINITY);
+                    }
+                    t_near = _mm_max_ps(t_near, lo);
+                    t_far = _mm_min_ps(t_far, hi);
+                }
+                _mm_storeu_ps(near[4 * half..].as_mut_ptr(), t_near);
+                mask |= (_mm_movemask_ps(_mm_cmple_ps(t_near, t_far)) as u32) << (4 * half);
+            }
+        }
+        mask
+    }
+
+    #[inline(always)]
+    fn block(b: &TriBlock, r: &TriRay4, limit: f32, out: &mut BlockHits) -> (u32, u32) {
+        block_sse(b, r, limit, out)
+    }
+}
+
+/// AVX2 with FMA: one 8-wide box test.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Avx2;
+
+/// The box test's ray data, broadcast to 8 lanes.
+#[derive(Clone, Copy)]
+pub(crate) struct NodeRay8 {
+    origin: [__m256; 3],
+    inv: [__m256; 3],
+    inv_far: [__m256; 3],
+    near: [usize; 3],
+}
+
+impl Lanes for Avx2 {
+    type NodeRay = NodeRay8;
+    type TriRay = TriRay4;
+
+    #[inline(always)]
+    fn node_ray(r: &NodeRay) -> NodeRay8 {
+        // SAFETY: only reached inside the `#[target_feature(enable = "avx2,fma,popcnt,bmi1,lzcnt")]` entry
+        // points below, which run after the CPU was found to have AVX2 and FMA.
+        let s = |x: f32| unsafe { _mm256_set1_ps(x) };
+        NodeRay8 {
+            origin: r.origin.map(s),
+            inv: r.inv.map(s),
+            inv_far: r.inv_far.map(s),
+            near: r.near,
+        }
+    }
+
+    #[inline(always)]
+    fn tri_ray(r: &TriRay) -> TriRay4 {
+        tri_ray4(r)
+    }
+
+    #[inline(always)]
+    fn node<const SAFE: bool>(
+        n: &WideNode,
+        r: &NodeRay8,
+        limit: f32,
+        near: &mut [f32; WIDTH],
+    ) -> u32 {
+        // SAFETY: only reached inside the AVX2 entry points (see `node_ray`); the loads read
+        // whole `[f32; 8]` plane rows, the store writes the whole `[f32; 8]` of `near`.
+        unsafe {
+            let mut t_near = _mm256_setzero_ps();
+            let mut t_far = _mm256_set1_ps(limit);
+            for a in 0..3 {
+                let lo = _mm256_loadu_ps(n.planes[r.near[a]].as_ptr());
+                let hi = _mm256_loadu_ps(n.planes[r.near[a] ^ 1].as_ptr());
+                let mut lo = _mm256_mul_ps(_mm256_sub_ps(lo, r.origin[a]), r.inv[a]);
+                let mut hi = _mm256_mul_ps(_mm256_sub_ps(hi, r.origin[a]), r.inv_far[a]);
+                if SAFE {
+                    let nan = _mm256_cmp_ps::<_CMP_UNORD_Q>(lo, lo);
+                    lo = _mm256_blendv_ps(lo, _mm256_set1_ps(f32::NEG_INFINITY), nan);
+                    let nan = _mm256_cmp_ps::<_CMP_UNORD_Q>(hi, hi);
+                    hi = _mm256_blendv_ps(hi, _mm256_set1_ps(f32::INFINITY), nan);
+                }
+                t_near = _mm256_max_ps(t_near, lo);
+                t_far = _mm256_min_ps(t_far, hi);
+            }
+            _mm256_storeu_ps(near.as_mut_ptr(), t_near);
+            _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(t_near, t_far)) as u32
+        }
+    }
+
+    #[inline(always)]
+    fn block(b: &TriBlock, r: &TriRay4, limit: f32, out: &mut BlockHits) -> (u32, u32) {
+        block_sse(b, r, limit, out)
+    }
+}
+
+/// Proof that this CPU has AVX2 and FMA (and POPCNT, BMI1 and LZCNT, which every AVX2 CPU
+/// has and the mask bookkeeping uses): made only by [`Avx2Cpu::detect`].
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Avx2Cpu(());
+
+impl Avx2Cpu {
+    /// The proof, when the CPU has both.
+    pub fn detect() -> Option<Avx2Cpu> {
+        (is_x86_feature_detected!("avx2")
+            && is_x86_feature_detected!("fma")
+            && is_x86_feature_detected!("popcnt")
+            && is_x86_feature_detected!("bmi1")
+            && is_x86_feature_detected!("lzcnt"))
+        .then_some(Avx2Cpu(()))
+    }
+}
+
+#[target_feature(enable = "avx2,fma,popcnt,bmi1,lzcnt")]
+fn closest_avx2_inner<const SAFE: bool>(w: &WideBvh, ray: &PreparedRay, t_max: f32) -> Best {
+    traverse::closest::<Avx2, SAFE>(w, ray, t_max)
+}
+
+#[target_feature(enable = "avx2,fma,popcnt,bmi1,lzcnt")]
+fn each_hit_avx2_inner<const SAFE: bool, F: FnMut(u32, f32) -> bool>(
+    w: &WideBvh,
+    ray: &PreparedRay,
+    t_max: f32,
+    f: &mut F,
+) -> bool {
+    traverse::each_hit::<Avx2, SAFE>(w, ray, t_max, f)
+}
+
+/// Closest hit with the AVX2 kernel (the whole traversal compiled for AVX2).
+#[inline]
+pub(crate) fn closest_avx2<const SAFE: bool>(
+    _cpu: Avx2Cpu,
+    w: &WideBvh,
+    ray: &PreparedRay,
+    t_max: f32,
+) -> Best {
+    // SAFETY: an `Avx2Cpu` exists only when the CPU has every feature enabled here.
+    unsafe { closest_avx2_inner::<SAFE>(w, ray, t_max) }
+}
+
+/// Every hit with the AVX2 kernel (see [`traverse::each_hit`]).
+#[inline]
+pub(crate) fn each_hit_avx2<const SAFE: bool, F: FnMut(u32, f32) -> bool>(
+    _cpu: Avx2Cpu,
+    w: &WideBvh,
+    ray: &PreparedRay,
+    t_max: f32,
+    f: &mut F,
+) -> bool {
+    // SAFETY: an `Avx2Cpu` exists only when the CPU has every feature enabled here.
+    unsafe { each_hit_avx2_inner::<SAFE, F>(w, ray, t_max, f) }
+}

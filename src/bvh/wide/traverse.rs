@@ -1,0 +1,241 @@
+//! The traversal loops over the 8-wide layout, written once for every kernel ([`Lanes`]).
+//!
+//! - [`closest`]: nearest child first. One child hit: go there with no stack traffic; two:
+//!   push the farther; more: push all and sort them by entry distance. A popped entry that
+//!   starts beyond the best hit is skipped.
+//! - [`any_hit`]: no ordering; leaves are tested as soon as they are found, and the first
+//!   hit ends the walk.
+//! - [`each_hit`]: every hit, in no particular order, until the caller asks to stop.
+
+use super::kernel::stack::{Entry, Stack};
+use super::kernel::{BlockHits, Lanes, NodeRay, TriRay};
+use super::{WIDTH, WideBvh};
+use crate::geometry::{PreparedRay, intersect_triangle, intersect_triangle_t};
+
+/// Boxes are culled only when they start clearly beyond the best hit so far: the slack keeps a
+/// box whose entry distance rounds a hair past an equally distant hit, so ties in `t` still go
+/// to the lowest triangle index exactly as brute force decides them.
+pub(crate) const CULL_SLACK: f32 = 1.0 + 1.0 / 65536.0;
+
+/// The best hit of a closest-hit traversal: distance, triangle (caller's index) and the
+/// barycentric weights of its second and third vertex; `prim` is `u32::MAX` when nothing was
+/// hit.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) struct Best {
+    pub t: f32,
+    pub prim: u32,
+    pub u: f32,
+    pub v: f32,
+}
+
+impl Best {
+    pub fn none(t_max: f32) -> Self {
+        Self {
+            t: t_max,
+            prim: u32::MAX,
+            u: 0.0,
+            v: 0.0,
+        }
+    }
+
+    /// Keeps the hit `(t, prim)` when it is closer, or as close with a lower index.
+    #[inline(always)]
+    fn offer(&mut self, t: f32, prim: u32, u: f32, v: f32) {
+        if t < self.t || (t == self.t && prim < self.prim) {
+            *self = Best { t, prim, u, v };
+        }
+    }
+}
+
+/// Tests a leaf's blocks, keeping the closest hit (lowest index on ties).
+#[inline(always)]
+fn leaf_closest<L: Lanes>(
+    w: &WideBvh,
+    first: u32,
+    count: u32,
+    r: &TriRay,
+    lr: &L::TriRay,
+    best: &mut Best,
+) {
+    let mut out = BlockHits::default();
+    for b in first..first + count {
+        let block = &w.blocks[b as usize];
+        // Hits as close as the best so far still count (for the index tie rule).
+        let limit = best.t.next_up();
+        let (mut hits, mut exact) = L::block(block, lr, limit, &mut out);
+        while hits != 0 {
+            let k = hits.trailing_zeros() as usize;
+            hits &= hits - 1;
+            best.offer(out.t[k], block.prim[k], out.u[k], out.v[k]);
+        }
+        while exact != 0 {
+            let k = exact.trailing_zeros() as usize;
+            exact &= exact - 1;
+            if let Some(h) = intersect_triangle(&r.ray, &block.triangle(k), limit) {
+                best.offer(h.t, block.prim[k], h.u, h.v);
+            }
+        }
+    }
+}
+
+/// Closest hit at `0 < t < t_max` (the best is `t_max` with no triangle when nothing is hit).
+#[inline(always)]
+pub(crate) fn closest<L: Lanes, const SAFE: bool>(
+    w: &WideBvh,
+    ray: &PreparedRay,
+    t_max: f32,
+) -> Best {
+    let mut best = Best::none(t_max);
+    let tr = TriRay::new(ray);
+    let lr = L::tri_ray(&tr);
+    if let Some((first, count)) = w.root_leaf {
+        leaf_closest::<L>(w, first, count, &tr, &lr, &mut best);
+        return best;
+    }
+    if w.nodes.is_empty() {
+        return best;
+    }
+    let nr = L::node_ray(&NodeRay::new(ray));
+    let mut stack = Stack::new();
+    let mut near = [0.0f32; WIDTH];
+    let mut current = 0u32;
+    'node: loop {
+        let node = &w.nodes[current as usize];
+        let mask = L::node::<SAFE>(node, &nr, best.t * CULL_SLACK, &mut near);
+        // The child to visit next, if this node gives one.
+        let next = match mask.count_ones() {
+            0 => None,
+            1 => Some(mask.trailing_zeros() as usize),
+            2 => {
+                let a = mask.trailing_zeros() as usize;
+                let b = (mask & (mask - 1)).trailing_zeros() as usize;
+                let (n, f) = if near[b] < near[a] { (b, a) } else { (a, b) };
+                stack.push(Entry {
+                    child: node.child[f],
+                    blocks: node.blocks[f],
+                    dist: near[f],
+                });
+                Some(n)
+            }
+            _ => {
+                let start = stack.len();
+                let mut m = mask;
+                while m != 0 {
+                    let k = m.trailing_zeros() as usize;
+                    m &= m - 1;
+                    stack.push(Entry {
+                        child: node.child[k],
+                        blocks: node.blocks[k],
+                        dist: near[k],
+                    });
+                }
+                stack.sort_from(start);
+                None
+            }
+        };
+        if let Some(k) = next {
+            if node.blocks[k] == 0 {
+                current = node.child[k];
+                continue 'node;
+            }
+            leaf_closest::<L>(w, node.child[k], node.blocks[k], &tr, &lr, &mut best);
+        }
+        // Pop, skipping entries that now start beyond the best hit; leaves are tested here.
+        loop {
+            let Some(e) = stack.pop() else {
+                return best;
+            };
+            if e.dist > best.t * CULL_SLACK {
+                continue;
+            }
+            if e.blocks == 0 {
+                current = e.child;
+                continue 'node;
+            }
+            leaf_closest::<L>(w, e.child, e.blocks, &tr, &lr, &mut best);
+        }
+    }
+}
+
+/// Calls `f(prim, t)` for every hit in a leaf; false when `f` asked to stop.
+#[inline(always)]
+fn leaf_each<L: Lanes>(
+    w: &WideBvh,
+    first: u32,
+    count: u32,
+    r: &TriRay,
+    lr: &L::TriRay,
+    t_max: f32,
+    f: &mut impl FnMut(u32, f32) -> bool,
+) -> bool {
+    let mut out = BlockHits::default();
+    for b in first..first + count {
+        let block = &w.blocks[b as usize];
+        let (mut hits, mut exact) = L::block(block, lr, t_max, &mut out);
+        while hits != 0 {
+            let k = hits.trailing_zeros() as usize;
+            hits &= hits - 1;
+            if !f(block.prim[k], out.t[k]) {
+                return false;
+            }
+        }
+        while exact != 0 {
+            let k = exact.trailing_zeros() as usize;
+            exact &= exact - 1;
+            let tk = intersect_triangle_t(&r.ray, &block.triangle(k), t_max);
+            if tk < t_max && !f(block.prim[k], tk) {
+                return false;
+            }
+        }
+    }
+    true
+}
+
+/// Calls `f(prim, t)` for every triangle hit at `0 < t < t_max`, in no particular order, until
+/// `f` returns false. Returns false when it was stopped.
+#[inline(always)]
+pub(crate) fn each_hit<L: Lanes, const SAFE: bool>(
+    w: &WideBvh,
+    ray: &PreparedRay,
+    t_max: f32,
+    f: &mut impl FnMut(u32, f32) -> bool,
+) -> bool {
+    let tr = TriRay::new(ray);
+    let lr = L::tri_ray(&tr);
+    if let Some((first, count)) = w.root_leaf {
+        return leaf_each::<L>(w, first, count, &tr, &lr, t_max, f);
+    }
+    if w.nodes.is_empty() {
+        return true;
+    }
+    let nr = L::node_ray(&NodeRay::new(ray));
+    let mut stack = Stack::new();
+    let mut near = [0.0f32; WIDTH];
+    let mut current = 0u32;
+    loop {
+        let node = &w.nodes[current as usize];
+        let mut mask = L::node::<SAFE>(node, &nr, t_max, &mut near);
+        let mut next = None;
+        while mask != 0 {
+            let k = mask.trailing_zeros() as usize;
+            mask &= mask - 1;
+            if node.blocks[k] > 0 {
+                if !leaf_each::<L>(w, node.child[k], node.blocks[k], &tr, &lr, t_max, f) {
+                    return false;
+                }
+            } else if next.is_none() {
+                next = Some(node.child[k]);
+            } else {
+                stack.push(Entry {
+                    child: node.child[k],
+                    blocks: 0,
+                    dist: 0.0,
+                });
+            }
+        }
+        match next.or_else(|| stack.pop().map(|e| e.child)) {
+            Some(c) => current = c,
+            None => return true,
+        }
+    }
+}
