@@ -55,17 +55,10 @@ fn enter(node: &BvhNode, ray: &PreparedRay, limit: f32) -> f32 {
 
 impl Bvh {
     /// The closest triangle the ray hits at `0 < t < t_max`. Ties in `t` go to the lowest
-    /// triangle index.
+    /// triangle index. A ray with a NaN or infinite origin or direction, or a zero direction,
+    /// hits nothing and walks no tree.
     #[inline]
     pub fn intersect(&self, ray: &Ray, t_max: f32) -> Option<Hit> {
-        self.intersect_prepared(&PreparedRay::new(ray), t_max)
-    }
-
-    /// [`Bvh::intersect`] for a ray already prepared (saves the setup when one ray is traced
-    /// against several structures). A ray with a NaN or infinite origin or direction, or a zero
-    /// direction, hits nothing and walks no tree.
-    #[inline]
-    pub fn intersect_prepared(&self, ray: &PreparedRay, t_max: f32) -> Option<Hit> {
         if self.tris.is_empty() || t_max.is_nan() || t_max <= 0.0 || !ray.is_valid() {
             return None;
         }
@@ -238,7 +231,7 @@ impl Bvh {
         if self.tris.is_empty() || t_max.is_nan() || t_max <= 0.0 || !ray.is_valid() {
             return;
         }
-        self.wide.each_hit(&PreparedRay::new(ray), t_max, &mut f);
+        self.wide.each_hit(ray, t_max, &mut f);
     }
 }
 

@@ -46,7 +46,7 @@ pub struct PreparedRay {
 
 impl PreparedRay {
     /// Precomputes the per-ray constants of `ray`.
-    #[inline]
+    #[inline(always)]
     pub fn new(ray: &Ray) -> Self {
         let d = ray.dir;
         let inv_dir = Vec3A::ONE / Vec3A::from(d);

@@ -4,11 +4,11 @@
 //! inner child with the largest surface area (the one a random ray is likeliest to enter),
 //! until it has eight children or only leaves are left. Binary leaves become wide leaves, their
 //! triangles cut into blocks of four. Siblings' nodes and blocks are stored side by side, and
-//! subtrees depth first.
+//! subtrees depth first. Each node gets its per-octant visiting order ([`WideNode::order`]).
 
 use glam::Vec3A;
 
-use super::{BLOCK, Kernel, TriBlock, WIDTH, WideBvh, WideNode};
+use super::{BLOCK, Child, Kernel, TriBlock, WIDTH, WideBvh, WideNode};
 use crate::bvh::BvhNode;
 
 /// Collapses `nodes` (the binary tree, root at 0) over `tris` (leaf order) and `prim_ids`.
@@ -23,6 +23,18 @@ pub fn collapse(nodes: &[BvhNode], tris: &[[Vec3A; 3]], prim_ids: &[u32]) -> Wid
     if root.is_leaf() {
         let first = push_blocks(&mut out.blocks, root, tris, prim_ids);
         out.root_leaf = Some((first, out.blocks.len() as u32 - first));
+        return out;
+    }
+    if tris.len() > Child::MAX_FIRST_BLOCK as usize {
+        // More blocks than a leaf word can address (over 500 million triangles, hundreds of
+        // gigabytes): every triangle in one root leaf, correct if slow.
+        let all = BvhNode {
+            count: tris.len() as u32,
+            first: 0,
+            ..*root
+        };
+        push_blocks(&mut out.blocks, &all, tris, prim_ids);
+        out.root_leaf = Some((0, out.blocks.len() as u32));
         return out;
     }
     out.nodes.reserve(nodes.len() / 4);
@@ -60,23 +72,77 @@ pub fn collapse(nodes: &[BvhNode], tris: &[[Vec3A; 3]], prim_ids: &[u32]) -> Wid
                 node.planes[2 * axis][lane] = n.min[axis];
                 node.planes[2 * axis + 1][lane] = n.max[axis];
             }
-            if n.is_leaf() {
+            node.child[lane] = if n.is_leaf() {
                 let first = push_blocks(&mut out.blocks, n, tris, prim_ids);
-                node.child[lane] = first;
-                node.blocks[lane] = out.blocks.len() as u32 - first;
+                leaf_child(&mut out.nodes, n, first, out.blocks.len() as u32 - first)
             } else {
                 let index = out.nodes.len();
                 out.nodes.push(WideNode::EMPTY);
-                node.child[lane] = index as u32;
                 inner[inner_count] = (index, c);
                 inner_count += 1;
+                Child::inner(index as u32)
             }
+            .0;
         }
+        node.order = octant_order(&node);
         out.nodes[wide] = node;
         // Depth first, the first child next.
         stack.extend(inner[..inner_count].iter().rev());
     }
     out
+}
+
+/// The child word of a binary leaf whose blocks are `first..first + count`: one leaf word, or
+/// a node of leaf words (same box) when it has more blocks than one word holds.
+fn leaf_child(nodes: &mut Vec<WideNode>, leaf: &BvhNode, first: u32, count: u32) -> Child {
+    if count <= Child::MAX_BLOCKS {
+        return Child::leaf(first, count);
+    }
+    let mut node = WideNode::EMPTY;
+    for (lane, start) in (first..first + count)
+        .step_by(Child::MAX_BLOCKS as usize)
+        .enumerate()
+    {
+        for axis in 0..3 {
+            node.planes[2 * axis][lane] = leaf.min[axis];
+            node.planes[2 * axis + 1][lane] = leaf.max[axis];
+        }
+        let n = (first + count - start).min(Child::MAX_BLOCKS);
+        node.child[lane] = Child::leaf(start, n).0;
+    }
+    node.order = octant_order(&node);
+    nodes.push(node);
+    Child::inner(nodes.len() as u32 - 1)
+}
+
+/// The visiting order of a node's lanes for each octant: by how far along the octant's
+/// diagonal each box starts (its entry corner projected on the diagonal), farthest first;
+/// empty lanes first of all.
+fn octant_order(node: &WideNode) -> [u32; WIDTH] {
+    let mut order = [0u32; WIDTH];
+    for q in 0..8u32 {
+        let key = |lane: usize| -> f64 {
+            (0..3)
+                .map(|a| {
+                    let negative = q >> a & 1 == 1;
+                    let (lo, hi) = (node.planes[2 * a][lane], node.planes[2 * a + 1][lane]);
+                    if lo > hi {
+                        f64::INFINITY // an empty lane
+                    } else if negative {
+                        -(hi as f64)
+                    } else {
+                        lo as f64
+                    }
+                })
+                .sum()
+        };
+        let mut lanes: [usize; WIDTH] = std::array::from_fn(|k| k);
+        lanes.sort_by(|&a, &b| key(b).total_cmp(&key(a)).then(a.cmp(&b)));
+        for (i, &lane) in lanes.iter().enumerate() {
+            order[i] |= (lane as u32) << (3 * q);
+        }
+    }
+    order
 }
 
 /// Appends the blocks of a binary leaf; returns the index of its first block.

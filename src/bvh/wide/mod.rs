@@ -17,14 +17,15 @@ pub mod traverse;
 
 pub use kernel::Kernel;
 
-use crate::geometry::PreparedRay;
+use crate::geometry::Ray;
 
 /// Children per node (the SIMD width of the AVX2 box test).
 pub const WIDTH: usize = 8;
 /// Triangles per block (the SIMD width of the triangle test).
 pub const BLOCK: usize = 4;
 
-/// One 8-wide node: the boxes of up to eight children as lanes, and what each child is.
+/// One 8-wide node (256 bytes): the boxes of up to eight children as lanes, what each child
+/// is, and the order to visit them in for each of the eight ray-direction octants.
 ///
 /// Unused lanes hold an empty box (`lo = +inf`, `hi = -inf`) that no ray can enter.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -32,10 +33,15 @@ pub const BLOCK: usize = 4;
 pub struct WideNode {
     /// `[lo_x, hi_x, lo_y, hi_y, lo_z, hi_z]`, one lane per child.
     pub planes: [[f32; WIDTH]; 6],
-    /// Per child: an inner node's index into [`WideBvh::nodes`], or a leaf's first block.
+    /// Per child, a [`Child`] word: an inner node's index into [`WideBvh::nodes`], or a leaf's
+    /// blocks.
     pub child: [u32; WIDTH],
-    /// Per child: 0 for an inner node (or an unused lane), else the leaf's number of blocks.
-    pub blocks: [u32; WIDTH],
+    /// Visiting order per octant: bits `3q..3q + 3` of entry `i` hold the lane that comes `i`-th
+    /// for a ray in octant `q` (bit `a` of `q` set when the direction's component `a` is
+    /// negative), farthest first. The order sorts the children by how far along the octant's
+    /// diagonal their boxes start (Fuetterling et al., "Accelerated Single Ray Tracing for Wide
+    /// Vector Units", 2017): no distances need sorting while tracing.
+    pub order: [u32; WIDTH],
 }
 
 impl WideNode {
@@ -50,7 +56,7 @@ impl WideNode {
             [f32::NEG_INFINITY; WIDTH],
         ],
         child: [0; WIDTH],
-        blocks: [0; WIDTH],
+        order: [0; WIDTH],
     };
 
     /// Number of children in use.
@@ -58,6 +64,56 @@ impl WideNode {
         (0..WIDTH)
             .filter(|&k| self.planes[0][k] <= self.planes[1][k])
             .count()
+    }
+
+    /// The lane visited `i`-th by rays of octant `q`.
+    #[inline(always)]
+    pub fn lane_in_order(&self, q: u32, i: usize) -> usize {
+        ((self.order[i] >> (3 * q)) & 7) as usize
+    }
+}
+
+/// A child word: an inner node's index (bit 31 clear), or a leaf (bit 31 set) of `count`
+/// blocks from `first` (bits 0-26: first block; bits 27-30: count - 1). A binary leaf of more
+/// than [`Child::MAX_BLOCKS`] blocks (over 64 triangles) becomes a node of such leaves.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Child(pub u32);
+
+impl Child {
+    const LEAF: u32 = 1 << 31;
+    /// Blocks one leaf word can hold.
+    pub const MAX_BLOCKS: u32 = 16;
+    /// The last block a leaf can start at (2^27 - 1: over 500 million triangles).
+    pub const MAX_FIRST_BLOCK: u32 = (1 << 27) - 1;
+
+    /// An inner node.
+    pub fn inner(index: u32) -> Child {
+        debug_assert!(index < Self::LEAF);
+        Child(index)
+    }
+
+    /// A leaf of `count` (1 to [`Child::MAX_BLOCKS`]) blocks from `first`.
+    pub fn leaf(first: u32, count: u32) -> Child {
+        debug_assert!((1..=Self::MAX_BLOCKS).contains(&count) && first <= Self::MAX_FIRST_BLOCK);
+        Child(Self::LEAF | ((count - 1) << 27) | first)
+    }
+
+    /// True for a leaf.
+    #[inline(always)]
+    pub fn is_leaf(self) -> bool {
+        self.0 & Self::LEAF != 0
+    }
+
+    /// An inner node's index.
+    #[inline(always)]
+    pub fn index(self) -> u32 {
+        self.0
+    }
+
+    /// A leaf's first block and block count.
+    #[inline(always)]
+    pub fn blocks(self) -> (u32, u32) {
+        (self.0 & Self::MAX_FIRST_BLOCK, ((self.0 >> 27) & 15) + 1)
     }
 }
 
@@ -158,10 +214,12 @@ impl WideBvh {
         Ok(())
     }
 
-    /// Closest hit at `0 < t < t_max`, by the chosen kernel.
+    /// Closest hit at `0 < t < t_max`, by the chosen kernel. The ray is prepared inside the
+    /// kernel, so its constants stay in registers (a prepared ray passed in memory was read
+    /// back with wider loads than it was written with: a store-forwarding stall per ray).
     #[inline]
-    pub(crate) fn closest(&self, ray: &PreparedRay, t_max: f32) -> traverse::Best {
-        let safe = !ray.inv_dir.is_finite();
+    pub(crate) fn closest(&self, ray: &Ray, t_max: f32) -> traverse::Best {
+        let safe = needs_nan_rule(ray);
         match (self.dispatch, safe) {
             (Dispatch::Scalar, false) => {
                 traverse::closest::<kernel::Scalar, false>(self, ray, t_max)
@@ -183,11 +241,11 @@ impl WideBvh {
     #[inline]
     pub(crate) fn each_hit<F: FnMut(u32, f32) -> bool>(
         &self,
-        ray: &PreparedRay,
+        ray: &Ray,
         t_max: f32,
         f: &mut F,
     ) -> bool {
-        let safe = !ray.inv_dir.is_finite();
+        let safe = needs_nan_rule(ray);
         match (self.dispatch, safe) {
             (Dispatch::Scalar, false) => {
                 traverse::each_hit::<kernel::Scalar, false>(self, ray, t_max, f)
@@ -211,6 +269,14 @@ impl WideBvh {
             }
         }
     }
+}
+
+/// True when a reciprocal of the direction may be infinite (a component below `1 / f32::MAX`,
+/// with margin), so that the box test can meet `0 * inf`: such rays take the kernels' `SAFE`
+/// path, which maps NaN distances explicitly (see [`kernel`]). Every other ray can skip it.
+#[inline(always)]
+fn needs_nan_rule(ray: &Ray) -> bool {
+    ray.dir.abs().min_element() < 1e-37
 }
 
 pub(super) use collapse::collapse;

@@ -1,16 +1,16 @@
 //! The traversal loops over the 8-wide layout, written once for every kernel ([`Lanes`]).
 //!
-//! - [`closest`]: nearest child first. One child hit: go there with no stack traffic; two:
-//!   push the farther; more: push all and sort them by entry distance. A popped entry that
-//!   starts beyond the best hit is skipped.
-//! - [`any_hit`]: no ordering; leaves are tested as soon as they are found, and the first
-//!   hit ends the walk.
-//! - [`each_hit`]: every hit, in no particular order, until the caller asks to stop.
+//! [`closest`] visits the nearest child first. One child hit: go there with no stack traffic;
+//! two: push the farther; more: push all in the node's visiting order for the ray's octant
+//! (farthest first, so the nearest ends on top; no sort). A popped entry that starts beyond
+//! the best hit so far is skipped, a popped leaf is tested on the spot. [`each_hit`] tests the
+//! leaves a node leads to at once and visits its inner children in lane order, until the caller
+//! asks to stop.
 
-use super::kernel::stack::{Entry, Stack};
+use super::kernel::stack::Stack;
 use super::kernel::{BlockHits, Lanes, NodeRay, TriRay};
-use super::{WIDTH, WideBvh};
-use crate::geometry::{PreparedRay, intersect_triangle, intersect_triangle_t};
+use super::{Child, WIDTH, WideBvh};
+use crate::geometry::{PreparedRay, Ray, intersect_triangle, intersect_triangle_t};
 
 /// Boxes are culled only when they start clearly beyond the best hit so far: the slack keeps a
 /// box whose entry distance rounds a hair past an equally distant hit, so ties in `t` still go
@@ -80,11 +80,8 @@ fn leaf_closest<L: Lanes>(
 
 /// Closest hit at `0 < t < t_max` (the best is `t_max` with no triangle when nothing is hit).
 #[inline(always)]
-pub(crate) fn closest<L: Lanes, const SAFE: bool>(
-    w: &WideBvh,
-    ray: &PreparedRay,
-    t_max: f32,
-) -> Best {
+pub(crate) fn closest<L: Lanes, const SAFE: bool>(w: &WideBvh, ray: &Ray, t_max: f32) -> Best {
+    let ray = &PreparedRay::new(ray);
     let mut best = Best::none(t_max);
     let tr = TriRay::new(ray);
     let lr = L::tri_ray(&tr);
@@ -109,50 +106,41 @@ pub(crate) fn closest<L: Lanes, const SAFE: bool>(
             2 => {
                 let a = mask.trailing_zeros() as usize;
                 let b = (mask & (mask - 1)).trailing_zeros() as usize;
-                let (n, f) = if near[b] < near[a] { (b, a) } else { (a, b) };
-                stack.push(Entry {
-                    child: node.child[f],
-                    blocks: node.blocks[f],
-                    dist: near[f],
-                });
+                // Without a branch: which is nearer is as good as random.
+                let swap = (near[b] < near[a]) as usize;
+                let (n, f) = ([a, b][swap], [b, a][swap]);
+                stack.push(node.child[f], near[f]);
                 Some(n)
             }
             _ => {
-                let start = stack.len();
-                let mut m = mask;
-                while m != 0 {
-                    let k = m.trailing_zeros() as usize;
-                    m &= m - 1;
-                    stack.push(Entry {
-                        child: node.child[k],
-                        blocks: node.blocks[k],
-                        dist: near[k],
-                    });
-                }
-                stack.sort_from(start);
+                L::push_in_order(node, &nr, mask, &near, &mut stack);
                 None
             }
         };
         if let Some(k) = next {
-            if node.blocks[k] == 0 {
-                current = node.child[k];
+            let child = Child(node.child[k]);
+            if !child.is_leaf() {
+                current = child.index();
                 continue 'node;
             }
-            leaf_closest::<L>(w, node.child[k], node.blocks[k], &tr, &lr, &mut best);
+            let (first, count) = child.blocks();
+            leaf_closest::<L>(w, first, count, &tr, &lr, &mut best);
         }
         // Pop, skipping entries that now start beyond the best hit; leaves are tested here.
         loop {
-            let Some(e) = stack.pop() else {
+            let Some((child, dist)) = stack.pop() else {
                 return best;
             };
-            if e.dist > best.t * CULL_SLACK {
+            if dist > best.t * CULL_SLACK {
                 continue;
             }
-            if e.blocks == 0 {
-                current = e.child;
+            let child = Child(child);
+            if !child.is_leaf() {
+                current = child.index();
                 continue 'node;
             }
-            leaf_closest::<L>(w, e.child, e.blocks, &tr, &lr, &mut best);
+            let (first, count) = child.blocks();
+            leaf_closest::<L>(w, first, count, &tr, &lr, &mut best);
         }
     }
 }
@@ -196,10 +184,11 @@ fn leaf_each<L: Lanes>(
 #[inline(always)]
 pub(crate) fn each_hit<L: Lanes, const SAFE: bool>(
     w: &WideBvh,
-    ray: &PreparedRay,
+    ray: &Ray,
     t_max: f32,
     f: &mut impl FnMut(u32, f32) -> bool,
 ) -> bool {
+    let ray = &PreparedRay::new(ray);
     let tr = TriRay::new(ray);
     let lr = L::tri_ray(&tr);
     if let Some((first, count)) = w.root_leaf {
@@ -210,30 +199,30 @@ pub(crate) fn each_hit<L: Lanes, const SAFE: bool>(
     }
     let nr = L::node_ray(&NodeRay::new(ray));
     let mut stack = Stack::new();
-    let mut near = [0.0f32; WIDTH];
     let mut current = 0u32;
+    let mut near = [0.0f32; WIDTH];
     loop {
         let node = &w.nodes[current as usize];
         let mut mask = L::node::<SAFE>(node, &nr, t_max, &mut near);
+        // Leaves are tested as soon as they are found (a shadow ray may stop there); the first
+        // inner child is visited next, the others wait on the stack.
         let mut next = None;
         while mask != 0 {
             let k = mask.trailing_zeros() as usize;
             mask &= mask - 1;
-            if node.blocks[k] > 0 {
-                if !leaf_each::<L>(w, node.child[k], node.blocks[k], &tr, &lr, t_max, f) {
+            let child = Child(node.child[k]);
+            if child.is_leaf() {
+                let (first, count) = child.blocks();
+                if !leaf_each::<L>(w, first, count, &tr, &lr, t_max, f) {
                     return false;
                 }
             } else if next.is_none() {
-                next = Some(node.child[k]);
+                next = Some(child.index());
             } else {
-                stack.push(Entry {
-                    child: node.child[k],
-                    blocks: 0,
-                    dist: 0.0,
-                });
+                stack.push(child.0, 0.0);
             }
         }
-        match next.or_else(|| stack.pop().map(|e| e.child)) {
+        match next.or_else(|| stack.pop().map(|(c, _)| c)) {
             Some(c) => current = c,
             None => return true,
         }

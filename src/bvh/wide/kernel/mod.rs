@@ -27,6 +27,7 @@ mod x86;
 
 use super::{BLOCK, TriBlock, WIDTH, WideNode};
 use crate::geometry::{PreparedRay, gamma};
+use stack::Stack;
 
 /// Which implementation the traversal uses.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, serde::Serialize)]
@@ -128,9 +129,12 @@ pub(crate) struct NodeRay {
     /// Per axis, the index into [`WideNode::planes`] of the near plane (`2 axis + 1` when the
     /// direction's sign bit is set); the far plane is the other one (`near ^ 1`).
     pub near: [usize; 3],
+    /// The direction's octant: bit `a` set when component `a` is negative (sign bit).
+    pub octant: u32,
 }
 
 impl NodeRay {
+    #[inline(always)]
     pub fn new(ray: &PreparedRay) -> Self {
         let inv = ray.inv_dir.to_array();
         let neg = ray.neg_mask.bitmask();
@@ -139,6 +143,7 @@ impl NodeRay {
             inv,
             inv_far: inv.map(|i| i * FAR_SCALE),
             near: std::array::from_fn(|a| 2 * a + ((neg >> a) & 1) as usize),
+            octant: neg,
         }
     }
 }
@@ -156,6 +161,7 @@ pub(crate) struct TriRay {
 }
 
 impl TriRay {
+    #[inline(always)]
     pub fn new(ray: &PreparedRay) -> Self {
         Self {
             ray: *ray,
@@ -185,6 +191,28 @@ pub(crate) trait Lanes {
         limit: f32,
         near: &mut [f32; WIDTH],
     ) -> u32;
+
+    /// Pushes the children in `mask` (with their distances from `near`) in the node's visiting
+    /// order for the ray's octant, farthest first, so the nearest ends on top.
+    #[inline(always)]
+    fn push_in_order(
+        n: &WideNode,
+        r: &Self::NodeRay,
+        mask: u32,
+        near: &[f32; WIDTH],
+        stack: &mut Stack,
+    ) {
+        let octant = Self::octant(r);
+        for i in 0..WIDTH {
+            let lane = n.lane_in_order(octant, i);
+            if mask >> lane & 1 == 1 {
+                stack.push(n.child[lane], near[lane]);
+            }
+        }
+    }
+
+    /// The ray's octant (see [`NodeRay::octant`]).
+    fn octant(r: &Self::NodeRay) -> u32;
 
     /// The watertight test on the four lanes of `b` for `0 < t < limit`: returns the lanes hit
     /// (their distances and barycentric coordinates in `out`) and the lanes the scalar test must

@@ -9,6 +9,42 @@ use crate::geometry::intersect_triangle;
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct Scalar;
 
+/// The box test, lane by lane: bit `k` of the result is set when the ray enters child `k`
+/// (its entry distance in `near[k]`).
+#[inline(always)]
+pub(super) fn node_mask<const SAFE: bool>(
+    n: &WideNode,
+    r: &NodeRay,
+    limit: f32,
+    near: &mut [f32; WIDTH],
+) -> u32 {
+    let mut mask = 0;
+    for (k, near) in near.iter_mut().enumerate() {
+        let mut t_near = 0.0f32;
+        let mut t_far = limit;
+        for a in 0..3 {
+            let lo = (n.planes[r.near[a]][k] - r.origin[a]) * r.inv[a];
+            let hi = (n.planes[r.near[a] ^ 1][k] - r.origin[a]) * r.inv_far[a];
+            // NaN only as 0 * inf: that slab constrains nothing.
+            let lo = if SAFE && lo.is_nan() {
+                f32::NEG_INFINITY
+            } else {
+                lo
+            };
+            let hi = if SAFE && hi.is_nan() {
+                f32::INFINITY
+            } else {
+                hi
+            };
+            t_near = if lo > t_near { lo } else { t_near };
+            t_far = if hi < t_far { hi } else { t_far };
+        }
+        *near = t_near;
+        mask |= ((t_near <= t_far) as u32) << k;
+    }
+    mask
+}
+
 impl Lanes for Scalar {
     type NodeRay = NodeRay;
     type TriRay = TriRay;
@@ -30,31 +66,12 @@ impl Lanes for Scalar {
         limit: f32,
         near: &mut [f32; WIDTH],
     ) -> u32 {
-        let mut mask = 0;
-        for (k, near) in near.iter_mut().enumerate() {
-            let mut t_near = 0.0f32;
-            let mut t_far = limit;
-            for a in 0..3 {
-                let lo = (n.planes[r.near[a]][k] - r.origin[a]) * r.inv[a];
-                let hi = (n.planes[r.near[a] ^ 1][k] - r.origin[a]) * r.inv_far[a];
-                // NaN only as 0 * inf: that slab constrains nothing.
-                let lo = if SAFE && lo.is_nan() {
-                    f32::NEG_INFINITY
-                } else {
-                    lo
-                };
-                let hi = if SAFE && hi.is_nan() {
-                    f32::INFINITY
-                } else {
-                    hi
-                };
-                t_near = if lo > t_near { lo } else { t_near };
-                t_far = if hi < t_far { hi } else { t_far };
-            }
-            *near = t_near;
-            mask |= ((t_near <= t_far) as u32) << k;
-        }
-        mask
+        node_mask::<SAFE>(n, r, limit, near)
+    }
+
+    #[inline(always)]
+    fn octant(r: &NodeRay) -> u32 {
+        r.octant
     }
 
     #[inline(always)]

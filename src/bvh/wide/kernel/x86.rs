@@ -18,10 +18,11 @@
 
 use std::arch::x86_64::*;
 
+use super::stack::Stack;
 use super::{BlockHits, G2, G3, G5, Lanes, NodeRay, TriRay};
 use crate::bvh::wide::traverse::{self, Best};
 use crate::bvh::wide::{TriBlock, WIDTH, WideBvh, WideNode};
-use crate::geometry::PreparedRay;
+use crate::geometry::Ray;
 
 /// The triangle test's ray data, broadcast to 4 lanes.
 #[derive(Clone, Copy)]
@@ -69,29 +70,36 @@ fn max3_abs(a: __m128, b: __m128, c: __m128) -> __m128 {
     unsafe { _mm_max_ps(_mm_max_ps(abs4(a), abs4(b)), abs4(c)) }
 }
 
+/// One vertex of the block's four triangles relative to the origin, then sheared:
+/// `a = v - o`, `(a[kx] - sx a[kz], a[ky] - sy a[kz], a[kz])`.
+#[inline(always)]
+fn sheared4(b: &TriBlock, r: &TriRay4, vertex: usize) -> (__m128, __m128, __m128) {
+    let [kx, ky, kz] = r.k;
+    // SAFETY: SSE2 baseline operations; the loads read whole `[f32; 4]` rows of the block.
+    unsafe {
+        let x = _mm_sub_ps(_mm_loadu_ps(b.v[vertex][kx].as_ptr()), r.origin[kx]);
+        let y = _mm_sub_ps(_mm_loadu_ps(b.v[vertex][ky].as_ptr()), r.origin[ky]);
+        let z = _mm_sub_ps(_mm_loadu_ps(b.v[vertex][kz].as_ptr()), r.origin[kz]);
+        (
+            _mm_sub_ps(x, _mm_mul_ps(r.sx, z)),
+            _mm_sub_ps(y, _mm_mul_ps(r.sy, z)),
+            z,
+        )
+    }
+}
+
 /// The watertight test on a block's four lanes (see [`Lanes::block`]).
 #[inline(always)]
 fn block_sse(b: &TriBlock, r: &TriRay4, limit: f32, out: &mut BlockHits) -> (u32, u32) {
-    let valid = b.valid_mask();
-    let [kx, ky, kz] = r.k;
-    // SAFETY: SSE2 baseline operations; the loads read whole `[f32; 4]` rows of the block and
-    // the store writes the whole `[f32; 4]` output.
+    // SAFETY: SSE2 baseline operations; the load reads the whole `[u32; 4]` of indices and the
+    // stores write whole `[f32; 4]` outputs.
     unsafe {
-        let ld = |vertex: usize, axis: usize| _mm_loadu_ps(b.v[vertex][axis].as_ptr());
-        // Vertices relative to the origin, then sheared: `a = v0 - o`, `ax = a[kx] - sx a[kz]`.
-        let sheared = |vertex: usize| {
-            let x = _mm_sub_ps(ld(vertex, kx), r.origin[kx]);
-            let y = _mm_sub_ps(ld(vertex, ky), r.origin[ky]);
-            let z = _mm_sub_ps(ld(vertex, kz), r.origin[kz]);
-            (
-                _mm_sub_ps(x, _mm_mul_ps(r.sx, z)),
-                _mm_sub_ps(y, _mm_mul_ps(r.sy, z)),
-                z,
-            )
-        };
-        let (ax, ay, az) = sheared(0);
-        let (bx, by, bz) = sheared(1);
-        let (cx, cy, cz) = sheared(2);
+        // Lanes holding a triangle: index not u32::MAX.
+        let empty = _mm_cmpeq_epi32(_mm_loadu_si128(b.prim.as_ptr().cast()), _mm_set1_epi32(-1));
+        let valid = !(_mm_movemask_ps(_mm_castsi128_ps(empty)) as u32) & 0xf;
+        let (ax, ay, az) = sheared4(b, r, 0);
+        let (bx, by, bz) = sheared4(b, r, 1);
+        let (cx, cy, cz) = sheared4(b, r, 2);
         let u = _mm_sub_ps(_mm_mul_ps(cx, by), _mm_mul_ps(cy, bx));
         let v = _mm_sub_ps(_mm_mul_ps(ax, cy), _mm_mul_ps(ay, cx));
         let w = _mm_sub_ps(_mm_mul_ps(bx, ay), _mm_mul_ps(by, ax));
@@ -189,6 +197,7 @@ pub(crate) struct NodeRay4 {
     inv: [__m128; 3],
     inv_far: [__m128; 3],
     near: [usize; 3],
+    octant: u32,
 }
 
 /// `x` with its NaN lanes replaced by `fill` (SSE2 has no blend: and / andnot / or).
@@ -214,6 +223,7 @@ impl Lanes for Sse2 {
             inv: r.inv.map(s),
             inv_far: r.inv_far.map(s),
             near: r.near,
+            octant: r.octant,
         }
     }
 
@@ -256,6 +266,11 @@ impl Lanes for Sse2 {
     }
 
     #[inline(always)]
+    fn octant(r: &NodeRay4) -> u32 {
+        r.octant
+    }
+
+    #[inline(always)]
     fn block(b: &TriBlock, r: &TriRay4, limit: f32, out: &mut BlockHits) -> (u32, u32) {
         block_sse(b, r, limit, out)
     }
@@ -272,6 +287,51 @@ pub(crate) struct NodeRay8 {
     inv: [__m256; 3],
     inv_far: [__m256; 3],
     near: [usize; 3],
+    octant: u32,
+    /// `3 * octant` in every lane: shifts a node's order words to this octant's lane indices.
+    shift: __m256i,
+}
+
+/// For each 8-bit mask, the positions of its set bits in increasing order (the rest 0): the
+/// permutation that packs the hit lanes to the front.
+static COMPACT: [[u32; WIDTH]; 256] = {
+    let mut table = [[0u32; WIDTH]; 256];
+    let mut m = 0;
+    while m < 256 {
+        let mut k = 0;
+        let mut bit = 0;
+        while bit < WIDTH {
+            if m >> bit & 1 == 1 {
+                table[m][k] = bit as u32;
+                k += 1;
+            }
+            bit += 1;
+        }
+        m += 1;
+    }
+    table
+};
+
+/// Near and far distances of the eight boxes along axis `a` (no closures around intrinsics: a
+/// closure is a function of its own, compiled without the caller's target features unless
+/// it happens to be inlined).
+#[inline(always)]
+fn slab8<const SAFE: bool>(n: &WideNode, r: &NodeRay8, a: usize) -> (__m256, __m256) {
+    // SAFETY: only reached inside the AVX2 entry points (see `Avx2::node_ray`); the loads read
+    // whole `[f32; 8]` plane rows.
+    unsafe {
+        let lo = _mm256_loadu_ps(n.planes[r.near[a]].as_ptr());
+        let hi = _mm256_loadu_ps(n.planes[r.near[a] ^ 1].as_ptr());
+        let mut lo = _mm256_mul_ps(_mm256_sub_ps(lo, r.origin[a]), r.inv[a]);
+        let mut hi = _mm256_mul_ps(_mm256_sub_ps(hi, r.origin[a]), r.inv_far[a]);
+        if SAFE {
+            let nan = _mm256_cmp_ps::<_CMP_UNORD_Q>(lo, lo);
+            lo = _mm256_blendv_ps(lo, _mm256_set1_ps(f32::NEG_INFINITY), nan);
+            let nan = _mm256_cmp_ps::<_CMP_UNORD_Q>(hi, hi);
+            hi = _mm256_blendv_ps(hi, _mm256_set1_ps(f32::INFINITY), nan);
+        }
+        (lo, hi)
+    }
 }
 
 impl Lanes for Avx2 {
@@ -288,6 +348,9 @@ impl Lanes for Avx2 {
             inv: r.inv.map(s),
             inv_far: r.inv_far.map(s),
             near: r.near,
+            octant: r.octant,
+            // SAFETY: as above.
+            shift: unsafe { _mm256_set1_epi32(3 * r.octant as i32) },
         }
     }
 
@@ -303,27 +366,64 @@ impl Lanes for Avx2 {
         limit: f32,
         near: &mut [f32; WIDTH],
     ) -> u32 {
-        // SAFETY: only reached inside the AVX2 entry points (see `node_ray`); the loads read
-        // whole `[f32; 8]` plane rows, the store writes the whole `[f32; 8]` of `near`.
+        // SAFETY: only reached inside the AVX2 entry points (see `node_ray`); the store writes
+        // the whole `[f32; 8]` of `near`.
         unsafe {
-            let mut t_near = _mm256_setzero_ps();
-            let mut t_far = _mm256_set1_ps(limit);
-            for a in 0..3 {
-                let lo = _mm256_loadu_ps(n.planes[r.near[a]].as_ptr());
-                let hi = _mm256_loadu_ps(n.planes[r.near[a] ^ 1].as_ptr());
-                let mut lo = _mm256_mul_ps(_mm256_sub_ps(lo, r.origin[a]), r.inv[a]);
-                let mut hi = _mm256_mul_ps(_mm256_sub_ps(hi, r.origin[a]), r.inv_far[a]);
-                if SAFE {
-                    let nan = _mm256_cmp_ps::<_CMP_UNORD_Q>(lo, lo);
-                    lo = _mm256_blendv_ps(lo, _mm256_set1_ps(f32::NEG_INFINITY), nan);
-                    let nan = _mm256_cmp_ps::<_CMP_UNORD_Q>(hi, hi);
-                    hi = _mm256_blendv_ps(hi, _mm256_set1_ps(f32::INFINITY), nan);
-                }
-                t_near = _mm256_max_ps(t_near, lo);
-                t_far = _mm256_min_ps(t_far, hi);
-            }
+            let (lx, hx) = slab8::<SAFE>(n, r, 0);
+            let (ly, hy) = slab8::<SAFE>(n, r, 1);
+            let (lz, hz) = slab8::<SAFE>(n, r, 2);
+            // Trees of two levels, not chains of three: shorter latency.
+            let t_near = _mm256_max_ps(
+                _mm256_max_ps(lx, ly),
+                _mm256_max_ps(lz, _mm256_setzero_ps()),
+            );
+            let t_far = _mm256_min_ps(
+                _mm256_min_ps(hx, hy),
+                _mm256_min_ps(hz, _mm256_set1_ps(limit)),
+            );
             _mm256_storeu_ps(near.as_mut_ptr(), t_near);
             _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(t_near, t_far)) as u32
+        }
+    }
+
+    #[inline(always)]
+    fn octant(r: &NodeRay8) -> u32 {
+        r.octant
+    }
+
+    /// Without a branch per child: the hit lanes are put in the octant's order and packed to
+    /// the front with two lane permutations, and pushed with two stores.
+    #[inline(always)]
+    fn push_in_order(
+        n: &WideNode,
+        r: &NodeRay8,
+        mask: u32,
+        near: &[f32; WIDTH],
+        stack: &mut Stack,
+    ) {
+        // SAFETY: only reached inside the AVX2 entry points (see `node_ray`); the loads read
+        // whole `[u32; 8]` / `[f32; 8]` rows; the transmutes reinterpret 32-byte vectors as
+        // 32-byte arrays of the same lane type.
+        unsafe {
+            // Lane indices in this octant's order (vpermd reads the low 3 bits of each).
+            let order = _mm256_srlv_epi32(_mm256_loadu_si256(n.order.as_ptr().cast()), r.shift);
+            // The hit mask as lanes, reordered.
+            let bits = _mm256_setr_epi32(1, 2, 4, 8, 16, 32, 64, 128);
+            let hit =
+                _mm256_cmpeq_epi32(_mm256_and_si256(_mm256_set1_epi32(mask as i32), bits), bits);
+            let hit_in_order = _mm256_permutevar8x32_epi32(hit, order);
+            let m = _mm256_movemask_ps(_mm256_castsi256_ps(hit_in_order)) as usize;
+            // The hit positions packed to the front, then the lanes they name.
+            let packed = _mm256_loadu_si256(COMPACT[m].as_ptr().cast());
+            let lanes = _mm256_permutevar8x32_epi32(order, packed);
+            let child =
+                _mm256_permutevar8x32_epi32(_mm256_loadu_si256(n.child.as_ptr().cast()), lanes);
+            let dist = _mm256_permutevar8x32_ps(_mm256_loadu_ps(near.as_ptr()), lanes);
+            stack.push8(
+                std::mem::transmute::<__m256i, [u32; WIDTH]>(child),
+                std::mem::transmute::<__m256, [f32; WIDTH]>(dist),
+                m.count_ones() as usize,
+            );
         }
     }
 
@@ -351,14 +451,14 @@ impl Avx2Cpu {
 }
 
 #[target_feature(enable = "avx2,fma,popcnt,bmi1,lzcnt")]
-fn closest_avx2_inner<const SAFE: bool>(w: &WideBvh, ray: &PreparedRay, t_max: f32) -> Best {
+fn closest_avx2_inner<const SAFE: bool>(w: &WideBvh, ray: &Ray, t_max: f32) -> Best {
     traverse::closest::<Avx2, SAFE>(w, ray, t_max)
 }
 
 #[target_feature(enable = "avx2,fma,popcnt,bmi1,lzcnt")]
 fn each_hit_avx2_inner<const SAFE: bool, F: FnMut(u32, f32) -> bool>(
     w: &WideBvh,
-    ray: &PreparedRay,
+    ray: &Ray,
     t_max: f32,
     f: &mut F,
 ) -> bool {
@@ -370,7 +470,7 @@ fn each_hit_avx2_inner<const SAFE: bool, F: FnMut(u32, f32) -> bool>(
 pub(crate) fn closest_avx2<const SAFE: bool>(
     _cpu: Avx2Cpu,
     w: &WideBvh,
-    ray: &PreparedRay,
+    ray: &Ray,
     t_max: f32,
 ) -> Best {
     // SAFETY: an `Avx2Cpu` exists only when the CPU has every feature enabled here.
@@ -382,7 +482,7 @@ pub(crate) fn closest_avx2<const SAFE: bool>(
 pub(crate) fn each_hit_avx2<const SAFE: bool, F: FnMut(u32, f32) -> bool>(
     _cpu: Avx2Cpu,
     w: &WideBvh,
-    ray: &PreparedRay,
+    ray: &Ray,
     t_max: f32,
     f: &mut F,
 ) -> bool {
