@@ -284,6 +284,17 @@ fn rtc_ray(r: &Ray) -> RtcRay {
 
 impl Engine for Embree {
     fn closest(&self, ray: &Ray) -> HitRecord {
+        self.intersect1(ray)
+    }
+
+    fn occluded(&self, ray: &Ray) -> bool {
+        self.occluded1(ray)
+    }
+}
+
+impl Embree {
+    /// `rtcIntersect1`: the closest hit of one ray.
+    pub fn intersect1(&self, ray: &Ray) -> HitRecord {
         let mut rh = RtcRayHit {
             ray: rtc_ray(ray),
             hit: RtcHit {
@@ -306,7 +317,8 @@ impl Engine for Embree {
         }
     }
 
-    fn occluded(&self, ray: &Ray) -> bool {
+    /// `rtcOccluded1`: whether anything lies on the ray.
+    pub fn occluded1(&self, ray: &Ray) -> bool {
         let mut r = rtc_ray(ray);
         let mut ctx = RtcIntersectContext::new(RTC_INTERSECT_CONTEXT_FLAG_INCOHERENT);
         // SAFETY: as in `closest`.

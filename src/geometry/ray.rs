@@ -40,8 +40,6 @@ pub struct PreparedRay {
     pub(crate) k: [usize; 3],
     /// Triangle test shear constants `Sx`, `Sy`, `Sz`.
     pub(crate) shear: [f32; 3],
-    /// [`Ray::is_valid`] of the ray it was made from.
-    valid: bool,
 }
 
 impl PreparedRay {
@@ -78,15 +76,7 @@ impl PreparedRay {
             neg_mask: BVec3A::new(neg[0], neg[1], neg[2]),
             k: [kx, ky, kz],
             shear,
-            valid: ray.is_valid(),
         }
-    }
-
-    /// True when the ray it was made from is valid ([`Ray::is_valid`]): finite origin and
-    /// direction, direction not zero. Queries answer "no hit" for any other ray at once.
-    #[inline]
-    pub fn is_valid(&self) -> bool {
-        self.valid
     }
 }
 

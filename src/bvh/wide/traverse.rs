@@ -47,6 +47,13 @@ impl Best {
     }
 }
 
+/// The next float above `t`, for `t` in `(0, +inf]` (the best distance always is): one
+/// integer add, where `f32::next_up` branches on NaN, zero and sign.
+#[inline(always)]
+fn next_up(t: f32) -> f32 {
+    f32::from_bits(t.to_bits() + (t < f32::INFINITY) as u32)
+}
+
 /// Tests a leaf's blocks, keeping the closest hit (lowest index on ties).
 #[inline(always)]
 fn leaf_closest<L: Lanes>(
@@ -61,7 +68,7 @@ fn leaf_closest<L: Lanes>(
     for b in first..first + count {
         let block = &w.blocks[b as usize];
         // Hits as close as the best so far still count (for the index tie rule).
-        let limit = best.t.next_up();
+        let limit = next_up(best.t);
         let (mut hits, mut exact) = L::block(block, lr, limit, &mut out);
         while hits != 0 {
             let k = hits.trailing_zeros() as usize;
@@ -83,18 +90,24 @@ fn leaf_closest<L: Lanes>(
 pub(crate) fn closest<L: Lanes, const SAFE: bool>(w: &WideBvh, ray: &Ray, t_max: f32) -> Best {
     let ray = &PreparedRay::new(ray);
     let mut best = Best::none(t_max);
+    if let Some((first, count)) = w.root_leaf {
+        let tr = TriRay::new(ray);
+        leaf_closest::<L>(w, first, count, &tr, &L::tri_ray(&tr), &mut best);
+        return best;
+    }
+    let Some(root) = w.nodes.first() else {
+        return best;
+    };
+    let nr = L::node_ray(&NodeRay::new(ray));
+    let mut near = [0.0f32; WIDTH];
+    // The root first, before the triangle test's setup: many rays of an image enter none of
+    // its children and leave here.
+    if L::node::<SAFE>(root, &nr, t_max * CULL_SLACK, &mut near) == 0 {
+        return best;
+    }
     let tr = TriRay::new(ray);
     let lr = L::tri_ray(&tr);
-    if let Some((first, count)) = w.root_leaf {
-        leaf_closest::<L>(w, first, count, &tr, &lr, &mut best);
-        return best;
-    }
-    if w.nodes.is_empty() {
-        return best;
-    }
-    let nr = L::node_ray(&NodeRay::new(ray));
     let mut stack = Stack::new();
-    let mut near = [0.0f32; WIDTH];
     let mut current = 0u32;
     'node: loop {
         let node = &w.nodes[current as usize];

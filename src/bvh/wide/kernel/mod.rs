@@ -134,6 +134,8 @@ pub(crate) struct NodeRay {
 }
 
 impl NodeRay {
+    /// The box test's constants of `ray`: the reciprocal direction (`+-inf` for `+-0`), the
+    /// near planes by the sign bits.
     #[inline(always)]
     pub fn new(ray: &PreparedRay) -> Self {
         let inv = ray.inv_dir.to_array();
@@ -163,8 +165,9 @@ pub(crate) struct TriRay {
 impl TriRay {
     #[inline(always)]
     pub fn new(ray: &PreparedRay) -> Self {
+        let ray = *ray;
         Self {
-            ray: *ray,
+            ray,
             origin: ray.origin.to_array(),
             k: ray.k,
             shear: ray.shear,

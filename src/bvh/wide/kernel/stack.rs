@@ -43,10 +43,16 @@ impl Stack {
     /// builders rules out.
     #[inline(always)]
     pub fn push8(&mut self, child: [u32; WIDTH], dist: [f32; WIDTH], count: usize) {
-        let end = self.len + WIDTH;
-        self.child[self.len..end].copy_from_slice(&child.map(MaybeUninit::new));
-        self.dist[self.len..end].copy_from_slice(&dist.map(MaybeUninit::new));
-        self.len += count.min(WIDTH);
+        let top = self.len;
+        let (c, d) = (
+            &mut self.child[top..top + WIDTH],
+            &mut self.dist[top..top + WIDTH],
+        );
+        for k in 0..WIDTH {
+            c[k].write(child[k]);
+            d[k].write(dist[k]);
+        }
+        self.len = top + count.min(WIDTH);
     }
 
     /// Pushes one entry.

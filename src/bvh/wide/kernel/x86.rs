@@ -32,10 +32,6 @@ pub(crate) struct TriRay4 {
     sx: __m128,
     sy: __m128,
     sz: __m128,
-    /// `|sz|`, `2 |sx|`, `2 |sy|` of the distance error bound.
-    abs_sz: __m128,
-    two_abs_sx: __m128,
-    two_abs_sy: __m128,
 }
 
 #[inline(always)]
@@ -49,9 +45,6 @@ fn tri_ray4(r: &TriRay) -> TriRay4 {
         sx: s(sx),
         sy: s(sy),
         sz: s(sz),
-        abs_sz: s(sz.abs()),
-        two_abs_sx: s(2.0 * sx.abs()),
-        two_abs_sy: s(2.0 * sy.abs()),
     }
 }
 
@@ -113,14 +106,11 @@ fn block_sse(b: &TriBlock, r: &TriRay4, limit: f32, out: &mut BlockHits) -> (u32
             );
             _mm_movemask_ps(z) as u32 & valid
         };
-        let neg = _mm_or_ps(
-            _mm_or_ps(_mm_cmplt_ps(u, zero), _mm_cmplt_ps(v, zero)),
-            _mm_cmplt_ps(w, zero),
-        );
-        let pos = _mm_or_ps(
-            _mm_or_ps(_mm_cmpgt_ps(u, zero), _mm_cmpgt_ps(v, zero)),
-            _mm_cmpgt_ps(w, zero),
-        );
+        // Some edge function negative and some positive: outside. As min < 0 and max > 0
+        // (a NaN lane may decide differently from the scalar test's comparisons here, but its
+        // distance is NaN, so it misses either way).
+        let neg = _mm_cmplt_ps(_mm_min_ps(_mm_min_ps(u, v), w), zero);
+        let pos = _mm_cmpgt_ps(_mm_max_ps(_mm_max_ps(u, v), w), zero);
         let inside = !(_mm_movemask_ps(_mm_and_ps(neg, pos)) as u32) & valid & !exact & 0xf;
         if inside == 0 {
             return (0, exact);
@@ -141,17 +131,21 @@ fn block_sse(b: &TriBlock, r: &TriRay4, limit: f32, out: &mut BlockHits) -> (u32
         );
         // The distance error bound, in the order of `t_error_bound`.
         let max_z = max3_abs(az, bz, cz);
-        let max_zt = _mm_mul_ps(max_z, r.abs_sz);
+        // `|sz|`, `2 |sx|`, `2 |sy|` (doubling is exact): made here, not kept per ray, to
+        // spare registers.
+        let abs_sx = abs4(r.sx);
+        let abs_sy = abs4(r.sy);
+        let max_zt = _mm_mul_ps(max_z, abs4(r.sz));
         let max_x = max3_abs(ax, bx, cx);
         let max_y = max3_abs(ay, by, cy);
         let delta_z = _mm_mul_ps(_mm_set1_ps(G3), max_zt);
         let delta_x = _mm_mul_ps(
             _mm_set1_ps(G5),
-            _mm_add_ps(max_x, _mm_mul_ps(r.two_abs_sx, max_z)),
+            _mm_add_ps(max_x, _mm_mul_ps(_mm_add_ps(abs_sx, abs_sx), max_z)),
         );
         let delta_y = _mm_mul_ps(
             _mm_set1_ps(G5),
-            _mm_add_ps(max_y, _mm_mul_ps(r.two_abs_sy, max_z)),
+            _mm_add_ps(max_y, _mm_mul_ps(_mm_add_ps(abs_sy, abs_sy), max_z)),
         );
         let delta_e = _mm_mul_ps(
             _mm_set1_ps(2.0),
