@@ -119,27 +119,34 @@ fn leaf_child(nodes: &mut Vec<WideNode>, leaf: &BvhNode, first: u32, count: u32)
 /// diagonal each box starts (its entry corner projected on the diagonal), farthest first;
 /// empty lanes first of all.
 fn octant_order(node: &WideNode) -> [u32; WIDTH] {
+    // Per lane, its entry coordinate on each axis for a positive and a negative direction:
+    // `lo`, and `-hi` (so larger is always farther); empty lanes are farthest of all.
+    let mut corner = [[[0.0f32; WIDTH]; 2]; 3];
+    for a in 0..3 {
+        for lane in 0..WIDTH {
+            let (lo, hi) = (node.planes[2 * a][lane], node.planes[2 * a + 1][lane]);
+            let empty = lo > hi;
+            corner[a][0][lane] = if empty { f32::INFINITY } else { lo };
+            corner[a][1][lane] = if empty { f32::INFINITY } else { -hi };
+        }
+    }
     let mut order = [0u32; WIDTH];
-    for q in 0..8u32 {
-        let key = |lane: usize| -> f64 {
-            (0..3)
-                .map(|a| {
-                    let negative = q >> a & 1 == 1;
-                    let (lo, hi) = (node.planes[2 * a][lane], node.planes[2 * a + 1][lane]);
-                    if lo > hi {
-                        f64::INFINITY // an empty lane
-                    } else if negative {
-                        -(hi as f64)
-                    } else {
-                        lo as f64
-                    }
-                })
-                .sum()
-        };
-        let mut lanes: [usize; WIDTH] = std::array::from_fn(|k| k);
-        lanes.sort_by(|&a, &b| key(b).total_cmp(&key(a)).then(a.cmp(&b)));
-        for (i, &lane) in lanes.iter().enumerate() {
-            order[i] |= (lane as u32) << (3 * q);
+    for q in 0..8usize {
+        let mut key = [0.0f32; WIDTH];
+        for (a, c) in corner.iter().enumerate() {
+            let side = &c[q >> a & 1];
+            for lane in 0..WIDTH {
+                key[lane] += side[lane];
+            }
+        }
+        // Each lane's rank: how many lanes come before it (larger key, or equal key and lower
+        // lane). Branch-free, and every rank is distinct.
+        for i in 0..WIDTH {
+            let mut rank = 0;
+            for (j, &kj) in key.iter().enumerate() {
+                rank += ((kj > key[i]) | ((kj == key[i]) & (j < i))) as usize;
+            }
+            order[rank] |= (i as u32) << (3 * q);
         }
     }
     order
