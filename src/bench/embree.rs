@@ -155,8 +155,8 @@ unsafe extern "C" {
     );
 }
 
-/// An Embree device and a committed scene over a triangle list (one thread for the build, as
-/// our builds are measured; tracing runs on whatever threads call it).
+/// An Embree device and a committed scene over a triangle list (built with a given number of
+/// threads; tracing runs on whatever threads call it).
 pub struct Embree {
     device: RtcDevice,
     scene: RtcScene,
@@ -169,10 +169,11 @@ unsafe impl Send for Embree {}
 unsafe impl Sync for Embree {}
 
 impl Embree {
-    /// Builds the scene at medium quality on one thread. Triangles must be finite (the
-    /// benchmark leaves out the others before any engine sees them).
-    pub fn build(triangles: &[[Vec3; 3]]) -> Result<Embree> {
-        let config = c"threads=1";
+    /// Builds the scene at medium quality with `threads` threads. Triangles must be finite
+    /// (the benchmark leaves out the others before any engine sees them).
+    pub fn build(triangles: &[[Vec3; 3]], threads: usize) -> Result<Embree> {
+        let config = std::ffi::CString::new(format!("threads={}", threads.max(1)))
+            .expect("no NUL in a number");
         // SAFETY: `config` is a NUL-terminated string that outlives the call.
         let device = unsafe { rtcNewDevice(config.as_ptr()) };
         if device.is_null() {

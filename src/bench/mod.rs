@@ -120,9 +120,9 @@ pub struct EngineResult {
     pub mesh: String,
     /// Triangles the engines were given (the mesh's finite triangles).
     pub triangles: usize,
-    /// Threads used for tracing (builds are single-threaded for every engine).
+    /// Threads used for building and tracing (obvhs builds on one thread whatever the count).
     pub threads: usize,
-    /// Build time in milliseconds (best of the repeats).
+    /// Build time in milliseconds with that many threads (best of the repeats).
     pub build_ms: f64,
     /// Closest-hit throughput, millions of rays per second (best of the repeats).
     pub closest_mrays: f64,
@@ -192,17 +192,19 @@ pub struct MeshBench {
     pub excluded: usize,
 }
 
-/// A built engine under test and its best build time.
+/// A built engine under test and its best build time per thread count.
 struct Entry {
     name: String,
-    build_ms: f64,
+    build_ms: Vec<f64>,
     stats: Option<BvhStats>,
     engine: Box<dyn Engine>,
 }
 
-/// Builds one engine: the engine and its stats (ours only); an error when a peer cannot be
-/// built (Embree's library refusing the CPU, say).
-type Builder<'a> = Box<dyn Fn() -> Result<(Box<dyn Engine>, Option<BvhStats>)> + Send + Sync + 'a>;
+/// Builds one engine with a number of threads (on a rayon pool of that size): the engine and
+/// its stats (ours only); an error when a peer cannot be built (Embree's library refusing the
+/// CPU, say).
+type Builder<'a> =
+    Box<dyn Fn(usize) -> Result<(Box<dyn Engine>, Option<BvhStats>)> + Send + Sync + 'a>;
 
 /// Builds every engine over the finite triangles of `triangles` and traces `rays` (a row-major
 /// image `width` rays wide, which packet engines trace in tiles) with each thread count.
@@ -235,13 +237,12 @@ pub fn run(
     }
     let tris = &finite[..];
 
-    let one = pool(1);
     let mut builders: Vec<(String, Builder)> = Vec::new();
     for (name, options) in &config.ours {
         let options = *options;
         builders.push((
             name.clone(),
-            Box::new(move || {
+            Box::new(move |_| {
                 let bvh = Bvh::build(tris, &options);
                 let stats = bvh.stats;
                 Ok((Box::new(bvh) as Box<dyn Engine>, Some(stats)))
@@ -252,17 +253,17 @@ pub fn run(
     if config.embree {
         builders.push((
             "embree".into(),
-            Box::new(move || {
+            Box::new(move |threads| {
                 Ok((
-                    Box::new(embree::Embree::build(tris)?) as Box<dyn Engine>,
+                    Box::new(embree::Embree::build(tris, threads)?) as Box<dyn Engine>,
                     None,
                 ))
             }),
         ));
         builders.push((
             "embree-packet16".into(),
-            Box::new(move || {
-                let e = embree::EmbreePackets(embree::Embree::build(tris)?);
+            Box::new(move |threads| {
+                let e = embree::EmbreePackets(embree::Embree::build(tris, threads)?);
                 Ok((Box::new(e) as Box<dyn Engine>, None))
             }),
         ));
@@ -270,45 +271,51 @@ pub fn run(
     if config.obvhs {
         builders.push((
             "obvhs-bvh2".into(),
-            Box::new(move || Ok((Box::new(obvhs::Bvh2::build(tris)) as Box<dyn Engine>, None))),
+            Box::new(move |_| Ok((Box::new(obvhs::Bvh2::build(tris)) as Box<dyn Engine>, None))),
         ));
         builders.push((
             "obvhs-cwbvh".into(),
-            Box::new(move || Ok((Box::new(obvhs::Cwbvh::build(tris)) as Box<dyn Engine>, None))),
+            Box::new(move |_| Ok((Box::new(obvhs::Cwbvh::build(tris)) as Box<dyn Engine>, None))),
         ));
     }
 
-    // Builds, on one thread, interleaved. A peer's build time is its builder call (plus
-    // putting its triangles in leaf order for obvhs); ours includes copying the triangles into
-    // leaf order and the 8-wide layout.
+    // Builds, interleaved, with each thread count. A peer's build time is its builder call
+    // (plus putting its triangles in leaf order for obvhs); ours includes copying the
+    // triangles into leaf order and the 8-wide layout.
+    let pools: Vec<(usize, rayon::ThreadPool)> =
+        config.threads.iter().map(|&t| (t, pool(t))).collect();
     let mut entries: Vec<Entry> = Vec::new();
     for round in 0..config.repeat.max(1) {
         for (k, (name, build)) in builders.iter().enumerate() {
-            progress(&format!(
-                "{mesh_name}: building {name} (round {})",
-                round + 1
-            ));
-            let start = Instant::now();
-            let (engine, stats) = one.install(build)?;
-            let ms = start.elapsed().as_secs_f64() * 1e3;
-            match entries.get_mut(k) {
-                Some(e) => {
-                    e.build_ms = e.build_ms.min(ms);
-                    e.engine = engine;
+            for (p, (threads, pool)) in pools.iter().enumerate() {
+                progress(&format!(
+                    "{mesh_name}: building {name} on {threads} thread(s) (round {})",
+                    round + 1
+                ));
+                let start = Instant::now();
+                let (engine, stats) = pool.install(|| build(*threads))?;
+                let ms = start.elapsed().as_secs_f64() * 1e3;
+                match entries.get_mut(k) {
+                    Some(e) => {
+                        e.build_ms[p] = e.build_ms[p].min(ms);
+                        e.engine = engine;
+                    }
+                    None => {
+                        let mut build_ms = vec![f64::INFINITY; pools.len()];
+                        build_ms[p] = ms;
+                        entries.push(Entry {
+                            name: name.clone(),
+                            build_ms,
+                            stats,
+                            engine,
+                        });
+                    }
                 }
-                None => entries.push(Entry {
-                    name: name.clone(),
-                    build_ms: ms,
-                    stats,
-                    engine,
-                }),
             }
         }
     }
 
     // Traces, interleaved over engines and thread counts.
-    let pools: Vec<(usize, rayon::ThreadPool)> =
-        config.threads.iter().map(|&t| (t, pool(t))).collect();
     let n = entries.len() * pools.len();
     let mut closest = vec![Duration::MAX; n];
     let mut occluded = vec![Duration::MAX; n];
@@ -346,14 +353,14 @@ pub fn run(
             let k = e * pools.len() + p;
             let mut stats = entry.stats;
             if let Some(s) = &mut stats {
-                s.build_ms = entry.build_ms;
+                s.build_ms = entry.build_ms[p];
             }
             results.push(EngineResult {
                 engine: entry.name.clone(),
                 mesh: mesh_name.to_string(),
                 triangles: finite.len(),
                 threads: *threads,
-                build_ms: entry.build_ms,
+                build_ms: entry.build_ms[p],
                 closest_mrays: rays.len() as f64 / closest[k].as_secs_f64() / 1e6,
                 occluded_mrays: rays.len() as f64 / occluded[k].as_secs_f64() / 1e6,
                 agreement: agreement(

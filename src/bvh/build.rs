@@ -1,5 +1,10 @@
-//! Top-down construction: median split or binned SAH (Wald 2007), written straight into the
-//! flat node array.
+//! Top-down construction: median split or binned SAH (Wald 2007), into the flat node array.
+//!
+//! The top of the tree is built in parallel on the rayon pool: a node with many triangles is
+//! split, then its two halves are built at once (`rayon::join`), each into a node array of its
+//! own that the parent then joins to its own. Below [`PARALLEL_MIN`] triangles a subtree is
+//! built by one thread into one array, depth first. On a one-thread pool the whole build runs
+//! in order on that thread, and the tree is the same on any number of threads.
 
 use std::time::Instant;
 
@@ -12,6 +17,8 @@ use crate::geometry::{Aabb, is_degenerate};
 const COUNT_SPLIT_DEPTH: u32 = (MAX_DEPTH - 32) as u32;
 /// Largest bin count the SAH builder supports.
 const MAX_BINS: usize = 64;
+/// Subtrees with at least this many triangles split in two that are built in parallel.
+const PARALLEL_MIN: usize = 16 * 1024;
 
 pub(super) fn build(triangles: &[[Vec3; 3]], options: &BuildOptions) -> Bvh {
     let start = Instant::now();
@@ -45,29 +52,12 @@ pub(super) fn build(triangles: &[[Vec3; 3]], options: &BuildOptions) -> Bvh {
     }
     let excluded = triangles.len() - refs.len() - degenerate;
 
-    let mut nodes = vec![
-        BvhNode {
-            min: [0.0; 3],
-            first: 0,
-            max: [0.0; 3],
-            count: 0,
-        };
-        2
-    ];
-    if !refs.is_empty() {
-        let empty = Bin {
-            bounds: Aabb::EMPTY,
-            centroids: Aabb::EMPTY,
-            count: 0,
-        };
-        let mut builder = Builder {
-            nodes: &mut nodes,
-            options: &options,
-            grid: std::cell::RefCell::new(Box::new([empty; MAX_BINS])),
-            keys: std::cell::RefCell::new(vec![0; refs.len()]),
-        };
-        builder.run(&mut refs, root_bounds, root_centroids);
-    }
+    let nodes = if refs.is_empty() {
+        vec![EMPTY_NODE; 2]
+    } else {
+        let mut keys = vec![0u8; refs.len()];
+        subtree(&options, &mut refs, &mut keys, 0, root_bounds, root_centroids, 0)
+    };
 
     let prim_ids: Vec<u32> = refs.iter().map(PrimRef::id).collect();
     let tris: Vec<[Vec3A; 3]> = prim_ids
@@ -88,6 +78,85 @@ pub(super) fn build(triangles: &[[Vec3; 3]], options: &BuildOptions) -> Bvh {
     bvh
 }
 
+/// A node before it is filled in (and the unused slot 1).
+const EMPTY_NODE: BvhNode = BvhNode {
+    min: [0.0; 3],
+    first: 0,
+    max: [0.0; 3],
+    count: 0,
+};
+
+/// Builds the subtree over `local` (reference `offset` of the whole list onwards; `keys` is the
+/// scratch of the same range) into a node array of its own: root at 0, slot 1 unused, sibling
+/// pairs from 2, leaves pointing at whole-list reference slots.
+fn subtree(
+    options: &BuildOptions,
+    local: &mut [PrimRef],
+    keys: &mut [u8],
+    offset: usize,
+    bounds: Aabb,
+    centroids: Aabb,
+    depth: u32,
+) -> Vec<BvhNode> {
+    let builder = Builder::new(options, offset);
+    if local.len() < PARALLEL_MIN {
+        return builder.run(local, keys, bounds, centroids, depth);
+    }
+    let task = Task {
+        node: 0,
+        start: 0,
+        end: local.len(),
+        depth,
+        bounds,
+        centroids,
+    };
+    let Some(split) = builder.split(local, keys, &task) else {
+        return builder.run(local, keys, bounds, centroids, depth);
+    };
+    let (left, right) = local.split_at_mut(split.mid);
+    let (left_keys, right_keys) = keys.split_at_mut(split.mid);
+    let (l, r) = rayon::join(
+        || subtree(options, left, left_keys, offset, split.left.0, split.left.1, depth + 1),
+        || {
+            subtree(
+                options,
+                right,
+                right_keys,
+                offset + split.mid,
+                split.right.0,
+                split.right.1,
+                depth + 1,
+            )
+        },
+    );
+    join_subtrees(&bounds, l, r)
+}
+
+/// The node array of a node over `bounds` whose children are the roots of `l` and `r`.
+fn join_subtrees(bounds: &Aabb, l: Vec<BvhNode>, r: Vec<BvhNode>) -> Vec<BvhNode> {
+    // `l`'s nodes from index 2 go to 4.., `r`'s after them; inner nodes' child indices move
+    // with them (leaves point at reference slots, which do not move).
+    let (base_l, base_r) = (4u32, 4 + (l.len() as u32 - 2));
+    let shift = |n: &BvhNode, base: u32| {
+        if n.is_leaf() {
+            *n
+        } else {
+            BvhNode {
+                first: n.first - 2 + base,
+                ..*n
+            }
+        }
+    };
+    let mut nodes = Vec::with_capacity(l.len() + r.len());
+    let mut root = EMPTY_NODE;
+    root.set_aabb(bounds);
+    root.first = 2;
+    nodes.extend([root, EMPTY_NODE, shift(&l[0], base_l), shift(&r[0], base_r)]);
+    nodes.extend(l[2..].iter().map(|n| shift(n, base_l)));
+    nodes.extend(r[2..].iter().map(|n| shift(n, base_r)));
+    nodes
+}
+
 struct Task {
     node: usize,
     start: usize,
@@ -97,13 +166,13 @@ struct Task {
     centroids: Aabb,
 }
 
+/// One thread's builder of one subtree.
 struct Builder<'a> {
-    nodes: &'a mut Vec<BvhNode>,
     options: &'a BuildOptions,
+    /// Index in the whole reference list of the subtree's first reference.
+    offset: usize,
     /// Scratch bins, reused from node to node.
     grid: std::cell::RefCell<Box<[Bin; MAX_BINS]>>,
-    /// Per triangle reference, its bin in the current node.
-    keys: std::cell::RefCell<Vec<u8>>,
 }
 
 /// A triangle's box with its index stored in the `w` lane of `min`.
@@ -157,31 +226,52 @@ struct Bin {
     count: u32,
 }
 
-impl Builder<'_> {
-    fn run(&mut self, local: &mut [PrimRef], root_bounds: Aabb, root_centroids: Aabb) {
+impl<'a> Builder<'a> {
+    fn new(options: &'a BuildOptions, offset: usize) -> Self {
+        let empty = Bin {
+            bounds: Aabb::EMPTY,
+            centroids: Aabb::EMPTY,
+            count: 0,
+        };
+        Self {
+            options,
+            offset,
+            grid: std::cell::RefCell::new(Box::new([empty; MAX_BINS])),
+        }
+    }
+
+    /// Builds the subtree over `local` on this thread, depth first (see [`subtree`]).
+    fn run(
+        &self,
+        local: &mut [PrimRef],
+        keys: &mut [u8],
+        root_bounds: Aabb,
+        root_centroids: Aabb,
+        depth: u32,
+    ) -> Vec<BvhNode> {
+        let mut nodes = Vec::with_capacity(2 * local.len().div_ceil(2));
+        nodes.extend([EMPTY_NODE; 2]);
         let mut stack = vec![Task {
             node: 0,
             start: 0,
             end: local.len(),
-            depth: 0,
+            depth,
             bounds: root_bounds,
             centroids: root_centroids,
         }];
         while let Some(task) = stack.pop() {
-            self.nodes[task.node].set_aabb(&task.bounds);
-            let split = self.split(local, &task);
+            nodes[task.node].set_aabb(&task.bounds);
+            let split = self.split(local, keys, &task);
             match split {
                 None => {
-                    let n = &mut self.nodes[task.node];
-                    n.first = task.start as u32;
+                    let n = &mut nodes[task.node];
+                    n.first = (self.offset + task.start) as u32;
                     n.count = (task.end - task.start) as u32;
                 }
                 Some(s) => {
-                    let left = self.nodes.len();
-                    let empty = self.nodes[1];
-                    self.nodes.push(empty);
-                    self.nodes.push(empty);
-                    let n = &mut self.nodes[task.node];
+                    let left = nodes.len();
+                    nodes.extend([EMPTY_NODE; 2]);
+                    let n = &mut nodes[task.node];
                     n.first = left as u32;
                     n.count = 0;
                     // Right first so that the left subtree is laid out next (depth-first).
@@ -204,10 +294,11 @@ impl Builder<'_> {
                 }
             }
         }
+        nodes
     }
 
     /// Decides how to split a range, or `None` for a leaf.
-    fn split(&self, local: &mut [PrimRef], task: &Task) -> Option<Split> {
+    fn split(&self, local: &mut [PrimRef], keys: &mut [u8], task: &Task) -> Option<Split> {
         let n = task.end - task.start;
         let max_leaf = self.options.max_leaf_size as usize;
         if n <= 1 {
@@ -218,7 +309,7 @@ impl Builder<'_> {
         }
         match self.options.split {
             SplitMethod::Median => (n > max_leaf).then(|| self.split_median(local, task)),
-            SplitMethod::Sah => self.split_sah(local, task),
+            SplitMethod::Sah => self.split_sah(local, keys, task),
         }
     }
 
@@ -257,7 +348,7 @@ impl Builder<'_> {
     }
 
     /// Binned SAH over the three axes of the centroid bounds, with SAH leaf termination.
-    fn split_sah(&self, local: &mut [PrimRef], task: &Task) -> Option<Split> {
+    fn split_sah(&self, local: &mut [PrimRef], keys: &mut [u8], task: &Task) -> Option<Split> {
         let n = task.end - task.start;
         let max_leaf = self.options.max_leaf_size as usize;
         // Small nodes need no more bins than they have triangles: the per-node cost of
@@ -285,8 +376,7 @@ impl Builder<'_> {
         row.fill(empty);
         let last = bins as u32 - 1;
         // Each triangle's bin is kept, so the partition below need not recompute it.
-        let mut keys_guard = self.keys.borrow_mut();
-        let keys = &mut keys_guard[task.start..task.end];
+        let keys = &mut keys[task.start..task.end];
         for (p, key) in local[task.start..task.end].iter().zip(keys.iter_mut()) {
             let c = p.centroid();
             let k = bin_index(c[axis], lo, scale, last);
