@@ -111,3 +111,99 @@ fn visiting_traversal_finds_the_same_hits_and_reports_its_work() {
         }
     }
 }
+
+/// The rays of the canonical camera in 8 x 8 tiles (and tiles of a thin lens, whose rays leave
+/// from different points), as the renderer and the benchmark trace them.
+fn camera_tiles(tris: &[[Vec3; 3]], size: u32, lens: f32) -> Vec<Vec<Ray>> {
+    use tracery::camera::CameraRays;
+    use tracery::scene::{Camera, Mesh};
+    let mut camera = Camera::canonical(&Mesh::from_triangles(tris.to_vec(), 0).bounds());
+    camera.lens_radius = lens;
+    let cam = CameraRays::new(&camera, size, size);
+    let mut rng = tracery::sampling::SplitMix64::new(9);
+    let mut tiles = Vec::new();
+    for ty in (0..size).step_by(8) {
+        for tx in (0..size).step_by(8) {
+            let mut tile = Vec::new();
+            for y in ty..(ty + 8).min(size) {
+                for x in tx..(tx + 8).min(size) {
+                    let (px, py) = (x as f32 + rng.next_f32(), y as f32 + rng.next_f32());
+                    let lens = glam::Vec2::new(rng.next_f32(), rng.next_f32()) * 2.0 - 1.0;
+                    tile.push(cam.thin_lens(px, py, lens * 0.7));
+                }
+            }
+            tiles.push(tile);
+        }
+    }
+    tiles
+}
+
+/// Tiles of rays from one point aimed exactly at triangle vertices and edge midpoints, grouped
+/// by direction octant: they graze the boxes that hold those triangles, where a packet's
+/// interval bounds must stay as conservative as each ray's own box test.
+fn vertex_tiles(tris: &[[Vec3; 3]]) -> Vec<Vec<Ray>> {
+    let b = tracery::scene::Mesh::from_triangles(tris.to_vec(), 0).bounds();
+    let from = Vec3::from(b.center()) + Vec3::from(b.max - b.min) * Vec3::new(0.37, 0.61, 1.3);
+    let mut by_octant: Vec<Vec<Ray>> = vec![Vec::new(); 8];
+    for t in tris.iter().take(2000) {
+        for target in [t[0], t[1], (t[0] + t[2]) * 0.5] {
+            let d = target - from;
+            let q =
+                (d.x < 0.0) as usize | ((d.y < 0.0) as usize) << 1 | ((d.z < 0.0) as usize) << 2;
+            by_octant[q].push(Ray::new(from, d));
+        }
+    }
+    by_octant
+        .iter()
+        .flat_map(|v| v.chunks(64).map(|c| c.to_vec()))
+        .collect()
+}
+
+#[test]
+fn packets_give_every_ray_its_single_ray_hit() {
+    let mut meshes = vec![
+        (
+            "cornell box",
+            tracery::scene::Scene::cornell_box().mesh.triangles,
+        ),
+        ("icosphere", shapes::icosphere(4)),
+        ("soup", shapes::random_soup(3000, 0.1, 7)),
+        ("needles", shapes::needles(500, 1e4)),
+    ];
+    if let Some(p) = common::external("bunny/bunny.obj") {
+        meshes.push((
+            "bunny",
+            tracery::scene::Scene::load(&p).unwrap().mesh.triangles,
+        ));
+    }
+    for (name, tris) in meshes {
+        for (bvh_name, bvh) in common::all_bvhs(&tris) {
+            for lens in [0.0, 0.05] {
+                let mut rays: Vec<Vec<Ray>> = camera_tiles(&tris, 96, lens);
+                // Tiles that cannot go together: mixed octants, and a partial tile.
+                rays.push(common::random_rays(&tris, 64, 3));
+                rays.push(common::random_rays(&tris, 13, 4));
+                rays.extend(vertex_tiles(&tris));
+                for tile in &rays {
+                    for t_max in [f32::INFINITY, 2.0] {
+                        let mut out = vec![None; tile.len()];
+                        bvh.intersect_packet(tile, t_max, &mut out);
+                        for (r, got) in tile.iter().zip(&out) {
+                            let want = bvh.intersect(r, t_max);
+                            let same = match (got, &want) {
+                                (None, None) => true,
+                                (Some(a), Some(b)) => {
+                                    a.prim == b.prim
+                                        && a.t.to_bits() == b.t.to_bits()
+                                        && a.u.to_bits() == b.u.to_bits()
+                                }
+                                _ => false,
+                            };
+                            assert!(same, "{name}, {bvh_name}, lens {lens}: {got:?} vs {want:?}");
+                        }
+                    }
+                }
+            }
+        }
+    }
+}

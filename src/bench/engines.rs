@@ -44,6 +44,35 @@ impl Engine for Bvh {
     }
 }
 
+/// Our BVH tracing camera-ray tiles of 8 x 8 as packets ([`Bvh::intersect_packet`]).
+pub(super) struct Packets(pub Bvh);
+
+impl Engine for Packets {
+    fn closest(&self, ray: &Ray) -> HitRecord {
+        self.0.closest(ray)
+    }
+    fn occluded(&self, ray: &Ray) -> bool {
+        Bvh::occluded(&self.0, ray, f32::INFINITY)
+    }
+    fn tile(&self) -> Option<u32> {
+        Some(8)
+    }
+    fn closest_tile(&self, rays: &[Ray], out: &mut [HitRecord]) {
+        let mut hits = [None; crate::bvh::wide::packet::PACKET];
+        let hits = &mut hits[..rays.len()];
+        self.0.intersect_packet(rays, f32::INFINITY, hits);
+        for (o, h) in out.iter_mut().zip(hits.iter()) {
+            *o = match h {
+                Some(h) => HitRecord {
+                    t: h.t,
+                    prim: h.prim,
+                },
+                None => HitRecord::MISS,
+            };
+        }
+    }
+}
+
 /// Gathers the rays of each `tile x tile` block of one band of `tile` rows (a row-major image
 /// `width` rays wide) into a contiguous tile, as a renderer generating camera rays per tile
 /// would have them, and calls `f(tile_rays, x0, tile_width)`.

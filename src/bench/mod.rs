@@ -150,6 +150,9 @@ pub struct BenchConfig {
     /// Also measure Embree (single rays and 16-ray packets); ignored without the `embree`
     /// feature.
     pub embree: bool,
+    /// Also measure our packets of camera-ray tiles (`tracery-packet`, built as the first of
+    /// `ours`).
+    pub packets: bool,
 }
 
 impl BenchConfig {
@@ -246,6 +249,20 @@ pub fn run(
                 let bvh = Bvh::build(tris, &options);
                 let stats = bvh.stats;
                 Ok((Box::new(bvh) as Box<dyn Engine>, Some(stats)))
+            }),
+        ));
+    }
+    if config.packets {
+        let options = config.ours.first().map_or(BuildOptions::sah(), |o| o.1);
+        builders.push((
+            "tracery-packet".into(),
+            Box::new(move |_| {
+                let bvh = Bvh::build(tris, &options);
+                let stats = bvh.stats;
+                Ok((
+                    Box::new(engines::Packets(bvh)) as Box<dyn Engine>,
+                    Some(stats),
+                ))
             }),
         ));
     }

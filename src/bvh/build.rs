@@ -56,7 +56,15 @@ pub(super) fn build(triangles: &[[Vec3; 3]], options: &BuildOptions) -> Bvh {
         vec![EMPTY_NODE; 2]
     } else {
         let mut keys = vec![0u8; refs.len()];
-        subtree(&options, &mut refs, &mut keys, 0, root_bounds, root_centroids, 0)
+        subtree(
+            &options,
+            &mut refs,
+            &mut keys,
+            0,
+            root_bounds,
+            root_centroids,
+            0,
+        )
     };
 
     let prim_ids: Vec<u32> = refs.iter().map(PrimRef::id).collect();
@@ -116,7 +124,17 @@ fn subtree(
     let (left, right) = local.split_at_mut(split.mid);
     let (left_keys, right_keys) = keys.split_at_mut(split.mid);
     let (l, r) = rayon::join(
-        || subtree(options, left, left_keys, offset, split.left.0, split.left.1, depth + 1),
+        || {
+            subtree(
+                options,
+                left,
+                left_keys,
+                offset,
+                split.left.0,
+                split.left.1,
+                depth + 1,
+            )
+        },
         || {
             subtree(
                 options,

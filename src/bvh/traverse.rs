@@ -197,6 +197,40 @@ impl Bvh {
         })
     }
 
+    /// [`Bvh::intersect`] for many rays at once, `out[i]` for `rays[i]`: coherent rays (the
+    /// camera rays of a tile of pixels) are traced in packets of up to
+    /// [`wide::packet::PACKET`] that walk the tree together; rays a packet cannot take (other
+    /// direction octants, invalid) are traced one by one. Every ray gets exactly the hit
+    /// [`Bvh::intersect`] gives it.
+    pub fn intersect_packet(&self, rays: &[Ray], t_max: f32, out: &mut [Option<Hit>]) {
+        assert_eq!(rays.len(), out.len(), "one result per ray");
+        if self.tris.is_empty() || t_max.is_nan() || t_max <= 0.0 {
+            out.fill(None);
+            return;
+        }
+        let mut best = [super::wide::traverse::Best::none(t_max); super::wide::packet::PACKET];
+        for (rays, out) in rays
+            .chunks(super::wide::packet::PACKET)
+            .zip(out.chunks_mut(super::wide::packet::PACKET))
+        {
+            let best = &mut best[..rays.len()];
+            if rays.iter().all(Ray::is_valid) && self.wide.closest_packet(rays, t_max, best) {
+                for (o, b) in out.iter_mut().zip(best.iter()) {
+                    *o = (b.prim != u32::MAX && b.t < t_max).then_some(Hit {
+                        t: b.t,
+                        prim: b.prim,
+                        u: b.u,
+                        v: b.v,
+                    });
+                }
+            } else {
+                for (o, r) in out.iter_mut().zip(rays) {
+                    *o = self.intersect(r, t_max);
+                }
+            }
+        }
+    }
+
     /// True when any triangle lies on the ray at `0 < t < t_max` (shadow rays).
     pub fn occluded(&self, ray: &Ray, t_max: f32) -> bool {
         let mut blocked = false;

@@ -78,6 +78,7 @@ pub fn run(a: BenchArgs) -> Result<()> {
         ours: BenchConfig::ours(options),
         obvhs: !a.no_peers && !a.no_obvhs,
         embree: !a.no_peers,
+        packets: true,
     };
     if config.embree && !BenchConfig::embree_available() {
         eprintln!(

@@ -85,6 +85,7 @@ fn splits(meshes: Vec<PathBuf>, repeat: usize) -> Result<()> {
             ours: BenchConfig::ours(BuildOptions::sah()),
             obvhs: false,
             embree: false,
+            packets: false,
         };
         eprintln!("{}: measuring", scene.name);
         let out = measure(&scene, &config)?;
@@ -153,6 +154,7 @@ fn bins_table(mesh: PathBuf, bins: Vec<u32>, repeat: usize) -> Result<()> {
         ours,
         obvhs: false,
         embree: false,
+        packets: false,
     };
     let out = measure(&scene, &config)?;
     println!("| bins | build ms | SAH cost | levels | leaves | closest Mrays/s (1 thread) |");

@@ -118,6 +118,10 @@ fn leaf_child(nodes: &mut Vec<WideNode>, leaf: &BvhNode, first: u32, count: u32)
 /// The visiting order of a node's lanes for each octant: by how far along the octant's
 /// diagonal each box starts (its entry corner projected on the diagonal), farthest first;
 /// empty lanes first of all.
+#[expect(
+    clippy::needless_range_loop,
+    reason = "lanes index several parallel arrays at once"
+)]
 fn octant_order(node: &WideNode) -> [u32; WIDTH] {
     // Per lane, its entry coordinate on each axis for a positive and a negative direction:
     // `lo`, and `-hi` (so larger is always farther); empty lanes are farthest of all.

@@ -13,6 +13,7 @@
 
 mod collapse;
 pub(crate) mod kernel;
+pub mod packet;
 pub mod traverse;
 
 pub use kernel::Kernel;
@@ -267,6 +268,26 @@ impl WideBvh {
             (Dispatch::Avx2(cpu), true) => {
                 kernel::each_hit_avx2::<true, F>(cpu, self, ray, t_max, f)
             }
+        }
+    }
+}
+
+impl WideBvh {
+    /// Closest hits of up to [`packet::PACKET`] valid rays traced together (see [`packet`]),
+    /// into `best`; `false` (nothing written) when they cannot be.
+    #[inline]
+    pub(crate) fn closest_packet(
+        &self,
+        rays: &[Ray],
+        t_max: f32,
+        best: &mut [traverse::Best],
+    ) -> bool {
+        match self.dispatch {
+            Dispatch::Scalar => packet::closest_packet::<kernel::Scalar>(self, rays, t_max, best),
+            #[cfg(target_arch = "x86_64")]
+            Dispatch::Sse2 => packet::closest_packet::<kernel::Sse2>(self, rays, t_max, best),
+            #[cfg(target_arch = "x86_64")]
+            Dispatch::Avx2(cpu) => kernel::closest_packet_avx2(cpu, self, rays, t_max, best),
         }
     }
 }

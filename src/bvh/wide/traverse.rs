@@ -40,7 +40,7 @@ impl Best {
 
     /// Keeps the hit `(t, prim)` when it is closer, or as close with a lower index.
     #[inline(always)]
-    fn offer(&mut self, t: f32, prim: u32, u: f32, v: f32) {
+    pub(crate) fn offer(&mut self, t: f32, prim: u32, u: f32, v: f32) {
         if t < self.t || (t == self.t && prim < self.prim) {
             *self = Best { t, prim, u, v };
         }

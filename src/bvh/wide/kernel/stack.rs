@@ -80,3 +80,40 @@ impl Stack {
         })
     }
 }
+
+/// A stack of up to `N` copyable items whose slots stay uninitialized until pushed (the
+/// packet traversal's, whose entries carry more than a child and a distance).
+pub(crate) struct SmallStack<T: Copy, const N: usize> {
+    buf: [MaybeUninit<T>; N],
+    len: usize,
+}
+
+impl<T: Copy, const N: usize> SmallStack<T, N> {
+    /// An empty stack (nothing is written).
+    #[inline(always)]
+    pub fn new() -> Self {
+        Self {
+            buf: [const { MaybeUninit::uninit() }; N],
+            len: 0,
+        }
+    }
+
+    /// Pushes an item. Panics past `N`.
+    #[inline(always)]
+    pub fn push(&mut self, item: T) {
+        self.buf[self.len].write(item);
+        self.len += 1;
+    }
+
+    /// Pops the top item.
+    #[inline(always)]
+    pub fn pop(&mut self) -> Option<T> {
+        if self.len == 0 {
+            return None;
+        }
+        self.len -= 1;
+        // SAFETY: every slot below the old `len` was written by `push`, and `len` only grows
+        // through `push`.
+        Some(unsafe { self.buf[self.len].assume_init() })
+    }
+}

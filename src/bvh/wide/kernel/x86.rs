@@ -459,6 +459,24 @@ fn each_hit_avx2_inner<const SAFE: bool, F: FnMut(u32, f32) -> bool>(
     traverse::each_hit::<Avx2, SAFE>(w, ray, t_max, f)
 }
 
+#[target_feature(enable = "avx2,fma,popcnt,bmi1,lzcnt")]
+fn closest_packet_avx2_inner(w: &WideBvh, rays: &[Ray], t_max: f32, best: &mut [Best]) -> bool {
+    crate::bvh::wide::packet::closest_packet::<Avx2>(w, rays, t_max, best)
+}
+
+/// A packet's closest hits with the AVX2 kernel (see [`crate::bvh::wide::packet`]).
+#[inline]
+pub(crate) fn closest_packet_avx2(
+    _cpu: Avx2Cpu,
+    w: &WideBvh,
+    rays: &[Ray],
+    t_max: f32,
+    best: &mut [Best],
+) -> bool {
+    // SAFETY: an `Avx2Cpu` exists only when the CPU has every feature enabled here.
+    unsafe { closest_packet_avx2_inner(w, rays, t_max, best) }
+}
+
 /// Closest hit with the AVX2 kernel (the whole traversal compiled for AVX2).
 #[inline]
 pub(crate) fn closest_avx2<const SAFE: bool>(
