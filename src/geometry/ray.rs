@@ -78,6 +78,19 @@ impl PreparedRay {
             shear,
         }
     }
+
+    /// A prepared ray from its parts as [`PreparedRay::new`] made them (the packet traversal
+    /// keeps them component by component). Only the triangle test's parts are used by the
+    /// test; the box test's are recomputed from nothing here and left neutral.
+    pub(crate) fn from_parts(origin: Vec3A, k: [usize; 3], shear: [f32; 3]) -> Self {
+        Self {
+            origin,
+            inv_dir: Vec3A::ZERO,
+            neg_mask: BVec3A::FALSE,
+            k,
+            shear,
+        }
+    }
 }
 
 /// Bound, per coordinate, on the rounding error of a surface point interpolated from the

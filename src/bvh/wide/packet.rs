@@ -17,20 +17,20 @@
 use super::kernel::stack::SmallStack;
 use super::kernel::{BlockHits, FAR_SCALE, Lanes, TriRay};
 use super::traverse::{Best, CULL_SLACK};
-use super::{Child, WIDTH, WideBvh, WideNode};
+use super::{Child, TriBlock, WIDTH, WideBvh, WideNode};
 use crate::geometry::{PreparedRay, Ray, intersect_triangle};
 
 /// Rays per packet: an 8 x 8 tile.
 pub const PACKET: usize = 64;
 
 /// The packet's rays, component by component.
-struct Rays {
-    n: usize,
-    origin: [[f32; PACKET]; 3],
-    inv: [[f32; PACKET]; 3],
-    inv_far: [[f32; PACKET]; 3],
+pub(crate) struct Rays {
+    pub n: usize,
+    pub origin: [[f32; PACKET]; 3],
+    pub inv: [[f32; PACKET]; 3],
+    pub inv_far: [[f32; PACKET]; 3],
     /// Per axis, the near plane's index in [`WideNode::planes`] (the same for every ray).
-    near: [usize; 3],
+    pub near: [usize; 3],
     octant: u32,
     /// Interval bounds over the rays: origins and reciprocals (and far reciprocals).
     o_lo: [f32; 3],
@@ -39,6 +39,66 @@ struct Rays {
     inv_hi: [f32; 3],
     far_lo: [f32; 3],
     far_hi: [f32; 3],
+}
+
+/// The packet's triangle-test constants per ray, made for a ray when it first reaches a leaf
+/// (most rays of most tiles never do).
+pub(crate) struct Tris {
+    /// Rays whose constants are made.
+    done: u64,
+    /// Per ray, the axis permutation `[kx, ky, kz]` as one number (`kx * 9 + ky * 3 + kz`).
+    pub perm: [u8; PACKET],
+    /// Per ray, the shear constants `[sx, sy, sz]`.
+    pub shear: [[f32; PACKET]; 3],
+}
+
+impl Tris {
+    /// Makes the constants of the rays in `rays_mask` that lack them.
+    #[inline(always)]
+    fn make(&mut self, rays: &[Ray], rays_mask: u64) {
+        let mut todo = rays_mask & !self.done;
+        self.done |= todo;
+        while todo != 0 {
+            let i = todo.trailing_zeros() as usize;
+            todo &= todo - 1;
+            let p = PreparedRay::new(&rays[i]);
+            self.perm[i] = perm_id(p.k);
+            for a in 0..3 {
+                self.shear[a][i] = p.shear[a];
+            }
+        }
+    }
+}
+
+/// The best hits of a packet's rays, component by component (see [`Best`]).
+pub(crate) struct Bests {
+    pub t: [f32; PACKET],
+    pub prim: [u32; PACKET],
+    pub u: [f32; PACKET],
+    pub v: [f32; PACKET],
+}
+
+impl Bests {
+    /// Keeps ray `i`'s hit `(t, prim)` when it is closer, or as close with a lower index.
+    #[inline(always)]
+    pub fn offer(&mut self, i: usize, t: f32, prim: u32, u: f32, v: f32) {
+        if t < self.t[i] || (t == self.t[i] && prim < self.prim[i]) {
+            (self.t[i], self.prim[i], self.u[i], self.v[i]) = (t, prim, u, v);
+        }
+    }
+}
+
+/// The permutation number of `[kx, ky, kz]`.
+#[inline(always)]
+pub(crate) fn perm_id(k: [usize; 3]) -> u8 {
+    (k[0] * 9 + k[1] * 3 + k[2]) as u8
+}
+
+/// The `[kx, ky, kz]` of a permutation number.
+#[inline(always)]
+pub(crate) fn perm_of(id: u8) -> [usize; 3] {
+    let id = id as usize;
+    [id / 9, id / 3 % 3, id % 3]
 }
 
 impl Rays {
@@ -132,36 +192,42 @@ fn node_interval(n: &WideNode, r: &Rays, limit: f32, near: &mut [f32; WIDTH]) ->
     mask
 }
 
-/// The rays (bit per ray) that enter the box of lane `lane` of `n` before their own best hit.
+/// The rays (bit per ray) that enter the box of lane `lane` of `n` before their own `limit`,
+/// each with its own box test (the single ray's operations). This is the readable version;
+/// the AVX2 kernel tests eight rays per instruction ([`super::kernel::Lanes::rays_entering`]).
 #[inline(always)]
-fn rays_entering(n: &WideNode, lane: usize, r: &Rays, limit: &[f32; PACKET]) -> u64 {
-    let pn: [f32; 3] = std::array::from_fn(|a| n.planes[r.near[a]][lane]);
-    let pf: [f32; 3] = std::array::from_fn(|a| n.planes[r.near[a] ^ 1][lane]);
-    // Eight rays at a time on plain arrays: the compiler turns each chunk into SIMD.
+pub(crate) fn rays_entering_scalar(
+    n: &WideNode,
+    lane: usize,
+    r: &Rays,
+    limit: &[f32; PACKET],
+) -> u64 {
     let mut mask = 0u64;
-    for c in 0..r.n.div_ceil(8) {
-        let mut t_near = [0.0f32; 8];
-        let mut t_far = [0.0f32; 8];
-        for j in 0..8 {
-            t_far[j] = limit[8 * c + j];
-        }
+    for (i, &limit) in limit.iter().enumerate().take(r.n) {
+        let mut t_near = 0.0f32;
+        let mut t_far = limit;
         for a in 0..3 {
-            for j in 0..8 {
-                let i = 8 * c + j;
-                let lo = (pn[a] - r.origin[a][i]) * r.inv[a][i];
-                let hi = (pf[a] - r.origin[a][i]) * r.inv_far[a][i];
-                t_near[j] = if lo > t_near[j] { lo } else { t_near[j] };
-                t_far[j] = if hi < t_far[j] { hi } else { t_far[j] };
-            }
+            let lo = (n.planes[r.near[a]][lane] - r.origin[a][i]) * r.inv[a][i];
+            let hi = (n.planes[r.near[a] ^ 1][lane] - r.origin[a][i]) * r.inv_far[a][i];
+            t_near = if lo > t_near { lo } else { t_near };
+            t_far = if hi < t_far { hi } else { t_far };
         }
-        let mut m = 0u64;
-        for j in 0..8 {
-            m |= ((t_near[j] <= t_far[j]) as u64) << j;
-        }
-        mask |= m << (8 * c);
+        mask |= ((t_near <= t_far) as u64) << i;
     }
-    // Lanes past the packet's end hold zeros; they are never asked for.
-    mask & (u64::MAX >> (64 - r.n))
+    mask
+}
+
+/// The largest of the 64 limits (which are never NaN), eight lanes at a time.
+#[inline(always)]
+fn largest(limit: &[f32; PACKET]) -> f32 {
+    let mut m = [0.0f32; 8];
+    for c in 0..PACKET / 8 {
+        for j in 0..8 {
+            let x = limit[8 * c + j];
+            m[j] = if x > m[j] { x } else { m[j] };
+        }
+    }
+    m.iter().fold(0.0f32, |a, &b| if b > a { b } else { a })
 }
 
 /// Closest hits of `rays` (at most [`PACKET`], all valid) at `0 < t < t_max`, into `best`
@@ -178,24 +244,54 @@ pub(crate) fn closest_packet<L: Lanes>(
     let Some(r) = Rays::new(rays) else {
         return false;
     };
-    best.fill(Best::none(t_max));
-    // Each ray's triangle-test constants, made the first time the ray reaches a leaf.
-    let mut tri: [Option<(TriRay, L::TriRay)>; PACKET] = [None; PACKET];
+    let mut bests = Bests {
+        t: [t_max; PACKET],
+        prim: [u32::MAX; PACKET],
+        u: [0.0; PACKET],
+        v: [0.0; PACKET],
+    };
+    let mut tris = Tris {
+        done: 0,
+        perm: [0; PACKET],
+        shear: [[0.0; PACKET]; 3],
+    };
     if w.nodes.is_empty() {
         if let Some((first, count)) = w.root_leaf {
-            for (i, b) in best.iter_mut().enumerate() {
-                leaf_for::<L>(w, &rays[i], &mut tri[i], first, count, b);
-            }
+            let all = u64::MAX >> (64 - r.n);
+            tris.make(rays, all);
+            leaf_rays::<L>(w, first, count, &r, &tris, all, &mut bests);
         }
-        return true;
+    } else {
+        walk::<L>(w, rays, &r, &mut tris, t_max, &mut bests);
     }
+    for (i, b) in best.iter_mut().enumerate() {
+        *b = Best {
+            t: bests.t[i],
+            prim: bests.prim[i],
+            u: bests.u[i],
+            v: bests.v[i],
+        };
+    }
+    true
+}
+
+/// The packet's walk of the tree (see the module docs).
+#[inline(always)]
+fn walk<L: Lanes>(
+    w: &WideBvh,
+    rays: &[Ray],
+    r: &Rays,
+    tris: &mut Tris,
+    t_max: f32,
+    bests: &mut Bests,
+) {
     // The largest of the rays' culling distances: boxes starting beyond it are skipped.
     let mut farthest = t_max * CULL_SLACK;
     // Each ray's culling distance, `best.t * CULL_SLACK` (past the packet's end: -1, so no
     // lane there ever enters a box).
     let mut limit = [-1.0f32; PACKET];
-    for (l, b) in limit.iter_mut().zip(best.iter()) {
-        *l = b.t * CULL_SLACK;
+    for l in &mut limit[..r.n] {
+        *l = t_max * CULL_SLACK;
     }
     // Entries: (child word, smallest entry distance, parent node * 8 + lane). At most seven
     // pending siblings per level of the current path.
@@ -211,23 +307,25 @@ pub(crate) fn closest_packet<L: Lanes>(
         let child = Child(word);
         if child.is_leaf() {
             let n = &w.nodes[parent as usize];
-            let mut active = rays_entering(n, lane as usize, &r, &limit);
+            let active = L::rays_entering(n, lane as usize, r, &limit);
             if active == 0 {
                 continue;
             }
             let (first, count) = child.blocks();
-            while active != 0 {
-                let i = active.trailing_zeros() as usize;
-                active &= active - 1;
-                leaf_for::<L>(w, &rays[i], &mut tri[i], first, count, &mut best[i]);
-                limit[i] = best[i].t * CULL_SLACK;
+            tris.make(rays, active);
+            leaf_rays::<L>(w, first, count, r, tris, active, bests);
+            let mut m = active;
+            while m != 0 {
+                let i = m.trailing_zeros() as usize;
+                m &= m - 1;
+                limit[i] = bests.t[i] * CULL_SLACK;
             }
-            farthest = limit.iter().fold(0.0f32, |m, &l| m.max(l));
+            farthest = largest(&limit);
             continue;
         }
         let index = child.index();
         let n = &w.nodes[index as usize];
-        let mask = node_interval(n, &r, farthest, &mut near);
+        let mask = node_interval(n, r, farthest, &mut near);
         // Farthest first, so the nearest is popped next.
         for i in 0..WIDTH {
             let k = n.lane_in_order(r.octant, i);
@@ -236,53 +334,64 @@ pub(crate) fn closest_packet<L: Lanes>(
             }
         }
     }
-    true
 }
 
-/// Ray `ray` against a leaf, its triangle-test constants made on first use into `tri`.
+/// The rays in `active` (bit per ray) against a leaf's blocks, eight rays at a time.
 #[inline(always)]
-fn leaf_for<L: Lanes>(
+fn leaf_rays<L: Lanes>(
     w: &WideBvh,
-    ray: &Ray,
-    tri: &mut Option<(TriRay, L::TriRay)>,
     first: u32,
     count: u32,
-    best: &mut Best,
+    r: &Rays,
+    tris: &Tris,
+    active: u64,
+    bests: &mut Bests,
 ) {
-    if tri.is_none() {
-        let tr = TriRay::new(&PreparedRay::new(ray));
-        *tri = Some((tr, L::tri_ray(&tr)));
-    }
-    if let Some((tr, lr)) = tri {
-        leaf::<L>(w, first, count, tr, lr, best);
+    for c in 0..r.n.div_ceil(8) {
+        let lanes = (active >> (8 * c)) as u32 & 0xff;
+        if lanes == 0 {
+            continue;
+        }
+        for b in first..first + count {
+            L::block_rays(&w.blocks[b as usize], r, tris, c, lanes, bests);
+        }
     }
 }
 
-/// One ray against a leaf's blocks, keeping its closest hit (lowest index on ties).
+/// [`super::kernel::Lanes::block_rays`] ray by ray: each ray of chunk `c` in `lanes` against
+/// block `b` with the single-ray block test.
 #[inline(always)]
-fn leaf<L: Lanes>(
-    w: &WideBvh,
-    first: u32,
-    count: u32,
-    tr: &TriRay,
-    lr: &L::TriRay,
-    best: &mut Best,
+pub(crate) fn block_rays_one_by_one<L: Lanes>(
+    b: &TriBlock,
+    r: &Rays,
+    tris: &Tris,
+    c: usize,
+    mut lanes: u32,
+    bests: &mut Bests,
 ) {
     let mut out = BlockHits::default();
-    for b in first..first + count {
-        let block = &w.blocks[b as usize];
-        let limit = f32::from_bits(best.t.to_bits() + (best.t < f32::INFINITY) as u32);
-        let (mut hits, mut exact) = L::block(block, lr, limit, &mut out);
+    while lanes != 0 {
+        let i = 8 * c + lanes.trailing_zeros() as usize;
+        lanes &= lanes - 1;
+        let ray = PreparedRay::from_parts(
+            glam::Vec3A::new(r.origin[0][i], r.origin[1][i], r.origin[2][i]),
+            perm_of(tris.perm[i]),
+            [tris.shear[0][i], tris.shear[1][i], tris.shear[2][i]],
+        );
+        let tr = TriRay::new(&ray);
+        let lr = L::tri_ray(&tr);
+        let limit = f32::from_bits(bests.t[i].to_bits() + (bests.t[i] < f32::INFINITY) as u32);
+        let (mut hits, mut exact) = L::block(b, &lr, limit, &mut out);
         while hits != 0 {
             let k = hits.trailing_zeros() as usize;
             hits &= hits - 1;
-            best.offer(out.t[k], block.prim[k], out.u[k], out.v[k]);
+            bests.offer(i, out.t[k], b.prim[k], out.u[k], out.v[k]);
         }
         while exact != 0 {
             let k = exact.trailing_zeros() as usize;
             exact &= exact - 1;
-            if let Some(h) = intersect_triangle(&tr.ray, &block.triangle(k), limit) {
-                best.offer(h.t, block.prim[k], h.u, h.v);
+            if let Some(h) = intersect_triangle(&ray, &b.triangle(k), limit) {
+                bests.offer(i, h.t, b.prim[k], h.u, h.v);
             }
         }
     }

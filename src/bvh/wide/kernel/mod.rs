@@ -25,6 +25,7 @@ pub(crate) mod stack;
 #[cfg(target_arch = "x86_64")]
 mod x86;
 
+use super::packet::{Bests, PACKET, Rays, Tris, block_rays_one_by_one, rays_entering_scalar};
 use super::{BLOCK, TriBlock, WIDTH, WideNode};
 use crate::geometry::{PreparedRay, gamma};
 use stack::Stack;
@@ -176,7 +177,7 @@ impl TriRay {
 }
 
 /// The two tests, for one kernel.
-pub(crate) trait Lanes {
+pub(crate) trait Lanes: Sized {
     /// The box test's ray data in this kernel's registers.
     type NodeRay: Copy;
     /// The triangle test's ray data in this kernel's registers.
@@ -216,6 +217,20 @@ pub(crate) trait Lanes {
 
     /// The ray's octant (see [`NodeRay::octant`]).
     fn octant(r: &Self::NodeRay) -> u32;
+
+    /// The packet's rays (bit per ray) that enter the box of lane `lane` of `n` before their
+    /// own `limit`; by default one ray at a time.
+    #[inline(always)]
+    fn rays_entering(n: &WideNode, lane: usize, r: &Rays, limit: &[f32; PACKET]) -> u64 {
+        rays_entering_scalar(n, lane, r, limit)
+    }
+
+    /// Rays `8 c..8 c + 8` of a packet (those whose bit is set in `lanes`) against the four
+    /// triangles of `b`, keeping each ray's closest hit. By default one ray at a time.
+    #[inline(always)]
+    fn block_rays(b: &TriBlock, r: &Rays, tris: &Tris, c: usize, lanes: u32, bests: &mut Bests) {
+        block_rays_one_by_one::<Self>(b, r, tris, c, lanes, bests)
+    }
 
     /// The watertight test on the four lanes of `b` for `0 < t < limit`: returns the lanes hit
     /// (their distances and barycentric coordinates in `out`) and the lanes the scalar test must

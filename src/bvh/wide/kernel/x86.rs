@@ -20,9 +20,10 @@ use std::arch::x86_64::*;
 
 use super::stack::Stack;
 use super::{BlockHits, G2, G3, G5, Lanes, NodeRay, TriRay};
+use crate::bvh::wide::packet::{Bests, PACKET, Rays, Tris, block_rays_one_by_one, perm_of};
 use crate::bvh::wide::traverse::{self, Best};
-use crate::bvh::wide::{TriBlock, WIDTH, WideBvh, WideNode};
-use crate::geometry::Ray;
+use crate::bvh::wide::{BLOCK, TriBlock, WIDTH, WideBvh, WideNode};
+use crate::geometry::{PreparedRay, Ray};
 
 /// The triangle test's ray data, broadcast to 4 lanes.
 #[derive(Clone, Copy)]
@@ -424,6 +425,265 @@ impl Lanes for Avx2 {
     #[inline(always)]
     fn block(b: &TriBlock, r: &TriRay4, limit: f32, out: &mut BlockHits) -> (u32, u32) {
         block_sse(b, r, limit, out)
+    }
+
+    /// Eight rays per instruction: the single ray's box test on eight lanes of rays.
+    #[inline(always)]
+    fn rays_entering(n: &WideNode, lane: usize, r: &Rays, limit: &[f32; PACKET]) -> u64 {
+        let mut mask = 0u64;
+        // SAFETY: only reached inside the AVX2 entry points.
+        unsafe {
+            let pn: [__m256; 3] =
+                std::array::from_fn(|a| _mm256_set1_ps(n.planes[r.near[a]][lane]));
+            let pf: [__m256; 3] =
+                std::array::from_fn(|a| _mm256_set1_ps(n.planes[r.near[a] ^ 1][lane]));
+            for c in 0..r.n.div_ceil(8) {
+                let base = 8 * c;
+                let mut t_near = _mm256_setzero_ps();
+                let mut t_far = ld8(limit, base);
+                for a in 0..3 {
+                    let o = ld8(&r.origin[a], base);
+                    let lo = _mm256_mul_ps(_mm256_sub_ps(pn[a], o), ld8(&r.inv[a], base));
+                    let hi = _mm256_mul_ps(_mm256_sub_ps(pf[a], o), ld8(&r.inv_far[a], base));
+                    t_near = _mm256_max_ps(t_near, lo);
+                    t_far = _mm256_min_ps(t_far, hi);
+                }
+                let m = _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(t_near, t_far)) as u64;
+                mask |= m << base;
+            }
+        }
+        // Lanes past the packet's end have limit -1: never entered.
+        mask
+    }
+
+    /// Eight rays at once per triangle when they share one axis permutation (camera rays of
+    /// a tile almost always do), else ray by ray.
+    #[inline(always)]
+    fn block_rays(b: &TriBlock, r: &Rays, tris: &Tris, c: usize, lanes: u32, bests: &mut Bests) {
+        let base = 8 * c;
+        let p0 = tris.perm[base + lanes.trailing_zeros() as usize];
+        let mut m = lanes;
+        let mut same = true;
+        while m != 0 {
+            same &= tris.perm[base + m.trailing_zeros() as usize] == p0;
+            m &= m - 1;
+        }
+        if !same || lanes.count_ones() < RAYS_TOGETHER {
+            return block_rays_one_by_one::<Self>(b, r, tris, c, lanes, bests);
+        }
+        let k = perm_of(p0);
+        let o = [
+            ld8(&r.origin[k[0]], base),
+            ld8(&r.origin[k[1]], base),
+            ld8(&r.origin[k[2]], base),
+        ];
+        let shear = [
+            ld8(&tris.shear[0], base),
+            ld8(&tris.shear[1], base),
+            ld8(&tris.shear[2], base),
+        ];
+        let mut out = [[0.0f32; 8]; 3];
+        for tri in 0..BLOCK {
+            if b.prim[tri] == u32::MAX {
+                continue;
+            }
+            // Each ray's limit: the next float above its best distance (ties still count).
+            // SAFETY: only reached inside the AVX2 entry points.
+            let limit = unsafe {
+                let best = ld8(&bests.t, base);
+                let finite = _mm256_castps_si256(_mm256_cmp_ps::<_CMP_LT_OQ>(
+                    best,
+                    _mm256_set1_ps(f32::INFINITY),
+                ));
+                _mm256_castsi256_ps(_mm256_sub_epi32(_mm256_castps_si256(best), finite))
+            };
+            let (mut hits, mut exact) =
+                triangle_rays8(b, tri, k, &o, &shear, limit, lanes, &mut out);
+            while hits != 0 {
+                let j = hits.trailing_zeros() as usize;
+                hits &= hits - 1;
+                bests.offer(base + j, out[0][j], b.prim[tri], out[1][j], out[2][j]);
+            }
+            while exact != 0 {
+                let j = exact.trailing_zeros() as usize;
+                exact &= exact - 1;
+                let i = base + j;
+                let ray = PreparedRay::from_parts(
+                    glam::Vec3A::new(r.origin[0][i], r.origin[1][i], r.origin[2][i]),
+                    k,
+                    [tris.shear[0][i], tris.shear[1][i], tris.shear[2][i]],
+                );
+                let limit =
+                    f32::from_bits(bests.t[i].to_bits() + (bests.t[i] < f32::INFINITY) as u32);
+                if let Some(h) = crate::geometry::intersect_triangle(&ray, &b.triangle(tri), limit)
+                {
+                    bests.offer(i, h.t, b.prim[tri], h.u, h.v);
+                }
+            }
+        }
+    }
+}
+
+/// The fewest active rays of an eight-ray chunk tested together per triangle; fewer go one by
+/// one (four triangles at a time each).
+const RAYS_TOGETHER: u32 = 4;
+
+/// Eight consecutive lanes of a packet array from `base`.
+#[inline(always)]
+fn ld8(a: &[f32; PACKET], base: usize) -> __m256 {
+    // SAFETY: only reached inside the AVX2 entry points; the slice `base..base + 8` is
+    // bounds-checked before the load reads it.
+    unsafe { _mm256_loadu_ps(a[base..base + 8].as_ptr()) }
+}
+
+/// `|x|` per lane, as `f32::abs`.
+#[inline(always)]
+fn abs8(x: __m256) -> __m256 {
+    // SAFETY: only reached inside the AVX2 entry points.
+    unsafe { _mm256_andnot_ps(_mm256_set1_ps(-0.0), x) }
+}
+
+/// `max(|a|, |b|, |c|)` per lane (see [`max3_abs`]).
+#[inline(always)]
+fn max3_abs8(a: __m256, b: __m256, c: __m256) -> __m256 {
+    // SAFETY: only reached inside the AVX2 entry points.
+    unsafe { _mm256_max_ps(_mm256_max_ps(abs8(a), abs8(b)), abs8(c)) }
+}
+
+/// One vertex of a triangle relative to eight rays' origins, then sheared by each ray's
+/// constants (the operations of [`sheared4`], lanes being rays instead of triangles).
+#[inline(always)]
+fn sheared8(
+    b: &TriBlock,
+    tri: usize,
+    vertex: usize,
+    k: [usize; 3],
+    o: &[__m256; 3],
+    sx: __m256,
+    sy: __m256,
+) -> (__m256, __m256, __m256) {
+    // SAFETY: only reached inside the AVX2 entry points.
+    unsafe {
+        let x = _mm256_sub_ps(_mm256_set1_ps(b.v[vertex][k[0]][tri]), o[0]);
+        let y = _mm256_sub_ps(_mm256_set1_ps(b.v[vertex][k[1]][tri]), o[1]);
+        let z = _mm256_sub_ps(_mm256_set1_ps(b.v[vertex][k[2]][tri]), o[2]);
+        (
+            _mm256_sub_ps(x, _mm256_mul_ps(sx, z)),
+            _mm256_sub_ps(y, _mm256_mul_ps(sy, z)),
+            z,
+        )
+    }
+}
+
+/// The watertight test of one triangle against eight rays sharing one axis permutation, in
+/// the operations and order of [`crate::geometry::intersect_triangle`] per lane: returns the
+/// rays (lane bits, within `lanes`) hit at `0 < t < limit`, the rays the scalar test must
+/// decide, and per lane `t`, `u`, `v`.
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+fn triangle_rays8(
+    b: &TriBlock,
+    tri: usize,
+    k: [usize; 3],
+    o: &[__m256; 3],
+    shear: &[__m256; 3],
+    limit: __m256,
+    lanes: u32,
+    out: &mut [[f32; 8]; 3],
+) -> (u32, u32) {
+    let [sx, sy, sz] = *shear;
+    // SAFETY: only reached inside the AVX2 entry points; the stores write whole `[f32; 8]`s.
+    unsafe {
+        let (ax, ay, az) = sheared8(b, tri, 0, k, o, sx, sy);
+        let (bx, by, bz) = sheared8(b, tri, 1, k, o, sx, sy);
+        let (cx, cy, cz) = sheared8(b, tri, 2, k, o, sx, sy);
+        let u = _mm256_sub_ps(_mm256_mul_ps(cx, by), _mm256_mul_ps(cy, bx));
+        let v = _mm256_sub_ps(_mm256_mul_ps(ax, cy), _mm256_mul_ps(ay, cx));
+        let w = _mm256_sub_ps(_mm256_mul_ps(bx, ay), _mm256_mul_ps(by, ax));
+        let zero = _mm256_setzero_ps();
+        let exact = if cfg!(feature = "no-watertight-fallback") {
+            0
+        } else {
+            let z = _mm256_or_ps(
+                _mm256_or_ps(
+                    _mm256_cmp_ps::<_CMP_EQ_OQ>(u, zero),
+                    _mm256_cmp_ps::<_CMP_EQ_OQ>(v, zero),
+                ),
+                _mm256_cmp_ps::<_CMP_EQ_OQ>(w, zero),
+            );
+            _mm256_movemask_ps(z) as u32 & lanes
+        };
+        let neg = _mm256_cmp_ps::<_CMP_LT_OQ>(_mm256_min_ps(_mm256_min_ps(u, v), w), zero);
+        let pos = _mm256_cmp_ps::<_CMP_GT_OQ>(_mm256_max_ps(_mm256_max_ps(u, v), w), zero);
+        let inside = !(_mm256_movemask_ps(_mm256_and_ps(neg, pos)) as u32) & lanes & !exact;
+        if inside == 0 {
+            return (0, exact);
+        }
+        let det = _mm256_add_ps(_mm256_add_ps(u, v), w);
+        let t_scaled = _mm256_mul_ps(
+            _mm256_add_ps(
+                _mm256_add_ps(_mm256_mul_ps(u, az), _mm256_mul_ps(v, bz)),
+                _mm256_mul_ps(w, cz),
+            ),
+            sz,
+        );
+        let inv = _mm256_div_ps(_mm256_set1_ps(1.0), det);
+        let t = _mm256_mul_ps(t_scaled, inv);
+        let in_range = _mm256_and_ps(
+            _mm256_cmp_ps::<_CMP_NEQ_UQ>(det, zero),
+            _mm256_and_ps(
+                _mm256_cmp_ps::<_CMP_GT_OQ>(t, zero),
+                _mm256_cmp_ps::<_CMP_LT_OQ>(t, limit),
+            ),
+        );
+        // The distance error bound, in the order of `t_error_bound`.
+        let abs_sx = abs8(sx);
+        let abs_sy = abs8(sy);
+        let max_z = max3_abs8(az, bz, cz);
+        let max_zt = _mm256_mul_ps(max_z, abs8(sz));
+        let max_x = max3_abs8(ax, bx, cx);
+        let max_y = max3_abs8(ay, by, cy);
+        let delta_z = _mm256_mul_ps(_mm256_set1_ps(G3), max_zt);
+        let delta_x = _mm256_mul_ps(
+            _mm256_set1_ps(G5),
+            _mm256_add_ps(max_x, _mm256_mul_ps(_mm256_add_ps(abs_sx, abs_sx), max_z)),
+        );
+        let delta_y = _mm256_mul_ps(
+            _mm256_set1_ps(G5),
+            _mm256_add_ps(max_y, _mm256_mul_ps(_mm256_add_ps(abs_sy, abs_sy), max_z)),
+        );
+        let delta_e = _mm256_mul_ps(
+            _mm256_set1_ps(2.0),
+            _mm256_add_ps(
+                _mm256_add_ps(
+                    _mm256_mul_ps(_mm256_mul_ps(_mm256_set1_ps(G2), max_x), max_y),
+                    _mm256_mul_ps(delta_y, max_x),
+                ),
+                _mm256_mul_ps(delta_x, max_y),
+            ),
+        );
+        let max_e = max3_abs8(u, v, w);
+        let bound = _mm256_mul_ps(
+            _mm256_mul_ps(
+                _mm256_set1_ps(3.0),
+                _mm256_add_ps(
+                    _mm256_add_ps(
+                        _mm256_mul_ps(_mm256_mul_ps(_mm256_set1_ps(G3), max_e), max_zt),
+                        _mm256_mul_ps(delta_e, max_zt),
+                    ),
+                    _mm256_mul_ps(delta_z, max_e),
+                ),
+            ),
+            abs8(inv),
+        );
+        let ok = _mm256_and_ps(in_range, _mm256_cmp_ps::<_CMP_NLE_UQ>(t, bound));
+        let hits = _mm256_movemask_ps(ok) as u32 & inside;
+        if hits != 0 {
+            _mm256_storeu_ps(out[0].as_mut_ptr(), t);
+            _mm256_storeu_ps(out[1].as_mut_ptr(), _mm256_mul_ps(v, inv));
+            _mm256_storeu_ps(out[2].as_mut_ptr(), _mm256_mul_ps(w, inv));
+        }
+        (hits, exact)
     }
 }
 
