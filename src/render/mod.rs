@@ -192,6 +192,10 @@ pub struct SampleRange {
 
 /// Adds the samples `samples` of every pixel of row `y` into `row` (one radiance sum per
 /// pixel); returns the rays traced and the number of non-finite samples left out.
+///
+/// Camera rays go in packets of [`crate::bvh::wide::packet::PACKET`] neighbouring pixels of
+/// the row ([`Bvh::intersect_packet`]), one sample index at a time; each pixel still adds its
+/// samples in order and gets the hits single rays would, so the image is the same bit for bit.
 pub fn trace_row(
     tracer: &Tracer,
     cam: &CameraRays,
@@ -199,27 +203,50 @@ pub fn trace_row(
     y: u32,
     row: &mut [Vec3],
 ) -> (RayCounts, u64) {
+    use crate::bvh::wide::packet::PACKET;
     let mut rays = RayCounts::default();
     let mut rejected = 0u64;
     let thin_lens = tracer.plan.thin_lens && cam.lens_radius > 0.0;
-    for (x, px_sum) in row.iter_mut().enumerate() {
-        let pixel = y as u64 * cam.width as u64 + x as u64;
-        let first = PixelSampler::new(samples.sampler, samples.seed, pixel, 0);
+    let mut camera_rays = [crate::geometry::Ray::new(Vec3::ZERO, Vec3::Z); PACKET];
+    let mut samplers = [PixelSampler::new(samples.sampler, samples.seed, 0, 0); PACKET];
+    let mut hits = [None; PACKET];
+    for (chunk, sums) in row.chunks_mut(PACKET).enumerate() {
+        let x0 = chunk * PACKET;
+        let n = sums.len();
+        let firsts: Vec<PixelSampler> = (0..n)
+            .map(|k| {
+                let pixel = y as u64 * cam.width as u64 + (x0 + k) as u64;
+                PixelSampler::new(samples.sampler, samples.seed, pixel, 0)
+            })
+            .collect();
         for s in samples.first..samples.first.saturating_add(samples.count) {
-            let sampler = first.with_index(s);
-            let jitter = sampler.get_2d(dim::PIXEL);
-            let (px, py) = (x as f32 + jitter.x, y as f32 + jitter.y);
-            let ray = if thin_lens {
-                cam.thin_lens(px, py, concentric_disk(sampler.get_2d(dim::LENS)))
-            } else {
-                cam.pinhole(px, py)
-            };
-            rays.camera += 1;
-            let l = tracer.radiance(&ray, &mut PathSampler::new(sampler), &mut rays);
-            if l.is_finite() {
-                *px_sum += l;
-            } else {
-                rejected += 1;
+            for k in 0..n {
+                let sampler = firsts[k].with_index(s);
+                let jitter = sampler.get_2d(dim::PIXEL);
+                let (px, py) = ((x0 + k) as f32 + jitter.x, y as f32 + jitter.y);
+                camera_rays[k] = if thin_lens {
+                    cam.thin_lens(px, py, concentric_disk(sampler.get_2d(dim::LENS)))
+                } else {
+                    cam.pinhole(px, py)
+                };
+                samplers[k] = sampler;
+            }
+            tracer
+                .bvh
+                .intersect_packet(&camera_rays[..n], f32::INFINITY, &mut hits[..n]);
+            rays.camera += n as u64;
+            for (k, px_sum) in sums.iter_mut().enumerate() {
+                let l = tracer.radiance_from_hit(
+                    &camera_rays[k],
+                    hits[k],
+                    &mut PathSampler::new(samplers[k]),
+                    &mut rays,
+                );
+                if l.is_finite() {
+                    *px_sum += l;
+                } else {
+                    rejected += 1;
+                }
             }
         }
     }

@@ -6,7 +6,7 @@ use glam::Vec3;
 
 use super::environment::EnvironmentMap;
 use super::{RayCounts, RenderPlan};
-use crate::bvh::Bvh;
+use crate::bvh::{Bvh, Hit};
 use crate::geometry::{Ray, interpolation_error, offset_ray_origin};
 use crate::sampling::PathSampler;
 use crate::scene::{Light, Material, Scene, face_normal};
@@ -53,6 +53,21 @@ impl Tracer<'_> {
         self.trace(ray, 0, rng, counts)
     }
 
+    /// [`Tracer::radiance`] of a ray whose closest hit is already known (`hit` is what
+    /// `self.bvh.intersect(ray, f32::INFINITY)` gives, as a packet traced it).
+    pub fn radiance_from_hit(
+        &self,
+        ray: &Ray,
+        hit: Option<Hit>,
+        rng: &mut PathSampler,
+        counts: &mut RayCounts,
+    ) -> Vec3 {
+        if !ray.is_valid() {
+            return FALLBACK;
+        }
+        self.shade(ray, hit, 0, rng, counts)
+    }
+
     fn background(&self, dir: Vec3) -> Vec3 {
         if self.plan.environment {
             self.env.radiance(dir)
@@ -88,7 +103,20 @@ impl Tracer<'_> {
     }
 
     fn trace(&self, ray: &Ray, depth: u32, rng: &mut PathSampler, counts: &mut RayCounts) -> Vec3 {
-        let Some(hit) = self.bvh.intersect(ray, f32::INFINITY) else {
+        let hit = self.bvh.intersect(ray, f32::INFINITY);
+        self.shade(ray, hit, depth, rng, counts)
+    }
+
+    /// Radiance along `ray` given its closest hit.
+    fn shade(
+        &self,
+        ray: &Ray,
+        hit: Option<Hit>,
+        depth: u32,
+        rng: &mut PathSampler,
+        counts: &mut RayCounts,
+    ) -> Vec3 {
+        let Some(hit) = hit else {
             return self.background(ray.dir);
         };
         let s = self.surface(ray, hit.prim, hit.u, hit.v);
