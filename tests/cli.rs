@@ -269,3 +269,41 @@ fn check_mesh_exit_status_tells_clean_from_not_from_unreadable() {
     assert_eq!(o.status.code(), Some(2));
     assert!(text(&o.stderr).contains("mesh.ply"));
 }
+
+#[test]
+fn bench_leaves_out_non_finite_triangles_before_any_engine_sees_them() {
+    // A grid of triangles with a few NaN and infinite vertices among them: obvhs' CWBVH build
+    // indexed out of bounds on such input before they were left out.
+    let dir = tempfile::tempdir().unwrap();
+    let mut obj = String::new();
+    for i in 0..40 {
+        for j in 0..40 {
+            let (x, y) = (i as f32 * 0.1, j as f32 * 0.1);
+            obj += &format!("v {x} {y} 0\nv {} {y} 0\nv {x} {} 0\n", x + 0.1, y + 0.1);
+        }
+    }
+    obj += "v nan 0 0\nv 0 inf 0\nv 1 1 -inf\n";
+    for k in 0..1600 {
+        obj += &format!("f {} {} {}\n", 3 * k + 1, 3 * k + 2, 3 * k + 3);
+    }
+    obj += "f 4801 1 2\nf 3 4802 5\nf 4803 4801 4802\n";
+    let path = dir.path().join("nan.obj");
+    std::fs::write(&path, obj).unwrap();
+    let o = tracery(&[
+        "bench",
+        path.to_str().unwrap(),
+        "--repeat",
+        "1",
+        "--threads",
+        "1",
+    ]);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let out = text(&o.stdout);
+    assert!(
+        out.contains("3 with NaN or infinite vertices left out for every engine"),
+        "{out}"
+    );
+    for engine in ["tracery-sah", "tracery-packet", "obvhs-bvh2", "obvhs-cwbvh"] {
+        assert!(out.contains(engine), "{engine} missing: {out}");
+    }
+}

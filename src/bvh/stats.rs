@@ -28,6 +28,28 @@ pub struct BvhStats {
     pub sah_cost: f64,
     /// Wall-clock build time in milliseconds.
     pub build_ms: f64,
+    /// Nodes of the 8-wide traversal layout.
+    pub wide_nodes: usize,
+    /// Triangle blocks (four triangles each) of the traversal layout.
+    pub blocks: usize,
+    /// Bytes of the binary tree of record: its nodes, the triangles in leaf order and the map
+    /// back to the caller's indices.
+    pub binary_bytes: usize,
+    /// Bytes of the traversal layout: 8-wide nodes and triangle blocks (which carry the
+    /// caller's indices).
+    pub wide_bytes: usize,
+}
+
+impl BvhStats {
+    /// Bytes per triangle of the binary tree of record (see [`BvhStats::binary_bytes`]).
+    pub fn binary_bytes_per_triangle(&self) -> f64 {
+        self.binary_bytes as f64 / self.triangles.max(1) as f64
+    }
+
+    /// Bytes per triangle of the traversal layout (see [`BvhStats::wide_bytes`]).
+    pub fn wide_bytes_per_triangle(&self) -> f64 {
+        self.wide_bytes as f64 / self.triangles.max(1) as f64
+    }
 }
 
 impl BvhStats {
@@ -38,6 +60,12 @@ impl BvhStats {
         build_time: Duration,
     ) -> Self {
         let mut s = BvhStats {
+            wide_nodes: bvh.wide.nodes.len(),
+            blocks: bvh.wide.blocks.len(),
+            binary_bytes: std::mem::size_of_val(&bvh.nodes[..])
+                + std::mem::size_of_val(&bvh.tris[..])
+                + std::mem::size_of_val(&bvh.prim_ids[..]),
+            wide_bytes: bvh.wide.bytes(),
             triangles: bvh.tris.len(),
             excluded,
             degenerate,

@@ -72,7 +72,7 @@ pub fn run(a: StatsArgs) -> Result<()> {
         tracery::bvh::sah::C_INTERSECT
     );
     println!(
-        "{:<8} {:>5} {:>5} {:>10} {:>9} {:>7} {:>16} {:>9} {:>10} {:>9} {:>10}",
+        "{:<8} {:>5} {:>5} {:>10} {:>9} {:>7} {:>16} {:>9} {:>10} {:>9} {:>10} {:>11} {:>11} {:>13}",
         "split",
         "bins",
         "leaf",
@@ -83,12 +83,15 @@ pub fn run(a: StatsArgs) -> Result<()> {
         "SAH cost",
         "non-finite",
         "zero-area",
-        "build ms"
+        "build ms",
+        "8-wide nodes",
+        "blocks of 4",
+        "bytes/tri b+w"
     );
     for r in &rows {
         let s = &r.stats;
         println!(
-            "{:<8} {:>5} {:>5} {:>10} {:>9} {:>7} {:>16} {:>9.2} {:>10} {:>9} {:>10.2}",
+            "{:<8} {:>5} {:>5} {:>10} {:>9} {:>7} {:>16} {:>9.2} {:>10} {:>9} {:>10.2} {:>11} {:>11} {:>13}",
             r.split.to_string(),
             if r.split == SplitMethod::Sah {
                 r.bins.to_string()
@@ -106,7 +109,14 @@ pub fn run(a: StatsArgs) -> Result<()> {
             s.sah_cost,
             s.excluded,
             s.degenerate,
-            s.build_ms
+            s.build_ms,
+            s.wide_nodes,
+            s.blocks,
+            format!(
+                "{:.0}+{:.0}",
+                s.binary_bytes_per_triangle(),
+                s.wide_bytes_per_triangle()
+            )
         );
     }
     Ok(())

@@ -186,6 +186,11 @@ enum Dispatch {
 }
 
 impl WideBvh {
+    /// Bytes of the layout: nodes plus triangle blocks.
+    pub fn bytes(&self) -> usize {
+        std::mem::size_of_val(&self.nodes[..]) + std::mem::size_of_val(&self.blocks[..])
+    }
+
     /// The kernel the queries use.
     pub fn kernel(&self) -> Kernel {
         match self.dispatch {
