@@ -67,9 +67,15 @@ pub(super) fn build(triangles: &[[Vec3; 3]], options: &BuildOptions) -> Bvh {
         )
     };
 
-    let prim_ids: Vec<u32> = refs.iter().map(PrimRef::id).collect();
+    use rayon::prelude::*;
+    let prim_ids: Vec<u32> = refs
+        .par_iter()
+        .with_min_len(1 << 14)
+        .map(PrimRef::id)
+        .collect();
     let tris: Vec<[Vec3A; 3]> = prim_ids
-        .iter()
+        .par_iter()
+        .with_min_len(1 << 14)
         .map(|&i| triangles[i as usize].map(Vec3A::from))
         .collect();
     let wide = super::wide::collapse(&nodes, &tris, &prim_ids);

@@ -29,6 +29,19 @@ enum ReportKind {
         #[arg(long, default_value_t = 3)]
         repeat: usize,
     },
+    /// Build time against size: our SAH build (with the 8-wide collapse) and Embree's (with
+    /// the `embree` feature), on one thread and on every thread, with the growth per doubling
+    /// of the triangle count.
+    Scaling {
+        /// Meshes, smallest first.
+        meshes: Vec<PathBuf>,
+        /// Also a generated terrain of about this many triangles (0: none).
+        #[arg(long, default_value_t = 4_000_000)]
+        generated: u32,
+        /// Repeat each measurement and keep the best.
+        #[arg(long, default_value_t = 3)]
+        repeat: usize,
+    },
     /// SAH bin counts against build ms, SAH cost and closest-hit Mrays/s (one thread).
     Bins {
         /// Mesh or scene file.
@@ -46,6 +59,11 @@ pub fn run(a: ReportArgs) -> Result<()> {
     match a.kind {
         ReportKind::Splits { meshes, repeat } => splits(meshes, repeat),
         ReportKind::Bins { mesh, bins, repeat } => bins_table(mesh, bins, repeat),
+        ReportKind::Scaling {
+            meshes,
+            generated,
+            repeat,
+        } => scaling(meshes, generated, repeat),
     }
 }
 
@@ -165,6 +183,100 @@ fn bins_table(mesh: PathBuf, bins: Vec<u32>, repeat: usize) -> Result<()> {
             "| {b} | {:.1} | {:.2} | {} | {} | {:.2} |",
             r.build_ms, s.sah_cost, s.levels, s.leaves, r.closest_mrays
         );
+    }
+    Ok(())
+}
+
+/// Best build time in ms of `build` over `repeat` runs on a pool of `threads` threads.
+fn best_ms(threads: usize, repeat: usize, build: &(dyn Fn() -> Result<()> + Sync)) -> Result<f64> {
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()?;
+    let mut best = f64::INFINITY;
+    for _ in 0..repeat.max(1) {
+        let start = Instant::now();
+        pool.install(build)?;
+        best = best.min(start.elapsed().as_secs_f64() * 1e3);
+    }
+    Ok(best)
+}
+
+fn scaling(meshes: Vec<PathBuf>, generated: u32, repeat: usize) -> Result<()> {
+    let cores = all_threads();
+    let mut inputs: Vec<(String, Vec<[glam::Vec3; 3]>)> = Vec::new();
+    for m in &meshes {
+        let scene = load_scene(Some(m))?;
+        inputs.push((scene.name.clone(), scene.mesh.triangles));
+    }
+    if generated > 0 {
+        let n = ((generated as f64 / 2.0).sqrt()).round() as u32;
+        inputs.push((
+            format!("terrain {n}x{n}"),
+            tracery::scene::shapes::terrain(n),
+        ));
+    }
+    let embree = BenchConfig::embree_available();
+    println!(
+        "| mesh | triangles | ours 1 thread ms | ours {cores} threads ms | growth per doubling (1 thread) |{}",
+        if embree {
+            format!(
+                " Embree 1 thread ms | Embree {cores} threads ms | Embree growth per doubling | ours / Embree (1 thread) | ours / Embree ({cores} threads) |"
+            )
+        } else {
+            String::new()
+        }
+    );
+    println!(
+        "|---|---:|---:|---:|---:|{}",
+        if embree {
+            "---:|---:|---:|---:|---:|"
+        } else {
+            ""
+        }
+    );
+    let mut last: Option<(usize, f64, f64)> = None;
+    for (name, tris) in &inputs {
+        eprintln!("{name}: {} triangles", tris.len());
+        let ours = |t: usize| {
+            best_ms(t, repeat, &|| {
+                std::hint::black_box(Bvh::build(tris, &BuildOptions::sah()));
+                Ok(())
+            })
+        };
+        let (o1, on) = (ours(1)?, ours(cores)?);
+        #[cfg(feature = "embree")]
+        let theirs = |t: usize| {
+            best_ms(t, repeat, &|| {
+                std::hint::black_box(bench::embree::Embree::build(tris, t)?);
+                Ok(())
+            })
+        };
+        #[cfg(feature = "embree")]
+        let (e1, en) = (theirs(1)?, theirs(cores)?);
+        #[cfg(not(feature = "embree"))]
+        let (e1, en) = (f64::NAN, f64::NAN);
+        let growth = |prev: Option<(usize, f64)>, ms: f64| match prev {
+            Some((n, t)) if tris.len() > n => {
+                let doublings = (tris.len() as f64 / n as f64).log2();
+                format!("{:.2}x", (ms / t).powf(1.0 / doublings))
+            }
+            _ => "-".into(),
+        };
+        print!(
+            "| {name} | {} | {o1:.1} | {on:.1} | {} |",
+            tris.len(),
+            growth(last.map(|l| (l.0, l.1)), o1)
+        );
+        if embree {
+            print!(
+                " {e1:.1} | {en:.1} | {} | {:.2}x | {:.2}x |",
+                growth(last.map(|l| (l.0, l.2)), e1),
+                o1 / e1,
+                on / en
+            );
+        }
+        println!();
+        last = Some((tris.len(), o1, e1));
     }
     Ok(())
 }

@@ -119,6 +119,19 @@ pub fn grid(n: u32, size: f32) -> Vec<[Vec3; 3]> {
     tris
 }
 
+/// A rolling terrain of `n x n` cells, two triangles each (`2 n^2` triangles): the grid of
+/// [`grid`] over the unit square with heights from a sum of sines, a large mesh with the
+/// shape of a real surface for build-time measurements.
+pub fn terrain(n: u32) -> Vec<[Vec3; 3]> {
+    let height = |x: f32, y: f32| {
+        0.05 * ((x * 17.0).sin() * (y * 13.0).cos() + 0.5 * (x * 41.0 + y * 37.0).sin())
+    };
+    grid(n, 1.0)
+        .into_iter()
+        .map(|t| t.map(|v| Vec3::new(v.x, v.y, height(v.x, v.y))))
+        .collect()
+}
+
 /// `count` needle triangles (length to width ratio `aspect`) fanned around the `y` axis at
 /// slightly different heights: long, thin boxes that overlap a lot.
 pub fn needles(count: u32, aspect: f32) -> Vec<[Vec3; 3]> {

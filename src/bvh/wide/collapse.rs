@@ -21,8 +21,10 @@ pub fn collapse(nodes: &[BvhNode], tris: &[[Vec3A; 3]], prim_ids: &[u32]) -> Wid
     }
     let root = &nodes[0];
     if root.is_leaf() {
-        let first = push_blocks(&mut out.blocks, root, tris, prim_ids);
-        out.root_leaf = Some((first, out.blocks.len() as u32 - first));
+        let mut sources = Vec::new();
+        push_blocks(&mut sources, root);
+        out.blocks = fill_blocks(&sources, tris, prim_ids);
+        out.root_leaf = Some((0, out.blocks.len() as u32));
         return out;
     }
     if tris.len() > Child::MAX_FIRST_BLOCK as usize {
@@ -33,12 +35,15 @@ pub fn collapse(nodes: &[BvhNode], tris: &[[Vec3A; 3]], prim_ids: &[u32]) -> Wid
             first: 0,
             ..*root
         };
-        push_blocks(&mut out.blocks, &all, tris, prim_ids);
+        let mut sources = Vec::new();
+        push_blocks(&mut sources, &all);
+        out.blocks = fill_blocks(&sources, tris, prim_ids);
         out.root_leaf = Some((0, out.blocks.len() as u32));
         return out;
     }
     out.nodes.reserve(nodes.len() / 4);
-    out.blocks.reserve(tris.len() / BLOCK + nodes.len() / 8);
+    // Where each block's triangles come from; the blocks are made at the end, in parallel.
+    let mut sources: Vec<(u32, u32)> = Vec::with_capacity(tris.len() / BLOCK + nodes.len() / 8);
     out.nodes.push(WideNode::EMPTY);
     // (wide node to fill, binary inner node it stands for)
     let mut stack = vec![(0usize, 0usize)];
@@ -73,8 +78,8 @@ pub fn collapse(nodes: &[BvhNode], tris: &[[Vec3A; 3]], prim_ids: &[u32]) -> Wid
                 node.planes[2 * axis + 1][lane] = n.max[axis];
             }
             node.child[lane] = if n.is_leaf() {
-                let first = push_blocks(&mut out.blocks, n, tris, prim_ids);
-                leaf_child(&mut out.nodes, n, first, out.blocks.len() as u32 - first)
+                let first = push_blocks(&mut sources, n);
+                leaf_child(&mut out.nodes, n, first, sources.len() as u32 - first)
             } else {
                 let index = out.nodes.len();
                 out.nodes.push(WideNode::EMPTY);
@@ -89,6 +94,7 @@ pub fn collapse(nodes: &[BvhNode], tris: &[[Vec3A; 3]], prim_ids: &[u32]) -> Wid
         // Depth first, the first child next.
         stack.extend(inner[..inner_count].iter().rev());
     }
+    out.blocks = fill_blocks(&sources, tris, prim_ids);
     out
 }
 
@@ -157,25 +163,33 @@ fn octant_order(node: &WideNode) -> [u32; WIDTH] {
 }
 
 /// Appends the blocks of a binary leaf; returns the index of its first block.
-fn push_blocks(
-    blocks: &mut Vec<TriBlock>,
-    leaf: &BvhNode,
-    tris: &[[Vec3A; 3]],
-    prim_ids: &[u32],
-) -> u32 {
-    let first = blocks.len() as u32;
-    let (start, end) = (leaf.first as usize, (leaf.first + leaf.count) as usize);
+fn push_blocks(sources: &mut Vec<(u32, u32)>, leaf: &BvhNode) -> u32 {
+    let first = sources.len() as u32;
+    let (start, end) = (leaf.first, leaf.first + leaf.count);
     for chunk in (start..end).step_by(BLOCK) {
-        let mut block = TriBlock::EMPTY;
-        for (lane, slot) in (chunk..(chunk + BLOCK).min(end)).enumerate() {
-            for (vertex, p) in tris[slot].iter().enumerate() {
-                for axis in 0..3 {
-                    block.v[vertex][axis][lane] = p[axis];
-                }
-            }
-            block.prim[lane] = prim_ids[slot];
-        }
-        blocks.push(block);
+        sources.push((chunk, (chunk + BLOCK as u32).min(end) - chunk));
     }
     first
+}
+
+/// The blocks, each made from its `(first leaf slot, count)` source, on the rayon pool.
+fn fill_blocks(sources: &[(u32, u32)], tris: &[[Vec3A; 3]], prim_ids: &[u32]) -> Vec<TriBlock> {
+    use rayon::prelude::*;
+    sources
+        .par_iter()
+        .with_min_len(4096)
+        .map(|&(first, count)| {
+            let mut block = TriBlock::EMPTY;
+            for lane in 0..count as usize {
+                let slot = first as usize + lane;
+                for (vertex, p) in tris[slot].iter().enumerate() {
+                    for axis in 0..3 {
+                        block.v[vertex][axis][lane] = p[axis];
+                    }
+                }
+                block.prim[lane] = prim_ids[slot];
+            }
+            block
+        })
+        .collect()
 }
