@@ -108,6 +108,23 @@ impl CameraRays {
         self.forward + sx * self.right + sy * self.up
     }
 
+    /// Where the direction `v` from the eye meets the image: `(px, py)` in pixel units (the
+    /// inverse of [`CameraRays::direction`]), or `None` when it points beside or behind the
+    /// camera.
+    #[inline]
+    pub fn pixel_of(&self, v: Vec3) -> Option<(f32, f32)> {
+        let z = v.dot(self.forward);
+        // (NaN is not in front either.)
+        if z.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
+            return None;
+        }
+        let sx = v.dot(self.right) / z;
+        let sy = v.dot(self.up) / z;
+        let px = (sx / (self.tan_half * self.aspect) + 1.0) * 0.5 * self.width as f32;
+        let py = (1.0 - sy / self.tan_half) * 0.5 * self.height as f32;
+        (px.is_finite() && py.is_finite()).then_some((px, py))
+    }
+
     /// The pinhole ray through `(px, py)`, with a unit direction.
     #[inline]
     pub fn pinhole(&self, px: f32, py: f32) -> Ray {

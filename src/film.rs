@@ -123,13 +123,23 @@ pub fn encode_rgba8(sums: &[Vec3], k: f32, out: &mut [u8]) {
     out.par_chunks_mut(CHUNK * 4)
         .zip(sums.par_chunks(CHUNK))
         .for_each(|(o, s)| {
-            let lut = srgb_lut();
-            let enc = |x: f32| lut_lookup(lut, x);
             for (px, v) in o.chunks_exact_mut(4).zip(s) {
-                let c = tone_map(*v * k);
-                px.copy_from_slice(&[enc(c.x), enc(c.y), enc(c.z), 255]);
+                px.copy_from_slice(&encode_pixel(*v, k));
             }
         });
+}
+
+/// Tone maps `v * k` and encodes it as sRGB RGBA8 (opaque): one pixel of [`encode_rgba8`].
+#[inline]
+pub fn encode_pixel(v: Vec3, k: f32) -> [u8; 4] {
+    let lut = srgb_lut();
+    let c = tone_map(v * k);
+    [
+        lut_lookup(lut, c.x),
+        lut_lookup(lut, c.y),
+        lut_lookup(lut, c.z),
+        255,
+    ]
 }
 
 /// Entries of the [`srgb8_fast`] table over `[0, 1]`.

@@ -1,9 +1,10 @@
 //! The long run (issue 5): 10,000 frames of the viewer's windowless app (`MinimalPlugins` and
 //! the core plugins) with a random setting change every few frames: camera moves, resolution
-//! scale, samples per frame, bounce depth, shadows, sampler, depth of field, environment,
+//! scale, the still delay, bounce depth, shadows, sampler, depth of field, environment,
 //! render mode and level, BVH split, bins and leaf size, and scene switches including a bad
-//! file. Nothing may panic, every image must be finite, and memory must stay flat. The only
-//! test in its binary, so the resident memory it reads is its own.
+//! file. Nothing may panic, every picture shown must be of a job no older than the last
+//! picture's and no newer than the newest sent, and of its size, and memory must stay flat. The only test in its binary, so the resident memory it
+//! reads is its own.
 #![cfg(feature = "viewer")]
 
 use std::path::PathBuf;
@@ -43,8 +44,7 @@ fn ten_thousand_frames_of_random_changes_run_flat() {
         bvh: BuildOptions::sah(),
         settings: ViewSettings {
             max_samples: 16,
-            // Short frames: the run is about state changes, not pictures.
-            frame_budget_ms: 2.0,
+            // Short steps: the run is about state changes, not pictures.
             moving_budget_ms: 1.0,
             ..ViewSettings::default()
         },
@@ -71,6 +71,7 @@ fn ten_thousand_frames_of_random_changes_run_flat() {
     let mut errors = 0u32;
     let mut scenes_seen = std::collections::HashSet::new();
     let mut last_version = 0;
+    let mut last_generation = 0;
     for frame in 0..FRAMES {
         if frame % 7 == 0 {
             let w = app.world_mut();
@@ -90,7 +91,7 @@ fn ten_thousand_frames_of_random_changes_run_flat() {
                 3 => {
                     let mut s = w.resource_mut::<ViewSettings>();
                     s.scale = [0.25, 0.5, 1.0][pick(3) as usize];
-                    s.samples_per_frame = 1 + pick(4) as u32;
+                    s.still_after_ms = [0.0, 5.0, 120.0][pick(3) as usize];
                 }
                 4 => {
                     let mut s = w.resource_mut::<ViewSettings>();
@@ -119,7 +120,8 @@ fn ten_thousand_frames_of_random_changes_run_flat() {
                         RenderMode::Shaded,
                         RenderMode::TraversalCost,
                         RenderMode::Overlap,
-                    ][pick(3) as usize];
+                        RenderMode::Work,
+                    ][pick(4) as usize];
                     s.level = pick(12) as u32;
                     s.exposure = [0.25, 1.0, 8.0][pick(3) as usize];
                 }
@@ -136,12 +138,23 @@ fn ten_thousand_frames_of_random_changes_run_flat() {
                 _ => {} // a few frames of plain accumulation
             }
         }
+        let newest = app.world().resource::<Accumulation>().generation;
         app.update();
+        // Frames of about a millisecond: the worker traces beside them.
+        std::thread::sleep(std::time::Duration::from_millis(1));
 
         let image = app.world().resource::<TracedImage>();
         if image.version != last_version {
             last_version = image.version;
             images += 1;
+            // The newest job's picture, or a moving picture a frame late (what it may differ in
+            // is checked in viewer_app.rs); never one older than a picture shown.
+            assert!(
+                image.generation <= newest && image.generation >= last_generation,
+                "frame {frame}: a picture of job {} after one of job {last_generation} (newest {newest})",
+                image.generation
+            );
+            last_generation = image.generation;
             assert!(
                 image.rgba.is_empty()
                     || image.rgba.len() == (image.width * image.height * 4) as usize,
@@ -156,10 +169,6 @@ fn ten_thousand_frames_of_random_changes_run_flat() {
             errors += 1;
         }
         scenes_seen.insert(app.world().resource::<CurrentScene>().scene.name.clone());
-        let acc = app.world().resource::<Accumulation>();
-        if let Some(full) = acc.full() {
-            assert!(full.rejected == 0 || full.passes() > 0, "frame {frame}");
-        }
         if frame == 1_000 {
             baseline = rss_kib();
         }

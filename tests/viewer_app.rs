@@ -1,6 +1,7 @@
 //! The viewer's ECS without a window (`MinimalPlugins`, `app.update()`): the BVH is rebuilt
 //! exactly when its settings or the scene change, accumulation starts over when the camera
-//! moves, a bad file keeps the old scene and shows its error, a debug ray's hits are the
+//! moves, a stale job's picture is never shown, a pure pan carries every still-valid pixel
+//! over, a bad file keeps the old scene and shows its error, a debug ray's hits are the
 //! core's closest hits, and the traced image equals the headless render of the same view.
 #![cfg(feature = "viewer")]
 
@@ -16,7 +17,10 @@ use tracery::viewer::bvh::{BvhSettings, SceneBvh};
 use tracery::viewer::camera::pose_of;
 use tracery::viewer::debug_ray::{DebugRay, ShootRay, ray_through};
 use tracery::viewer::scene::{CurrentScene, LoadScene, SceneLoading, ViewerStatus};
-use tracery::viewer::trace::{Accumulation, TraceCamera, TracedImage, ViewSettings, ViewportSize};
+use tracery::viewer::trace::{
+    Accumulation, TraceCamera, TraceStats, TraceWorker, TracedImage, ViewSettings, ViewportSize,
+    camera_rays,
+};
 
 const SIZE: UVec2 = UVec2::new(64, 48);
 
@@ -150,12 +154,20 @@ fn accumulation_resets_when_the_camera_moves_and_only_then() {
     assert_eq!(acc.resets, resets, "a still camera keeps accumulating");
     assert!(acc.full_passes() >= passes);
 
-    // Exposure only re-maps the image.
+    // Exposure only re-maps the picture: the passes go on.
     app.world_mut().resource_mut::<ViewSettings>().exposure = 2.0;
     app.update();
     assert_eq!(app.world().resource::<Accumulation>().resets, resets);
+    settle(&mut app, "the re-mapped picture", |w| {
+        let (i, a) = (w.resource::<TracedImage>(), w.resource::<Accumulation>());
+        i.generation == a.generation && i.samples >= passes
+    });
 
-    // Moving the camera starts over, with a preview on screen at once.
+    // Moving the camera starts over, with the moving picture shown first (the still one waits
+    // for the view to stay put).
+    app.world_mut()
+        .resource_mut::<ViewSettings>()
+        .still_after_ms = 1e6;
     let mut q = app
         .world_mut()
         .query_filtered::<&mut Transform, With<TraceCamera>>();
@@ -164,17 +176,176 @@ fn accumulation_resets_when_the_camera_moves_and_only_then() {
     let acc = app.world().resource::<Accumulation>();
     assert_eq!(acc.resets, resets + 1);
     assert_eq!(acc.full_passes(), 0);
+    settle(&mut app, "the moving picture", |w| {
+        w.resource::<TracedImage>().generation == w.resource::<Accumulation>().generation
+    });
     let image = app.world().resource::<TracedImage>();
     assert!(image.preview);
-    assert!(image.width <= SIZE.x && image.width >= 1);
+    assert_eq!((image.width, image.height), (SIZE.x, SIZE.y), "full size");
+
+    // The still picture follows once the view has stayed put.
+    app.world_mut()
+        .resource_mut::<ViewSettings>()
+        .still_after_ms = 0.0;
+    settle(&mut app, "the still picture", |w| {
+        let i = w.resource::<TracedImage>();
+        !i.preview && i.samples >= 1
+    });
+    let resets = app.world().resource::<Accumulation>().resets;
+    assert_eq!(resets, app.world().resource::<Accumulation>().resets);
 
     // Turning the camera, or a render setting, also starts over.
     q.single_mut(app.world_mut()).unwrap().rotate_y(0.01);
     app.update();
-    assert_eq!(app.world().resource::<Accumulation>().resets, resets + 2);
+    assert_eq!(app.world().resource::<Accumulation>().resets, resets + 1);
     app.world_mut().resource_mut::<ViewSettings>().max_depth = 1;
     app.update();
-    assert_eq!(app.world().resource::<Accumulation>().resets, resets + 3);
+    assert_eq!(app.world().resource::<Accumulation>().resets, resets + 2);
+}
+
+/// Every frame changes the view or a setting (the worker has to drop what it was doing). A
+/// picture taken is of the newest job's settings: of the newest job, or of one sent after the
+/// last change of settings whose view alone is out of date (a moving picture a frame late);
+/// pictures never go back in time, and some jobs were abandoned.
+#[test]
+fn a_stale_jobs_picture_is_never_shown() {
+    let mut app = app(Some("assets/scenes/cornell_mirror_glass.toml"));
+    app.world_mut().resource_mut::<ViewportSize>().0 = UVec2::new(320, 240);
+    settle(&mut app, "scene and BVH", |w| {
+        let g = w.resource::<CurrentScene>().generation;
+        g == 1 && w.resource::<SceneBvh>().for_scene(g).is_some()
+    });
+    let (mut shown, mut late, mut last_shown) = (0, 0, 0);
+    // The first job of the newest settings.
+    let mut settings_from = app.world().resource::<Accumulation>().generation;
+    for frame in 0..300u32 {
+        let settings_changed = {
+            let w = app.world_mut();
+            match frame % 4 {
+                0 => {
+                    let mut q = w.query_filtered::<&mut Transform, With<TraceCamera>>();
+                    q.single_mut(w).unwrap().rotate_y(0.003);
+                    false
+                }
+                1 => {
+                    w.resource_mut::<ViewSettings>().seed = frame as u64;
+                    true
+                }
+                2 => {
+                    w.resource_mut::<ViewSettings>().max_depth = 1 + frame % 5;
+                    true
+                }
+                _ => false, // the same job for one more frame
+            }
+        };
+        let newest = app.world().resource::<Accumulation>().generation;
+        let version = app.world().resource::<TracedImage>().version;
+        app.update();
+        let image = app.world().resource::<TracedImage>();
+        if image.version != version {
+            shown += 1;
+            // Pictures are taken before this frame's job is sent.
+            assert!(
+                image.generation >= settings_from && image.generation <= newest,
+                "frame {frame}: the picture of job {} shown, but the settings changed with job {settings_from} (newest {newest})",
+                image.generation
+            );
+            assert!(
+                image.generation >= last_shown,
+                "frame {frame}: the picture of job {} shown after one of job {last_shown}",
+                image.generation
+            );
+            late += usize::from(image.generation != newest);
+            last_shown = image.generation;
+        }
+        if settings_changed {
+            settings_from = app.world().resource::<Accumulation>().generation;
+        }
+        std::thread::sleep(Duration::from_millis(frame as u64 % 7));
+    }
+    assert!(
+        shown > 10,
+        "only {shown} pictures shown ({late} a frame late)"
+    );
+    let w = app.world().resource::<TraceWorker>().0.shared.stats();
+    assert!(w.abandoned > 0, "no job was ever abandoned: {w:?}");
+    // And the last job's picture comes.
+    settle(&mut app, "the last job's picture", |w| {
+        w.resource::<TracedImage>().generation == w.resource::<Accumulation>().generation
+    });
+}
+
+/// The moving picture of a camera that turned in place (a pure pan), with nothing traced
+/// after the turn: every pixel that one earlier pixel clearly falls on holds that pixel's
+/// value, byte for byte.
+#[test]
+fn reprojection_of_a_pure_pan_keeps_every_still_valid_pixel() {
+    let mut app = app(None);
+    app.world_mut()
+        .resource_mut::<ViewSettings>()
+        .still_after_ms = 1e6;
+    settle(&mut app, "a complete moving picture", |w| {
+        let (i, s) = (w.resource::<TracedImage>(), w.resource::<TraceStats>());
+        i.preview && s.holes == 0 && i.generation == w.resource::<Accumulation>().generation
+    });
+    // From now on nothing is traced: the pictures only carry the samples over.
+    app.world_mut()
+        .resource_mut::<ViewSettings>()
+        .moving_budget_ms = 0.0;
+    let picture = |app: &mut App| {
+        settle(app, "the picture of the newest job", |w| {
+            w.resource::<TracedImage>().generation == w.resource::<Accumulation>().generation
+        });
+        let w = app.world_mut();
+        let rgba = w.resource::<TracedImage>().rgba.clone();
+        let mut q = w.query_filtered::<(&Transform, &Projection), With<TraceCamera>>();
+        let (t, p) = q.single(w).unwrap();
+        let settings = w.resource::<ViewSettings>();
+        (rgba, camera_rays(t, p, SIZE, settings))
+    };
+    app.update();
+    let (before, from) = picture(&mut app);
+    let mut q = app
+        .world_mut()
+        .query_filtered::<&mut Transform, With<TraceCamera>>();
+    q.single_mut(app.world_mut()).unwrap().rotate_y(0.06);
+    app.update();
+    let (after, to) = picture(&mut app);
+    assert_ne!(before, after, "the view turned");
+
+    // Where each pixel centre's direction lands in the new view, and whether it lands clear
+    // of the pixel's edges.
+    let mut sources: std::collections::HashMap<usize, Vec<(usize, bool)>> = Default::default();
+    for y in 0..SIZE.y {
+        for x in 0..SIZE.x {
+            let d = from.direction(x as f32 + 0.5, y as f32 + 0.5);
+            let Some((px, py)) = to.pixel_of(d) else {
+                continue;
+            };
+            let clear = |v: f32| v - v.floor() > 0.01 && v - v.floor() < 0.99;
+            let inside = px >= 0.0 && py >= 0.0 && px < SIZE.x as f32 && py < SIZE.y as f32;
+            if inside {
+                let to_pixel = py as usize * SIZE.x as usize + px as usize;
+                sources
+                    .entry(to_pixel)
+                    .or_default()
+                    .push(((y * SIZE.x + x) as usize, clear(px) && clear(py)));
+            }
+        }
+    }
+    let mut kept = 0;
+    for (to_pixel, from_pixels) in &sources {
+        if let [(from_pixel, true)] = from_pixels[..] {
+            assert_eq!(
+                after[to_pixel * 4..to_pixel * 4 + 4],
+                before[from_pixel * 4..from_pixel * 4 + 4],
+                "pixel {to_pixel} should hold the sample of pixel {from_pixel}"
+            );
+            kept += 1;
+        }
+    }
+    let total = (SIZE.x * SIZE.y) as usize;
+    assert!(kept > total / 2, "only {kept} of {total} pixels checked");
 }
 
 #[test]
@@ -289,7 +460,7 @@ fn traced_image_equals_the_headless_render_of_the_same_view() {
     app.world_mut().resource_mut::<ViewSettings>().max_samples = 4;
     settle(&mut app, "4 samples", |w| {
         let i = w.resource::<TracedImage>();
-        !i.preview && i.samples == 4
+        !i.preview && i.samples == 4 && i.generation == w.resource::<Accumulation>().generation
     });
     let shown = app.world().resource::<TracedImage>().rgba.clone();
 

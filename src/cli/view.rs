@@ -67,8 +67,10 @@ pub struct ViewArgs {
     /// With --frames: window screenshot to save before exiting (PNG).
     #[arg(long)]
     screenshot: Option<PathBuf>,
-    /// With --frames: orbit the camera for this many frames first and print frame times
-    /// while moving and samples per second when still.
+    /// With --frames: orbit the camera for this many frames, then stop and let the picture
+    /// converge to --spp; prints the moving frame times and fresh samples per frame, the
+    /// moving picture's error against the converged one (and a stretched preview's), the
+    /// still Mrays/s against `tracery render` of the same view, and the idle CPU use.
     #[arg(long, default_value_t = 0)]
     orbit: u32,
 }
@@ -82,6 +84,8 @@ enum Mode {
     Cost,
     /// Boxes of the level each ray crosses.
     Overlap,
+    /// Where the samples go: samples per pixel of each tile in the last picture.
+    Work,
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
@@ -148,6 +152,7 @@ pub fn run(a: ViewArgs) -> Result<()> {
             Mode::Shaded => RenderMode::Shaded,
             Mode::Cost => RenderMode::TraversalCost,
             Mode::Overlap => RenderMode::Overlap,
+            Mode::Work => RenderMode::Work,
         },
         ..ViewSettings::default()
     };

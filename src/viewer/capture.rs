@@ -6,13 +6,20 @@
 use std::path::PathBuf;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
 
 use bevy::prelude::*;
 use bevy::render::view::screenshot::{Screenshot, ScreenshotCaptured};
 
+use super::bvh::SceneBvh;
 use super::camera::FlyCamera;
 use super::scene::{CurrentScene, ViewerStatus};
-use super::trace::{Accumulation, TraceStats, TracedImage, ViewSettings, picture};
+use super::trace::{
+    LoadedEnvironment, TraceCamera, TraceStats, TraceWorker, TracedImage, ViewSettings,
+    ViewportSize, camera_rays, picture_of,
+};
+use crate::render::resample::{Filter, resize_rgba8};
+use crate::render::{Progressive, RenderSettings, Tracer, render_with_plan};
 
 /// Saves images on request and runs scripted captures.
 pub struct CapturePlugin {
@@ -29,10 +36,16 @@ pub struct CaptureScript {
     pub samples: Option<u32>,
     /// Window screenshot to save before exiting.
     pub screenshot: Option<PathBuf>,
-    /// Orbit the camera about the scene's look-at point for this many frames first
-    /// (measuring frame times while moving).
+    /// Orbit the camera about the scene's look-at point for this many frames first, then
+    /// stop and let the picture converge: prints the moving frame times, the fresh samples per
+    /// frame, the moving picture's error against the converged one (and the stretched
+    /// preview's), the still Mrays/s against `tracery render` of the same view, and the CPU
+    /// use once converged.
     pub orbit_frames: u32,
 }
+
+/// How long the idle CPU use is measured for.
+const IDLE_WINDOW: Duration = Duration::from_secs(4);
 
 impl Plugin for CapturePlugin {
     fn build(&self, app: &mut App) {
@@ -43,7 +56,14 @@ impl Plugin for CapturePlugin {
                 script: script.clone(),
                 ..default()
             })
+            .insert_resource(super::pacing::KeepAwake(script.orbit_frames == 0))
             .add_systems(First, orbit)
+            .add_systems(
+                Update,
+                keep_snapshot
+                    .after(super::trace::TraceSystems)
+                    .before(super::display::ShowPicture),
+            )
             .add_systems(Last, (measure, finish).chain());
         }
     }
@@ -55,7 +75,7 @@ pub struct SavePng(pub Option<PathBuf>);
 
 fn save_png(
     mut requests: MessageReader<SavePng>,
-    acc: Res<Accumulation>,
+    worker: Res<TraceWorker>,
     settings: Res<ViewSettings>,
     current: Res<CurrentScene>,
     mut status: ResMut<ViewerStatus>,
@@ -63,9 +83,12 @@ fn save_png(
     let Some(SavePng(path)) = requests.read().last().cloned() else {
         return;
     };
-    let Some(film) = acc.full().filter(|f| f.passes() > 0) else {
-        status.notice =
-            Some("nothing to save yet: the full-resolution image has no samples".into());
+    let film = worker.0.shared.still.lock().ok().and_then(|f| f.clone());
+    let Some(film) = film.filter(|f| f.passes() > 0) else {
+        status.notice = Some(
+            "nothing to save yet: the still picture has no complete pass (hold the camera still)"
+                .into(),
+        );
         return;
     };
     let path = path.unwrap_or_else(|| {
@@ -78,7 +101,7 @@ fn save_png(
             film.passes()
         ))
     });
-    let (rgba, _) = picture(film, &settings);
+    let (rgba, _) = picture_of(&film, &settings);
     let result = path
         .parent()
         .filter(|p| !p.as_os_str().is_empty())
@@ -107,78 +130,200 @@ fn save_png(
     info!("{}", status.notice.as_deref().unwrap_or_default());
 }
 
+/// The moving picture shown at the end of the orbit, and the pose it was traced for.
+struct Snapshot {
+    rgba: Vec<u8>,
+    size: UVec2,
+    /// The job generation it was traced for, until the pose is found.
+    generation: u64,
+    pose: Option<Transform>,
+}
+
 #[derive(Resource, Default)]
 struct Script {
     script: CaptureScript,
     frame: u32,
     orbit_center: Option<Vec3>,
     moving_ms: Vec<f64>,
-    moving_trace_ms: Vec<f64>,
-    still_ms: Vec<f64>,
-    still_start: Option<(f64, u64, u32)>,
+    /// Job generation and camera pose of recent frames.
+    poses: std::collections::VecDeque<(u64, Transform)>,
+    /// Worker moving samples and pictures when the timed orbit frames began.
+    moving_from: Option<(u64, u64)>,
+    /// Fresh samples and moving pictures over the timed orbit frames.
+    moving_work: (u64, u64),
+    /// The worker's moving-picture time when the timed orbit frames began and ended.
+    moving_time: [super::worker::MovingTime; 2],
+    /// Wall clock over the timed orbit frames.
+    moving_wall: Option<Instant>,
+    moving_seconds: f64,
+    /// CPU seconds of the trace worker's threads and of all the others, when the timed orbit
+    /// frames began and ended.
+    moving_cpu: [(f64, f64); 2],
+    snapshot: Option<Snapshot>,
+    /// Start of the idle measurement: wall clock and process CPU seconds.
+    idle_from: Option<(Instant, f64)>,
     screenshot_requested: bool,
     saved: Arc<AtomicBool>,
     exit_in: Option<u32>,
 }
 
 fn orbit(
-    mut script: ResMut<Script>,
+    script: Res<Script>,
     current: Res<CurrentScene>,
     mut camera: Query<&mut Transform, With<FlyCamera>>,
 ) {
-    if script.frame >= script.script.orbit_frames || script.frame == 0 {
+    let (frame, frames) = (script.frame, script.script.orbit_frames);
+    if frames == 0 || frame == 0 || frame > frames {
         return;
     }
-    let center = *script
-        .orbit_center
-        .get_or_insert(current.scene.camera.look_at);
     for mut t in &mut camera {
+        if frame == frames {
+            // The orbit is over: stop at the pose of the last moving picture shown, so the
+            // converged picture is of the same view.
+            if let Some(pose) = script.snapshot.as_ref().and_then(|s| s.pose) {
+                *t = pose;
+            }
+            continue;
+        }
         // A full turn over the orbit, about the vertical through the look-at point.
-        let step = std::f32::consts::TAU / script.script.orbit_frames.max(1) as f32;
-        let q = Quat::from_rotation_y(step);
+        let center = script.orbit_center.unwrap_or(current.scene.camera.look_at);
+        let q = Quat::from_rotation_y(std::f32::consts::TAU / frames as f32);
         t.translation = center + q * (t.translation - center);
         t.rotation = q * t.rotation;
     }
 }
 
+#[allow(clippy::too_many_arguments)]
 fn measure(
     mut script: ResMut<Script>,
     time: Res<Time<Real>>,
-    acc: Res<Accumulation>,
-    stats: Res<TraceStats>,
+    acc: Res<super::trace::Accumulation>,
+    worker: Res<TraceWorker>,
+    current: Res<CurrentScene>,
+    ready: SceneReady,
+    camera: Query<&Transform, With<TraceCamera>>,
 ) {
+    // The script's frames count from the first picture of the scene asked for.
+    if script.frame == 0 && !ready.is_ready() {
+        return;
+    }
     script.frame += 1;
     let frame = script.frame;
     let orbit = script.script.orbit_frames;
-    if orbit == 0 {
+    if orbit == 0 || frame > orbit {
         return;
     }
+    if script.orbit_center.is_none() {
+        script.orbit_center = Some(current.scene.camera.look_at);
+    }
+    if let Ok(t) = camera.single() {
+        script.poses.push_back((acc.generation, *t));
+        if script.poses.len() > 64 {
+            script.poses.pop_front();
+        }
+    }
+    let w = worker.0.shared.stats();
     // Skip the first frames (window and pipelines start up) when timing.
-    if frame > 3 && frame <= orbit {
-        let ms = time.delta_secs_f64() * 1e3;
-        script.moving_ms.push(ms);
-        script.moving_trace_ms.push(stats.trace_ms);
+    if frame == 3 {
+        script.moving_from = Some((w.moving_samples, w.moving_pictures));
+        script.moving_time[0] = w.moving_time;
+        script.moving_wall = Some(Instant::now());
+        script.moving_cpu[0] = thread_cpu_seconds();
     }
-    if frame > orbit + 1 {
-        let ms = time.delta_secs_f64() * 1e3;
-        script.still_ms.push(ms);
+    if frame > 3 {
+        script.moving_ms.push(time.delta_secs_f64() * 1e3);
     }
-    if frame == orbit + 1 {
-        script.still_start = Some((
-            time.elapsed_secs_f64(),
-            acc.full().map_or(0, |f| f.rays.total()),
-            acc.full_passes(),
-        ));
+    if frame == orbit {
+        if let Some((s0, p0)) = script.moving_from {
+            script.moving_work = (w.moving_samples - s0, w.moving_pictures - p0);
+        }
+        script.moving_time[1] = w.moving_time;
+        script.moving_cpu[1] = thread_cpu_seconds();
+        script.moving_seconds = script
+            .moving_wall
+            .map_or(0.0, |t| t.elapsed().as_secs_f64());
+        let poses = std::mem::take(&mut script.poses);
+        if let Some(snap) = script.snapshot.as_mut() {
+            snap.pose = poses
+                .iter()
+                .find(|(g, _)| *g == snap.generation)
+                .map(|(_, t)| *t);
+        }
+        script.poses = poses;
     }
 }
 
+/// Keeps a copy of each moving picture of the orbit's last frames before the display takes its
+/// pixels: the last one is compared with the converged picture of its pose.
+fn keep_snapshot(mut script: ResMut<Script>, image: Res<TracedImage>) {
+    let frame = script.frame + 1;
+    let orbit = script.script.orbit_frames;
+    if orbit == 0 || frame > orbit || frame + 32 < orbit || !image.is_changed() {
+        return;
+    }
+    if image.preview && !image.rgba.is_empty() {
+        script.snapshot = Some(Snapshot {
+            rgba: image.rgba.clone(),
+            size: UVec2::new(image.width, image.height),
+            generation: image.generation,
+            pose: None,
+        });
+    }
+}
+
+/// Process CPU time (user and system) in seconds, from `/proc/self/stat` (Linux; the kernel
+/// counts in USER_HZ = 100 ticks a second on every architecture it exports it for).
+fn process_cpu_seconds() -> Option<f64> {
+    let stat = std::fs::read_to_string("/proc/self/stat").ok()?;
+    // The command name may hold spaces: fields are counted after its closing parenthesis.
+    let rest = &stat[stat.rfind(')')? + 2..];
+    let fields: Vec<&str> = rest.split_whitespace().collect();
+    let utime: f64 = fields.get(11)?.parse().ok()?;
+    let stime: f64 = fields.get(12)?.parse().ok()?;
+    Some((utime + stime) / 100.0)
+}
+
+/// CPU seconds (user and system) of the trace worker's threads and of the process's other
+/// threads (Bevy, the window, the graphics driver), from `/proc/self/task` (Linux).
+fn thread_cpu_seconds() -> (f64, f64) {
+    let (mut worker, mut other) = (0.0, 0.0);
+    let Ok(tasks) = std::fs::read_dir("/proc/self/task") else {
+        return (0.0, 0.0);
+    };
+    for task in tasks.flatten() {
+        let Ok(stat) = std::fs::read_to_string(task.path().join("stat")) else {
+            continue;
+        };
+        let (Some(open), Some(close)) = (stat.find('('), stat.rfind(')')) else {
+            continue;
+        };
+        let name = &stat[open + 1..close];
+        let fields: Vec<&str> = stat[close + 2..].split_whitespace().collect();
+        let ticks = |i: usize| {
+            fields
+                .get(i)
+                .and_then(|f| f.parse::<f64>().ok())
+                .unwrap_or(0.0)
+        };
+        let secs = (ticks(11) + ticks(12)) / 100.0;
+        if name.starts_with("tracery-trace") {
+            worker += secs;
+        } else {
+            other += secs;
+        }
+    }
+    (worker, other)
+}
+
+#[allow(clippy::too_many_arguments)]
 fn finish(
     mut commands: Commands,
     mut script: ResMut<Script>,
     image: Res<TracedImage>,
-    acc: Res<Accumulation>,
     stats: Res<TraceStats>,
-    time: Res<Time<Real>>,
+    settings: Res<ViewSettings>,
+    mut keep_awake: ResMut<super::pacing::KeepAwake>,
+    views: ReportViews,
     mut exit: MessageWriter<AppExit>,
 ) {
     if let Some(n) = script.exit_in.as_mut() {
@@ -189,34 +334,83 @@ fn finish(
         }
         return;
     }
-    if script.frame < script.script.frames {
+    if script.frame < script.script.frames.max(script.script.orbit_frames) {
         return;
     }
-    if let Some(target) = script.script.samples
+    let orbit = script.script.orbit_frames > 0;
+    let target = script
+        .script
+        .samples
+        .or(orbit.then_some(settings.max_samples));
+    if let Some(target) = target
         && (image.preview || image.samples < target)
     {
         return;
     }
-    if !script.screenshot_requested {
-        report(&script, &acc, &stats, &time);
-        match script.script.screenshot.clone() {
-            Some(path) => {
-                let saved = script.saved.clone();
-                commands.spawn(Screenshot::primary_window()).observe(
-                    move |shot: On<ScreenshotCaptured>| {
-                        save_screenshot(&shot.image, &path);
-                        saved.store(true, Ordering::SeqCst);
-                    },
-                );
-                script.screenshot_requested = true;
-            }
-            None => script.exit_in = Some(0),
+    if script.screenshot_requested {
+        if script.saved.load(Ordering::SeqCst) {
+            script.exit_in = Some(1);
         }
         return;
     }
-    if script.saved.load(Ordering::SeqCst) {
-        script.exit_in = Some(1);
+    if orbit {
+        // Converged: measure the CPU use with nothing to do before reporting.
+        let Some((t0, cpu0)) = script.idle_from else {
+            script.idle_from = Some((Instant::now(), process_cpu_seconds().unwrap_or(0.0)));
+            return;
+        };
+        if t0.elapsed() < IDLE_WINDOW {
+            return;
+        }
+        let idle = process_cpu_seconds().map(|c| (c - cpu0) / t0.elapsed().as_secs_f64());
+        report(&script, &stats, &settings, &views, idle);
+        // The screenshot needs frames again.
+        keep_awake.0 = true;
     }
+    match script.script.screenshot.clone() {
+        Some(path) => {
+            let saved = script.saved.clone();
+            commands.spawn(Screenshot::primary_window()).observe(
+                move |shot: On<ScreenshotCaptured>| {
+                    save_screenshot(&shot.image, &path);
+                    saved.store(true, Ordering::SeqCst);
+                },
+            );
+            script.screenshot_requested = true;
+        }
+        None => script.exit_in = Some(0),
+    }
+}
+
+/// Whether the scene asked for is up: loaded, its BVH built and a still picture of it shown
+/// (one complete pass: people look before they fly).
+#[derive(bevy::ecs::system::SystemParam)]
+struct SceneReady<'w> {
+    loading: Res<'w, super::scene::SceneLoading>,
+    current: Res<'w, CurrentScene>,
+    bvh: Res<'w, SceneBvh>,
+    image: Res<'w, TracedImage>,
+}
+
+impl SceneReady<'_> {
+    fn is_ready(&self) -> bool {
+        self.loading.current().is_none()
+            && self.bvh.for_scene(self.current.generation).is_some()
+            && self.image.version > 0
+            && !self.image.preview
+            && self.image.samples >= 1
+    }
+}
+
+/// What the report reads besides the script.
+#[derive(bevy::ecs::system::SystemParam)]
+struct ReportViews<'w, 's> {
+    worker: Res<'w, TraceWorker>,
+    current: Res<'w, CurrentScene>,
+    bvh: Res<'w, SceneBvh>,
+    env: Res<'w, LoadedEnvironment>,
+    viewport: Res<'w, ViewportSize>,
+    camera: Query<'w, 's, (&'static Transform, &'static Projection), With<TraceCamera>>,
 }
 
 fn save_screenshot(image: &Image, path: &std::path::Path) {
@@ -240,46 +434,199 @@ fn save_screenshot(image: &Image, path: &std::path::Path) {
     }
 }
 
-fn report(script: &Script, acc: &Accumulation, stats: &TraceStats, time: &Time<Real>) {
-    let s = &script.script;
-    if s.orbit_frames > 0 && !script.moving_ms.is_empty() {
+/// Root mean square difference of two RGBA8 pictures over their colour channels, in 8-bit
+/// levels.
+fn rmse_levels(a: &[u8], b: &[u8]) -> f64 {
+    let (mut sum, mut n) = (0.0f64, 0u64);
+    for (p, q) in a.chunks_exact(4).zip(b.chunks_exact(4)) {
+        for c in 0..3 {
+            let d = p[c] as f64 - q[c] as f64;
+            sum += d * d;
+            n += 1;
+        }
+    }
+    (sum / n.max(1) as f64).sqrt()
+}
+
+fn report(
+    script: &Script,
+    stats: &TraceStats,
+    settings: &ViewSettings,
+    views: &ReportViews,
+    idle_cpu: Option<f64>,
+) {
+    let w = views.worker.0.shared.stats();
+    let display = views.viewport.0;
+    // Moving.
+    let v = {
         let mut v = script.moving_ms.clone();
         v.sort_by(f64::total_cmp);
+        v
+    };
+    let fresh_per_frame = script.moving_work.0 as f64 / v.len().max(1) as f64;
+    if !v.is_empty() {
         let mean = v.iter().sum::<f64>() / v.len() as f64;
         let p95 = v[((v.len() as f64 * 0.95) as usize).min(v.len() - 1)];
-        let trace = script.moving_trace_ms.iter().sum::<f64>() / v.len() as f64;
         println!(
-            "moving: {} frames, frame time mean {:.1} ms, p95 {:.1} ms, max {:.1} ms (tracing {:.1} ms of it); preview {}x{} of {}x{}",
+            "moving: {} frames at {}x{}, frame time mean {:.1} ms, p95 {:.1} ms, max {:.1} ms; {:.0} fresh samples per frame ({:.1}% of the pixels), {} moving pictures",
             v.len(),
+            stats.size.x,
+            stats.size.y,
             mean,
             p95,
             v[v.len() - 1],
-            trace,
-            stats.preview_size.x,
-            stats.preview_size.y,
-            stats.size.x,
-            stats.size.y
+            fresh_per_frame,
+            100.0 * fresh_per_frame / (stats.size.x * stats.size.y).max(1) as f64,
+            script.moving_work.1,
+        );
+        let [a, b] = script.moving_time;
+        let wall = script.moving_seconds.max(1e-9);
+        let [(w0, o0), (w1, o1)] = script.moving_cpu;
+        println!(
+            "moving CPU: trace worker {:.2} cores, everything else (Bevy, window, graphics driver) {:.2} cores",
+            (w1 - w0) / wall,
+            (o1 - o0) / wall
+        );
+        println!(
+            "moving worker time: reprojecting {:.0}%, tracing {:.0}%, making pictures {:.0}% of the wall clock",
+            100.0 * (b.reproject - a.reproject) / wall,
+            100.0 * (b.trace - a.trace) / wall,
+            100.0 * (b.picture - a.picture) / wall,
         );
     }
-    if let Some((t0, rays0, spp0)) = script.still_start {
-        let secs = time.elapsed_secs_f64() - t0;
-        let spp = acc.full_passes().saturating_sub(spp0);
-        let rays = acc
-            .full()
-            .map_or(0, |f| f.rays.total())
-            .saturating_sub(rays0);
-        let frames = script.still_ms.len().max(1);
-        if secs > 0.0 {
-            println!(
-                "still: {} samples per pixel in {:.2} s = {:.2} spp/s at {}x{}, {:.2} Mrays/s; frame time mean {:.1} ms",
-                spp,
-                secs,
-                spp as f64 / secs,
-                stats.size.x,
-                stats.size.y,
-                rays as f64 / secs / 1e6,
-                script.still_ms.iter().sum::<f64>() / frames as f64
+    // Still: the worker's rays over its wall time, against the headless render.
+    let film = views
+        .worker
+        .0
+        .shared
+        .still
+        .lock()
+        .ok()
+        .and_then(|f| f.clone());
+    let (Some(film), Ok((transform, projection)), Some(tree)) = (
+        film,
+        views.camera.single(),
+        views.bvh.for_scene(views.current.generation),
+    ) else {
+        println!("still: no converged picture to compare");
+        return;
+    };
+    let viewer_mrays = w.still_rays.total() as f64 / w.still_wall.max(1e-9) / 1e6;
+    println!(
+        "still worker time: tracing {:.2} s of {:.2} s",
+        w.still_seconds, w.still_wall
+    );
+    let cam = camera_rays(
+        transform,
+        projection,
+        UVec2::new(film.width(), film.height()),
+        settings,
+    );
+    let mut scene = (*views.current.scene).clone();
+    scene.camera.position = cam.eye;
+    scene.camera.look_at = cam.eye + cam.forward;
+    scene.camera.up = cam.up;
+    let plan = settings.plan(&scene);
+    let render_settings = RenderSettings {
+        width: film.width(),
+        height: film.height(),
+        spp: film.passes(),
+        seed: settings.seed,
+        max_depth: settings.max_depth,
+        sampler: settings.sampler,
+    };
+    let t0 = Instant::now();
+    let headless = render_with_plan(
+        &scene,
+        tree,
+        &views.env.map,
+        &render_settings,
+        plan,
+        &|_| {},
+    );
+    let secs = t0.elapsed().as_secs_f64();
+    let headless_mrays = headless.rays.total() as f64 / secs / 1e6;
+    println!(
+        "still: {} spp at {}x{} in {:.2} s: viewer {:.2} Mrays/s, tracery render of the same view {:.2} Mrays/s ({:.2} s), ratio {:.2}",
+        film.passes(),
+        film.width(),
+        film.height(),
+        w.still_wall,
+        viewer_mrays,
+        headless_mrays,
+        secs,
+        viewer_mrays / headless_mrays.max(1e-9)
+    );
+    // The moving picture against the converged one of the same pose, and the stretched
+    // preview (the earlier design: a reduced picture with as many fresh samples, bilinear).
+    let converged = resize_rgba8(
+        picture_of(&film, settings).0,
+        film.width(),
+        film.height(),
+        display.x,
+        display.y,
+        Filter::Nearest,
+    );
+    if let Some(snap) = &script.snapshot
+        && let Some(pose) = snap.pose
+        && snap.size == display
+        && fresh_per_frame >= 1.0
+    {
+        let aspect = display.x as f64 / display.y as f64;
+        let pw = ((fresh_per_frame * aspect).sqrt().round() as u32).clamp(1, display.x);
+        let ph = ((fresh_per_frame / pw as f64).round() as u32).clamp(1, display.y);
+        let mut plan = settings.plan(&scene);
+        plan.max_light_samples = Some(1);
+        let tracer = Tracer {
+            scene: &scene,
+            bvh: tree,
+            plan,
+            max_depth: settings.max_depth,
+            env: &views.env.map,
+        };
+        // One pass at a reduced size, stretched to the display as the earlier design did.
+        let stretched = |size: UVec2| {
+            let mut preview = Progressive::new(size.x, size.y);
+            let pcam = camera_rays(&pose, projection, size, settings);
+            preview.step_shaded(
+                &tracer,
+                &pcam,
+                settings.sampler,
+                settings.seed,
+                Duration::from_secs(3600),
+                1,
             );
-        }
+            let rgba = resize_rgba8(
+                preview.to_rgba8(settings.exposure),
+                size.x,
+                size.y,
+                display.x,
+                display.y,
+                Filter::Bilinear,
+            );
+            rmse_levels(&rgba, &converged)
+        };
+        let old = UVec2::new(240, 135);
+        println!(
+            "moving picture against the converged one ({} spp) of the same pose: RMSE {:.2} levels; stretched preview with as many fresh samples ({}x{}): {:.2} levels; the earlier {}x{} preview: {:.2} levels",
+            film.passes(),
+            rmse_levels(&snap.rgba, &converged),
+            pw,
+            ph,
+            stretched(UVec2::new(pw, ph)),
+            old.x,
+            old.y,
+            stretched(old),
+        );
+    } else {
+        println!("moving picture: none shown at the end of the orbit to compare");
+    }
+    match idle_cpu {
+        Some(c) => println!(
+            "converged and idle: the process used {:.1}% of one core over {:.0} s",
+            c * 100.0,
+            IDLE_WINDOW.as_secs_f64()
+        ),
+        None => println!("converged and idle: CPU use unknown (no /proc/self/stat)"),
     }
 }

@@ -1,6 +1,5 @@
-//! Showing the traced image. The picture is resized on the CPU to the window's size (a
-//! preview bilinear, a reduced resolution scale with square pixels) and uploaded to a
-//! texture; a render system copies that texture into the 3D camera's main texture before
+//! Showing the traced image. The trace worker hands over pictures tone mapped and resized
+//! to the window already; they are uploaded to a texture; a render system copies that texture into the 3D camera's main texture before
 //! the camera draws, so the gizmos land on the traced pixels and no shader pass touches the
 //! picture (under a software Vulkan driver each full-window pass costs milliseconds).
 //! Files dropped on the window are opened.
@@ -34,12 +33,20 @@ impl Plugin for DisplayPlugin {
             .add_systems(Startup, spawn_view)
             .add_systems(First, track_window_size)
             .add_systems(PreUpdate, open_dropped_files)
-            .add_systems(Update, show_traced_image.after(TraceSystems));
+            .add_systems(
+                Update,
+                show_traced_image.in_set(ShowPicture).after(TraceSystems),
+            );
         if let Some(render_app) = app.get_sub_app_mut(RenderApp) {
             render_app.add_systems(Core3d, copy_background.before(Core3dSystems::Prepass));
         }
     }
 }
+
+/// The system that uploads a new picture (and takes its pixels): systems that read a picture's
+/// pixels run before it.
+#[derive(SystemSet, Debug, Clone, PartialEq, Eq, Hash)]
+pub struct ShowPicture;
 
 /// On a camera: the texture copied into its frame before it draws.
 #[derive(Component, Clone, ExtractComponent)]
@@ -105,7 +112,8 @@ fn track_window_size(
     viewport.set_if_neq(ViewportSize(physical));
 }
 
-/// Resizes the newest traced picture to the window and hands it to the display texture.
+/// Hands the newest traced picture to the display texture (the worker made it display-sized;
+/// a picture made before a window resize is stretched to the new size).
 fn show_traced_image(
     mut traced: ResMut<TracedImage>,
     mut shown: ResMut<Shown>,
@@ -127,12 +135,7 @@ fn show_traced_image(
     if image.size() != size {
         *image = blank(size);
     }
-    let filter = if traced.preview {
-        Filter::Bilinear
-    } else {
-        Filter::Nearest
-    };
-    // The pixels move on: the trace system writes a new buffer for the next picture.
+    // The pixels move on: the worker writes a new buffer for the next picture.
     let rgba = std::mem::take(&mut traced.rgba);
     image.data = Some(resize_rgba8(
         rgba,
@@ -140,7 +143,7 @@ fn show_traced_image(
         traced.height,
         size.x,
         size.y,
-        filter,
+        Filter::Nearest,
     ));
 }
 

@@ -168,6 +168,7 @@ fn keys(
     for (key, mode) in [
         (KeyCode::KeyH, RenderMode::TraversalCost),
         (KeyCode::KeyO, RenderMode::Overlap),
+        (KeyCode::KeyG, RenderMode::Work),
     ] {
         if input.just_pressed(key) {
             settings.mode = if settings.mode == mode {

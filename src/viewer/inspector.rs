@@ -95,6 +95,7 @@ pub const KEYS: &[(&str, &str)] = &[
     (", / .", "previous / next leaf"),
     ("R", "debug ray drawing"),
     ("H", "traversal cost heatmap"),
+    ("G", "where the samples go (work heatmap)"),
     ("P", "save the full-resolution image as PNG"),
     ("Tab", "show / hide the inspector"),
     ("F1", "this help"),
@@ -147,24 +148,21 @@ fn status_line(
     }
     let ctx = contexts.ctx_mut()?;
     let frame_ms = time.delta_secs_f64() * 1e3;
+    let picture = if stats.moving {
+        format!("moving, {} fresh samples", stats.fresh)
+    } else if stats.idle {
+        format!("{} spp, done", stats.spp)
+    } else {
+        format!("{} spp", stats.spp)
+    };
     let mut text = format!(
-        "{} | {} spp | {:.1} Mrays/s | frame {:.1} ms | trace {:.1} ms | BVH {:.1} ms | {}x{}{}",
+        "{} | {picture} | {:.1} Mrays/s | frame {:.1} ms | BVH {:.1} ms | {}x{}",
         current.scene.name,
-        stats.spp,
         stats.mrays_per_s,
         frame_ms,
-        stats.trace_ms,
         bvh.bvh.as_ref().map_or(0.0, |b| b.stats.build_ms),
         stats.size.x,
         stats.size.y,
-        if stats.moving {
-            format!(
-                " (preview {}x{})",
-                stats.preview_size.x, stats.preview_size.y
-            )
-        } else {
-            String::new()
-        }
     );
     if let Some((path, secs)) = loading.current() {
         text += &format!(" | loading {} ({secs:.1} s)", path.display());
@@ -321,9 +319,14 @@ fn render_section(ui: &mut egui::Ui, s: &mut ViewSettings, stats: &TraceStats) {
                 ui.radio_value(&mut s.mode, RenderMode::Shaded, "Shaded");
                 ui.radio_value(&mut s.mode, RenderMode::TraversalCost, "Cost (H)");
                 ui.radio_value(&mut s.mode, RenderMode::Overlap, "Overlap (O)");
-            });
+                ui.radio_value(&mut s.mode, RenderMode::Work, "Work (G)");
+            })
+            .response
+            .on_hover_text(
+                "Work: samples per pixel each 16x16 tile took for the last picture \
+                 (while moving, changed and noisy tiles get more)",
+            );
             ui.add(egui::Slider::new(&mut s.scale, 0.1..=1.0).text("resolution scale"));
-            ui.add(egui::Slider::new(&mut s.samples_per_frame, 1..=16).text("samples per frame"));
             ui.add(
                 egui::Slider::new(&mut s.max_samples, 1..=4096)
                     .logarithmic(true)
@@ -347,7 +350,12 @@ fn render_section(ui: &mut egui::Ui, s: &mut ViewSettings, stats: &TraceStats) {
                     .text("exposure"),
             );
             ui.add(
-                egui::Slider::new(&mut s.frame_budget_ms, 5.0..=200.0).text("trace ms per frame"),
+                egui::Slider::new(&mut s.moving_budget_ms, 1.0..=100.0)
+                    .text("ms of tracing per moving picture"),
+            );
+            ui.add(
+                egui::Slider::new(&mut s.still_after_ms, 0.0..=1000.0)
+                    .text("ms still before refining"),
             );
             if s.mode != RenderMode::Shaded {
                 heat_legend(ui, s, stats);
@@ -356,10 +364,10 @@ fn render_section(ui: &mut egui::Ui, s: &mut ViewSettings, stats: &TraceStats) {
 }
 
 fn heat_legend(ui: &mut egui::Ui, s: &mut ViewSettings, stats: &TraceStats) {
-    let what = if s.mode == RenderMode::TraversalCost {
-        "BVH nodes entered per camera ray"
-    } else {
-        "boxes of the level each camera ray crosses"
+    let what = match s.mode {
+        RenderMode::TraversalCost => "BVH nodes entered per camera ray",
+        RenderMode::Work => "samples per pixel of each tile in the last picture",
+        _ => "boxes of the level each camera ray crosses",
     };
     ui.label(what);
     let (rect, _) = ui.allocate_exact_size(egui::vec2(260.0, 16.0), egui::Sense::hover());
@@ -382,9 +390,9 @@ fn heat_legend(ui: &mut egui::Ui, s: &mut ViewSettings, stats: &TraceStats) {
     ui.horizontal(|ui| {
         ui.label("0");
         ui.add_space(200.0);
-        ui.label(format!("{top:.0}"));
+        ui.label(format!("{top:.2}"));
     });
-    ui.label(format!("mean {mean:.1}, scale top {top:.0}"));
+    ui.label(format!("mean {mean:.2}, scale top {top:.2}"));
     ui.add(egui::Slider::new(&mut s.heat_max, 0.0..=512.0).text("scale top (0: auto)"));
 }
 

@@ -5,8 +5,10 @@
 //! [`bvh::BvhPlugin`] (rebuilding the BVH when the scene or its settings change),
 //! [`trace::TracePlugin`] (the ray-trace system), [`display::DisplayPlugin`] (the traced
 //! image on screen), [`camera::FlyCameraPlugin`], [`gizmos::BvhGizmoPlugin`],
-//! [`debug_ray::DebugRayPlugin`], [`inspector::InspectorPlugin`] and
-//! [`capture::CapturePlugin`] (PNG, screenshots, scripted runs). [`CorePlugins`] is the part
+//! [`debug_ray::DebugRayPlugin`], [`inspector::InspectorPlugin`],
+//! [`pacing::PacingPlugin`] (continuous updates only while something changes) and
+//! [`capture::CapturePlugin`] (PNG, screenshots, scripted runs). The tracing itself runs on the
+//! trace worker ([`worker`]), off the schedule. [`CorePlugins`] is the part
 //! that needs no window, for tests with `MinimalPlugins`.
 
 pub mod bvh;
@@ -16,16 +18,17 @@ pub mod debug_ray;
 pub mod display;
 pub mod gizmos;
 pub mod inspector;
+pub mod pacing;
 pub mod scene;
 pub mod task;
 pub mod trace;
+pub mod worker;
 
 use std::path::PathBuf;
 
 use bevy::app::TaskPoolThreadAssignmentPolicy;
 use bevy::prelude::*;
 use bevy::window::{PresentMode, WindowResolution};
-use bevy::winit::WinitSettings;
 use bevy_egui::{EguiGlobalSettings, EguiPlugin, PrimaryEguiContext};
 
 use crate::bvh::BuildOptions;
@@ -161,9 +164,6 @@ pub fn run(options: ViewOptions) -> anyhow::Result<()> {
         ..default()
     })
     .insert_resource(ClearColor(Color::BLACK))
-    // Keep refining at full speed when the window is not focused too (Bevy's default caps an
-    // unfocused window at 60 updates a second and lets updates wait for redraw requests).
-    .insert_resource(WinitSettings::continuous())
     .add_plugins(CorePlugins {
         scene: options.scene.clone(),
         bvh: options.bvh,
@@ -173,6 +173,7 @@ pub fn run(options: ViewOptions) -> anyhow::Result<()> {
     })
     .add_plugins((
         display::DisplayPlugin,
+        pacing::PacingPlugin,
         camera::FlyCameraPlugin,
         gizmos::BvhGizmoPlugin,
         inspector::InspectorPlugin {

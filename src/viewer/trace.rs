@@ -1,16 +1,18 @@
-//! The ray-trace system: traces the view of the [`TraceCamera`] into a progressive film within
-//! a time budget per frame, accumulating while nothing changes and starting over (with a quick
-//! low-resolution preview) whenever the camera, scene or settings change.
+//! The ray-trace systems: every frame, [`send_job`] hands the view of the [`TraceCamera`] (with
+//! the scene, BVH, environment and settings) to the trace worker ([`super::worker`]) when it
+//! changed, and [`take_picture`] installs the newest picture the worker finished. The worker
+//! traces on its own threads, so the frame never waits for it.
 
 use std::path::PathBuf;
 use std::sync::Arc;
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use bevy::prelude::*;
 
 use super::bvh::SceneBvh;
 use super::scene::{CurrentScene, SceneSystems};
 use super::task::Background;
+use super::worker::{Content, Job, Worker};
 use crate::bvh::Bvh;
 use crate::camera::CameraRays;
 use crate::render::heatmap::{cost_row, cost_summary, heatmap_rgba8, overlap_row};
@@ -19,7 +21,7 @@ use crate::render::{EnvironmentMap, Progressive, RayCounts, RenderPlan, RenderSe
 use crate::sampling::SamplerKind;
 use crate::scene::{Environment, Scene};
 
-/// Traces the view every frame and keeps [`TracedImage`] up to date.
+/// Hands the view to the trace worker and keeps [`TracedImage`] up to date.
 pub struct TracePlugin {
     /// Settings at start.
     pub settings: ViewSettings,
@@ -35,13 +37,19 @@ impl Plugin for TracePlugin {
             .init_resource::<Accumulation>()
             .init_resource::<TracedImage>()
             .init_resource::<TraceStats>()
+            .insert_resource(TraceWorker(Worker::start()))
             .add_systems(
                 PreUpdate,
                 (scene_defaults, update_environment)
                     .chain()
                     .after(SceneSystems),
             )
-            .add_systems(Update, trace.in_set(TraceSystems));
+            // The picture is taken before the next job is sent: a picture taken is always of
+            // the newest job sent.
+            .add_systems(
+                Update,
+                (take_picture, send_job).chain().in_set(TraceSystems),
+            );
     }
 }
 
@@ -67,6 +75,9 @@ pub enum RenderMode {
     TraversalCost,
     /// How many boxes of the chosen BVH level each pixel's ray passes through.
     Overlap,
+    /// Where the samples go: samples per pixel each 16 x 16 tile took for the last picture,
+    /// as a heatmap (the moving picture gives changed and noisy tiles more).
+    Work,
 }
 
 /// Which environment rays that leave the scene see.
@@ -90,8 +101,6 @@ pub enum EnvChoice {
 pub struct ViewSettings {
     /// Image resolution relative to the window (1: one traced pixel per window pixel).
     pub scale: f32,
-    /// Most passes (samples per pixel) traced in one frame.
-    pub samples_per_frame: u32,
     /// Accumulation stops at this many samples per pixel.
     pub max_samples: u32,
     /// Largest number of mirror or transparent bounces.
@@ -124,10 +133,12 @@ pub struct ViewSettings {
     pub level: u32,
     /// Top of the heatmap scale (0: the image's largest value).
     pub heat_max: f32,
-    /// Time the tracing may take per frame while the camera is still, in milliseconds.
-    pub frame_budget_ms: f32,
-    /// Time a preview pass should take while the camera moves, in milliseconds.
+    /// Tracing time of each new view's moving picture, in milliseconds (its picture comes
+    /// this long after the view's samples are carried over).
     pub moving_budget_ms: f32,
+    /// How long the view must stay the same before the still picture starts over from fresh
+    /// samples, in milliseconds.
+    pub still_after_ms: f32,
 }
 
 impl Default for ViewSettings {
@@ -135,7 +146,6 @@ impl Default for ViewSettings {
         let r = RenderSettings::default();
         Self {
             scale: 1.0,
-            samples_per_frame: 1,
             max_samples: 1024,
             max_depth: r.max_depth,
             shadows: true,
@@ -152,23 +162,28 @@ impl Default for ViewSettings {
             mode: RenderMode::Shaded,
             level: 0,
             heat_max: 0.0,
-            frame_budget_ms: 20.0,
-            moving_budget_ms: 8.0,
+            moving_budget_ms: 16.0,
+            still_after_ms: 120.0,
         }
     }
 }
 
 impl ViewSettings {
     /// The settings that change the traced samples (everything but exposure, the heatmap
-    /// scale and the budgets): a change of these starts the accumulation over.
-    fn trace_key(&self) -> ViewSettings {
+    /// scale, the budgets and the sample limit): a change of these starts the pictures over.
+    pub fn trace_key(&self) -> ViewSettings {
         ViewSettings {
             exposure: 1.0,
             heat_max: 0.0,
-            frame_budget_ms: 0.0,
             moving_budget_ms: 0.0,
+            still_after_ms: 0.0,
             max_samples: 0,
-            samples_per_frame: 0,
+            // The work view traces what the shaded view traces.
+            mode: if self.mode == RenderMode::Work {
+                RenderMode::Shaded
+            } else {
+                self.mode
+            },
             level: if self.mode == RenderMode::Overlap {
                 self.level
             } else {
@@ -350,89 +365,76 @@ pub struct TracedImage {
     pub width: u32,
     /// Height in pixels.
     pub height: u32,
-    /// Samples per pixel behind it (of its least-sampled row).
+    /// Samples per pixel behind it (of its least-sampled row; 0 for the moving picture).
     pub samples: u32,
     /// Bumped at every change.
     pub version: u64,
-    /// True for a low-resolution preview (taken while things change).
+    /// True for the moving picture (shown while things change).
     pub preview: bool,
+    /// Generation of the job it belongs to.
+    pub generation: u64,
 }
 
-/// The progressive films: a full-resolution one, and the preview traced at every change.
+/// The trace worker ([`super::worker`]), owned by the app.
 #[derive(Resource)]
+pub struct TraceWorker(pub Worker);
+
+/// What the worker has done for the views sent so far.
+#[derive(Resource, Default)]
 pub struct Accumulation {
-    /// The full-resolution image being refined (see [`Accumulation::full`]).
-    full: Progressive,
-    /// The last preview.
-    pub preview: Progressive,
     key: Option<TraceKey>,
-    /// Preview resolution relative to the full one, adapted so a preview pass keeps to the
-    /// moving budget.
-    pub preview_scale: f32,
-    /// Times the accumulation started over.
+    /// Generation of the last job sent.
+    pub generation: u64,
+    /// Jobs sent: the times the picture started over for a new view or setting.
     pub resets: u64,
-    shown: Option<(f32, f32)>,
-    last_show: Option<Instant>,
-    full_stale: bool,
+    /// Complete passes of the still picture of the current job.
+    passes: u32,
+    /// Generation of the picture on screen.
+    pub shown: u64,
 }
 
 impl Accumulation {
-    /// The full-resolution image being refined; `None` after a change until tracing it
-    /// resumes (it is cleared then, not on every frame of a camera move).
-    pub fn full(&self) -> Option<&Progressive> {
-        (!self.full_stale).then_some(&self.full)
-    }
-
-    /// Samples per pixel of the full-resolution image (0 after a change).
+    /// Samples per pixel of the still picture of the current view (0 while the moving
+    /// picture is up).
     pub fn full_passes(&self) -> u32 {
-        self.full().map_or(0, Progressive::passes)
+        self.passes
     }
 }
 
-impl Default for Accumulation {
-    fn default() -> Self {
-        Self {
-            full: Progressive::new(1, 1),
-            preview: Progressive::new(1, 1),
-            key: None,
-            preview_scale: 0.35,
-            resets: 0,
-            shown: None,
-            last_show: None,
-            full_stale: true,
-        }
-    }
-}
-
+/// Everything a job depends on: any change sends a new one.
 #[derive(Clone, Debug, PartialEq)]
 struct TraceKey {
-    scene: u64,
-    bvh: usize,
-    env: u64,
+    content: Content,
     pose: [u32; 8],
-    size: UVec2,
+    display: UVec2,
     settings: ViewSettings,
 }
 
 /// Figures for the status line.
 #[derive(Resource, Default, Debug, Clone)]
 pub struct TraceStats {
-    /// Samples per pixel of the image shown.
+    /// Samples per pixel of the image shown (0 for the moving picture).
     pub spp: u32,
-    /// Rays per second while tracing, in millions (smoothed).
+    /// Rays per second of the worker's last batch, in millions.
     pub mrays_per_s: f64,
-    /// Time the last frame's tracing took, in milliseconds.
-    pub trace_ms: f64,
-    /// True when the last frame saw a change (camera moving, settings edited).
+    /// True when the picture shown is the moving one.
     pub moving: bool,
-    /// Size of the full-resolution image.
+    /// Size of the traced picture.
     pub size: UVec2,
-    /// Size of the last preview.
-    pub preview_size: UVec2,
-    /// Mean and largest value of the heatmap shown (cost and overlap modes).
+    /// Samples traced into the moving picture shown since the one before it.
+    pub fresh: u64,
+    /// Pixels of the moving picture shown that no sample reached.
+    pub holes: u64,
+    /// Mean and largest value of the heatmap shown (cost, overlap and work views).
     pub heat: (f32, f32),
     /// What is holding the image back, if anything ("building BVH", "loading environment").
     pub waiting: Option<&'static str>,
+    /// The worker has nothing left to do (the picture reached its sample limit).
+    pub idle: bool,
+    /// Rays traced for the still picture since it started over.
+    pub still_rays: u64,
+    /// Seconds the worker spent tracing the still picture since it started over.
+    pub still_seconds: f64,
 }
 
 /// The camera of a transform and projection, for an image of `size`.
@@ -477,8 +479,7 @@ fn pose_bits(t: &Transform, p: &Projection) -> [u32; 8] {
 }
 
 /// One [`Progressive::step`] of the chosen mode.
-#[allow(clippy::too_many_arguments)]
-fn step_mode(
+pub(super) fn step_mode(
     film: &mut Progressive,
     settings: &ViewSettings,
     tracer: &Tracer,
@@ -488,7 +489,7 @@ fn step_mode(
     max_passes: u32,
 ) -> StepReport {
     match settings.mode {
-        RenderMode::Shaded => film.step_shaded(
+        RenderMode::Shaded | RenderMode::Work => film.step_shaded(
             tracer,
             cam,
             settings.sampler,
@@ -515,9 +516,9 @@ fn step_mode(
 }
 
 /// The picture of a film in the chosen mode, and the heatmap's mean and top.
-pub(super) fn picture(film: &Progressive, settings: &ViewSettings) -> (Vec<u8>, (f32, f32)) {
+pub(super) fn picture_of(film: &Progressive, settings: &ViewSettings) -> (Vec<u8>, (f32, f32)) {
     match settings.mode {
-        RenderMode::Shaded => (film.to_rgba8(settings.exposure), (0.0, 0.0)),
+        RenderMode::Shaded | RenderMode::Work => (film.to_rgba8(settings.exposure), (0.0, 0.0)),
         RenderMode::TraversalCost | RenderMode::Overlap => {
             let (mean, max) = cost_summary(film.sums());
             let top = if settings.heat_max > 0.0 {
@@ -530,33 +531,17 @@ pub(super) fn picture(film: &Progressive, settings: &ViewSettings) -> (Vec<u8>, 
     }
 }
 
-fn show(
-    image: &mut TracedImage,
-    film: &Progressive,
-    settings: &ViewSettings,
-    preview: bool,
-) -> (f32, f32) {
-    let (rgba, heat) = picture(film, settings);
-    image.rgba = rgba;
-    image.width = film.width();
-    image.height = film.height();
-    image.samples = film.passes();
-    image.preview = preview;
-    image.version += 1;
-    heat
-}
-
-/// The ray-trace system.
+/// Sends the view to the worker when the view, the scene or a setting changed.
 #[allow(clippy::too_many_arguments)]
-fn trace(
+fn send_job(
     current: Res<CurrentScene>,
     bvh: Res<SceneBvh>,
     env: Res<LoadedEnvironment>,
     settings: Res<ViewSettings>,
     viewport: Res<ViewportSize>,
     camera: Query<(&Transform, &Projection), With<TraceCamera>>,
+    worker: Res<TraceWorker>,
     mut acc: ResMut<Accumulation>,
-    mut image: ResMut<TracedImage>,
     mut stats: ResMut<TraceStats>,
 ) {
     let Ok((transform, projection)) = camera.single() else {
@@ -571,127 +556,79 @@ fn trace(
         return;
     }
     stats.waiting = None;
-    let scene = &current.scene;
     let size = (viewport.0.as_vec2() * settings.scale.clamp(0.05, 1.0))
         .round()
         .as_uvec2()
         .max(UVec2::ONE);
-    let key = TraceKey {
-        scene: current.generation,
-        bvh: Arc::as_ptr(tree) as usize,
-        env: env.generation,
-        pose: pose_bits(transform, projection),
-        size,
-        settings: settings.trace_key(),
-    };
-    let tracer = Tracer {
-        scene,
-        bvh: tree,
-        plan: settings.plan(scene),
-        max_depth: settings.max_depth,
-        env: &env.map,
-    };
-    let acc = acc.as_mut();
     stats.size = size;
-    if acc.key.as_ref() != Some(&key) {
-        // Something changed: start over, and show a complete low-resolution pass at once.
-        acc.key = Some(key);
-        acc.resets += 1;
-        let psize = (size.as_vec2() * acc.preview_scale)
-            .round()
-            .as_uvec2()
-            .clamp(UVec2::ONE, size);
-        if acc.preview.width() != psize.x || acc.preview.height() != psize.y {
-            acc.preview = Progressive::new(psize.x, psize.y);
-        } else {
-            acc.preview.reset();
-        }
-        // The full image is cleared when tracing it resumes, not on every frame of a move.
-        acc.full_stale = true;
-        let cam = camera_rays(transform, projection, psize, &settings);
-        // One shadow ray per area light while things change: the preview is redone next
-        // frame anyway, and the time goes into resolution instead.
-        let preview_tracer = Tracer {
-            plan: RenderPlan {
-                max_light_samples: Some(1),
-                ..tracer.plan
-            },
-            ..tracer
-        };
-        let r = step_mode(
-            &mut acc.preview,
-            &settings,
-            &preview_tracer,
-            tree,
-            &cam,
-            Duration::MAX,
-            1,
-        );
-        // Aim the next preview at the moving budget (square root: it scales both sides).
-        let budget = settings.moving_budget_ms.max(1.0) as f64 * 1e-3;
-        // Steps of 1/32 with a dead band, so the preview texture keeps its size while the
-        // load is steady instead of being reallocated every frame.
-        if r.seconds > 0.0 {
-            let ideal = acc.preview_scale as f64 * (budget / r.seconds).sqrt();
-            let next = ((ideal * 32.0).round() / 32.0).clamp(1.0 / 32.0, 1.0) as f32;
-            if (next - acc.preview_scale).abs() > 0.08 * acc.preview_scale {
-                acc.preview_scale = next;
-            }
-        }
-        record(&mut stats, &r);
-        stats.moving = true;
-        stats.preview_size = psize;
-        stats.heat = show(&mut image, &acc.preview, &settings, true);
-        acc.shown = None;
+    let key = TraceKey {
+        content: Content {
+            scene: current.generation,
+            bvh: Arc::as_ptr(tree) as usize,
+            env: env.generation,
+            size,
+            settings: settings.trace_key(),
+        },
+        pose: pose_bits(transform, projection),
+        display: viewport.0,
+        settings: settings.clone(),
+    };
+    if acc.key.as_ref() == Some(&key) {
         return;
     }
-    stats.moving = false;
-    let target = settings.max_samples.max(1);
-    let mut completed = false;
-    let mut traced = false;
-    if acc.full_stale {
-        acc.full_stale = false;
-        if acc.full.width() != size.x || acc.full.height() != size.y {
-            acc.full = Progressive::new(size.x, size.y);
-        } else {
-            acc.full.reset();
-        }
+    let restart = acc
+        .key
+        .as_ref()
+        .is_none_or(|k| k.pose != key.pose || k.content != key.content);
+    acc.generation += 1;
+    if restart {
+        acc.resets += 1;
+        acc.passes = 0;
     }
-    if acc.full.passes() < target {
-        let cam = camera_rays(transform, projection, size, &settings);
-        let max = (acc.full.passes() + settings.samples_per_frame.max(1)).min(target);
-        let budget = Duration::from_secs_f32(settings.frame_budget_ms.max(1.0) * 1e-3);
-        let r = step_mode(&mut acc.full, &settings, &tracer, tree, &cam, budget, max);
-        record(&mut stats, &r);
-        traced = r.rows > 0;
-        completed = r.passes_completed > 0;
-    } else {
-        stats.trace_ms = 0.0;
-    }
-    // Show the full image once it has a complete pass; redraw when a pass completes, when the
-    // tone mapping changes, and now and then while a slow pass is under way.
-    let look = (settings.exposure, settings.heat_max);
-    let stale = acc
-        .last_show
-        .is_none_or(|t| t.elapsed() > Duration::from_millis(250));
-    if acc.full.passes() >= 1
-        && (completed || (traced && stale) || acc.shown != Some(look) || image.preview)
-    {
-        stats.heat = show(&mut image, &acc.full, &settings, false);
-        acc.shown = Some(look);
-        acc.last_show = Some(Instant::now());
-    }
-    stats.spp = image.samples;
+    worker.0.send(Job {
+        generation: acc.generation,
+        scene: current.scene.clone(),
+        bvh: tree.clone(),
+        env: env.map.clone(),
+        camera: camera_rays(transform, projection, size, &settings),
+        display: viewport.0,
+        settings: settings.clone(),
+        content: key.content.clone(),
+    });
+    acc.key = Some(key);
 }
 
-fn record(stats: &mut TraceStats, r: &StepReport) {
-    stats.trace_ms = r.seconds * 1e3;
-    if r.seconds > 0.0 {
-        let now = r.rays.total() as f64 / r.seconds / 1e6;
-        stats.mrays_per_s = if stats.mrays_per_s == 0.0 {
-            now
-        } else {
-            0.8 * stats.mrays_per_s + 0.2 * now
-        };
+/// Installs the newest picture the worker finished (of the newest job sent, or of one that
+/// differs from it only in the view), and its figures.
+fn take_picture(
+    worker: Res<TraceWorker>,
+    mut acc: ResMut<Accumulation>,
+    mut image: ResMut<TracedImage>,
+    mut stats: ResMut<TraceStats>,
+) {
+    let shared = &worker.0.shared;
+    let w = shared.stats();
+    if w.generation == acc.generation {
+        acc.passes = w.passes;
+        stats.still_rays = w.still_rays.total();
+        stats.still_seconds = w.still_seconds;
     }
+    stats.mrays_per_s = w.mrays_per_s;
+    stats.idle = w.idle;
+    let Some(p) = worker.0.take_picture() else {
+        return;
+    };
+    acc.shown = p.generation;
+    stats.moving = p.moving;
+    stats.heat = p.heat;
+    stats.spp = p.samples;
+    stats.fresh = p.fresh;
+    stats.holes = p.holes;
+    image.rgba = p.rgba;
+    image.width = p.width;
+    image.height = p.height;
+    image.samples = p.samples;
+    image.preview = p.moving;
+    image.generation = p.generation;
+    image.version += 1;
 }

@@ -1,0 +1,886 @@
+//! The picture of a moving camera: a render cache (after Walter, Drettakis and Parker, "Interactive
+//! Rendering using the Render Cache", 1999).
+//!
+//! Every pixel keeps its last sample: its colour as shown, where the camera ray met the scene
+//! (or a point far along a ray that left it) and the surface's normal there. When the camera
+//! moves, each kept sample is carried to the pixel it falls on in the new view
+//! ([`RenderCache::reproject`]; the nearest sample wins a pixel), so the picture is at full
+//! resolution at once. A carried sample is then moved within its surface's tangent plane to
+//! where the new pixel's centre ray meets it: samples stay on the pixel grid, so a smooth
+//! motion carries each pixel's sample to one pixel and only truly stretched or newly uncovered
+//! parts lose samples (carried as they were, samples would scatter within their pixels and
+//! collide more every frame: a third of them lost after a few frames of an orbit). Pixels no sample reaches
+//! (newly uncovered) are traced first; then fresh samples go to 16 x 16 tiles by priority
+//! ([`RenderCache::next_pixels`]): tiles whose new samples differed most from what they held
+//! (changed or noisy) and tiles not visited for longest come first, and within a tile pixels
+//! follow an ordered-dither order, so the fresh samples of one picture spread over the screen
+//! instead of sweeping it row by row. Pixels still without a sample are filled from their
+//! neighbourhood for display only (pull-push).
+//!
+//! Samples are taken through pixel centres with one shadow ray per area light and kept tone
+//! mapped for one exposure: the cache is for the moving picture; the still picture starts over
+//! from fresh samples and becomes the headless render.
+
+use glam::Vec3;
+use rayon::prelude::*;
+
+use super::{RayCounts, Tracer};
+use crate::bvh::wide::packet::PACKET;
+use crate::camera::CameraRays;
+use crate::film::encode_pixel;
+use crate::geometry::Ray;
+use crate::sampling::{PathSampler, PixelSampler, SamplerKind};
+use crate::scene::face_normal;
+
+/// Side of the tiles samples are scheduled by.
+pub const TILE: u32 = 16;
+
+/// Pixels a tile gets per visit of [`RenderCache::next_pixels`].
+const PER_VISIT: usize = 16;
+
+/// Priority floor of a tile whose samples stopped changing: it is still visited as it ages.
+const QUIET: f32 = 0.02;
+
+/// Distance along its direction at which a ray that left the scene keeps its sample: beyond
+/// any hit, so any surface in front wins its pixel, and far enough that moving the eye does not
+/// move it on screen (a point at infinity).
+const FAR: f32 = 1e30;
+
+/// An empty pixel: a NaN point, and a colour of alpha 0.
+const NO_POINT: [f32; 3] = [f32::NAN; 3];
+const NO_COLOUR: [u8; 4] = [0; 4];
+
+/// The normal of a sample that left the scene (or of an empty pixel).
+const NO_NORMAL: [i8; 4] = [0; 4];
+
+/// Largest relative change of a sample's depth when it moves to its new pixel's centre ray;
+/// beyond it (a surface seen nearly edge-on) the sample stays where it was.
+const MAX_RECENTRE: f32 = 0.05;
+
+/// A unit normal packed in signed bytes.
+fn pack_normal(n: Vec3) -> [i8; 4] {
+    let q = |c: f32| (c.clamp(-1.0, 1.0) * 127.0) as i8;
+    [q(n.x), q(n.y), q(n.z), 0]
+}
+
+fn unpack_normal(n: [i8; 4]) -> Vec3 {
+    Vec3::new(n[0] as f32, n[1] as f32, n[2] as f32) * (1.0 / 127.0)
+}
+
+/// How much a pixel's colour changed (0 to 1): the largest channel difference.
+fn change(old: [u8; 4], new: [u8; 4]) -> f32 {
+    (0..3).map(|c| old[c].abs_diff(new[c])).max().unwrap_or(0) as f32 / 255.0
+}
+
+/// The per-pixel samples of the moving picture and the schedule of fresh samples.
+///
+/// A pixel's sample is where its camera ray met the scene (or a point [`FAR`] along a ray that
+/// left it), the surface normal there and its colour as shown, sRGB RGBA8; kept as separate
+/// arrays, so the reprojection's first pass reads only the points and a picture is a copy of
+/// the colours.
+#[derive(Debug)]
+pub struct RenderCache {
+    width: u32,
+    height: u32,
+    points: Vec<[f32; 3]>,
+    normals: Vec<[i8; 4]>,
+    colours: Vec<[u8; 4]>,
+    /// Pixels holding no sample.
+    holes: usize,
+    /// Buffers the reprojection reuses (the next points, normals and colours, the winner of
+    /// each pixel).
+    spare_points: Vec<[f32; 3]>,
+    spare_normals: Vec<[i8; 4]>,
+    spare_colours: Vec<[u8; 4]>,
+    winner: Vec<u64>,
+    /// Exposure the colours were tone mapped with.
+    exposure: f32,
+    tiles: Tiles,
+    /// Samples taken since the cache was made.
+    pub traced: u64,
+}
+
+/// Per-tile schedule state.
+#[derive(Clone, Debug)]
+struct Tiles {
+    cols: u32,
+    rows: u32,
+    /// How much the tile's last fresh samples differed from what its pixels held (0 to 1).
+    change: Vec<f32>,
+    /// Calls of `next_pixels` since the tile was last given pixels.
+    age: Vec<u32>,
+    /// Position of the tile in the ordered-dither order of its pixels.
+    cursor: Vec<u16>,
+    /// Samples traced in the tile since [`RenderCache::take_work`].
+    work: Vec<u32>,
+    /// Pixel offsets within a tile in ordered-dither order.
+    order: Vec<(u8, u8)>,
+    /// The ordered-dither rank of each offset within a tile (row by row).
+    rank: Vec<u8>,
+}
+
+/// The pixel centres of a view, for moving samples onto them.
+struct PixelGrid {
+    eye: Vec3,
+    forward: Vec3,
+    /// One pixel's step right and down on the plane at unit depth.
+    right: Vec3,
+    up: Vec3,
+    centre: (f32, f32),
+    width: usize,
+}
+
+impl PixelGrid {
+    fn new(to: &CameraRays, w: u32, h: u32) -> Self {
+        let kx = 0.5 * w as f32 / (to.tan_half * to.aspect);
+        let ky = 0.5 * h as f32 / to.tan_half;
+        Self {
+            eye: to.eye,
+            forward: to.forward,
+            right: to.right / kx,
+            up: to.up / ky,
+            centre: (0.5 * w as f32, 0.5 * h as f32),
+            width: w as usize,
+        }
+    }
+
+    /// The centre ray of pixel `i`, scaled to unit depth along the view direction.
+    fn centre_ray(&self, i: usize) -> Vec3 {
+        let (x, y) = ((i % self.width) as f32 + 0.5, (i / self.width) as f32 + 0.5);
+        self.forward + self.right * (x - self.centre.0) + self.up * (self.centre.1 - y)
+    }
+
+    /// Sample point `p` moved to pixel `i`'s centre ray within its tangent plane (normal
+    /// `normal`); a sample that left the scene keeps its depth; one whose depth would change
+    /// by more than [`MAX_RECENTRE`] (a surface seen nearly edge-on) stays where it is.
+    fn recentre(&self, i: usize, p: [f32; 3], normal: [i8; 4]) -> [f32; 3] {
+        self.recentre_along(self.centre_ray(i), p, normal)
+    }
+
+    /// [`Self::recentre`] onto the centre ray `d` (from [`Self::centre_ray`]).
+    fn recentre_along(&self, d: Vec3, p: [f32; 3], normal: [i8; 4]) -> [f32; 3] {
+        let v = Vec3::from(p) - self.eye;
+        let depth = v.dot(self.forward);
+        if normal == NO_NORMAL {
+            return (self.eye + d * depth).into();
+        }
+        let n = unpack_normal(normal);
+        let s = v.dot(n) / d.dot(n);
+        if (s - depth).abs() <= MAX_RECENTRE * depth {
+            (self.eye + d * s).into()
+        } else {
+            p
+        }
+    }
+}
+
+/// The rank of a tile position in a 16 x 16 ordered-dither (Bayer) matrix: consecutive ranks
+/// are far apart, so taking a tile's pixels in rank order covers it evenly.
+fn bayer_rank(x: u32, y: u32) -> u32 {
+    let mut rank = 0;
+    for bit in (0..4).rev() {
+        let (bx, by) = ((x >> bit) & 1, (y >> bit) & 1);
+        rank = rank * 4 + ((bx ^ by) << 1 | by);
+    }
+    rank
+}
+
+impl RenderCache {
+    /// An empty cache for a `width x height` picture tone mapped after `exposure`.
+    pub fn new(width: u32, height: u32, exposure: f32) -> Self {
+        let (w, h) = (width.max(1), height.max(1));
+        let (cols, rows) = (w.div_ceil(TILE), h.div_ceil(TILE));
+        let n = (cols * rows) as usize;
+        let mut order: Vec<(u8, u8)> = (0..TILE * TILE)
+            .map(|i| ((i % TILE) as u8, (i / TILE) as u8))
+            .collect();
+        order.sort_by_key(|&(x, y)| bayer_rank(x as u32, y as u32));
+        Self {
+            width: w,
+            height: h,
+            points: vec![NO_POINT; (w * h) as usize],
+            normals: vec![NO_NORMAL; (w * h) as usize],
+            colours: vec![NO_COLOUR; (w * h) as usize],
+            holes: (w * h) as usize,
+            spare_points: Vec::new(),
+            spare_normals: Vec::new(),
+            spare_colours: Vec::new(),
+            winner: Vec::new(),
+            exposure,
+            tiles: Tiles {
+                cols,
+                rows,
+                change: vec![1.0; n],
+                age: vec![0; n],
+                cursor: vec![0; n],
+                work: vec![0; n],
+                order,
+                rank: (0..TILE * TILE)
+                    .map(|i| bayer_rank(i % TILE, i / TILE) as u8)
+                    .collect(),
+            },
+            traced: 0,
+        }
+    }
+
+    /// Width in pixels.
+    pub fn width(&self) -> u32 {
+        self.width
+    }
+
+    /// Height in pixels.
+    pub fn height(&self) -> u32 {
+        self.height
+    }
+
+    /// Number of pixels holding a sample.
+    pub fn filled(&self) -> usize {
+        self.colours.len() - self.holes
+    }
+
+    /// The colour of pixel `(x, y)`, if it holds a sample.
+    pub fn pixel(&self, x: u32, y: u32) -> Option<[u8; 4]> {
+        let c = self.colours[(y * self.width + x) as usize];
+        (c[3] != 0).then_some(c)
+    }
+
+    /// The exposure the colours were tone mapped with.
+    pub fn exposure(&self) -> f32 {
+        self.exposure
+    }
+
+    /// Tiles across and down.
+    pub fn tiles(&self) -> (u32, u32) {
+        (self.tiles.cols, self.tiles.rows)
+    }
+
+    /// Carries every sample to its pixel in the view `to` (the nearest sample wins a pixel; of
+    /// equally near ones, the first in memory); samples that fall outside the picture or behind
+    /// the camera are dropped. Each carried sample moves onto its new pixel's centre ray
+    /// (within its tangent plane), and one-pixel cracks within a surface take a neighbour's
+    /// sample. Returns the pixels left without a sample, in the order to trace them (spread
+    /// over the picture).
+    pub fn reproject(&mut self, to: &CameraRays) -> Vec<u32> {
+        let (w, h) = (self.width, self.height);
+        let n = self.points.len();
+        if self.holes == n {
+            // Nothing to carry: every pixel, in tracing order.
+            return self.fill_cracks(&PixelGrid::new(to, w, h), (0..n as u32).collect());
+        }
+        // Each pixel keeps the smallest (depth, source index): positive floats order like
+        // their bits, so the minimum of the packed pair picks the nearest sample. One thread
+        // writes them (no atomics: the frame's other threads compete for the cores, and a
+        // plain minimum is a few times cheaper than an atomic one); the gather below leaves
+        // every entry at MAX again for the next call.
+        if self.winner.len() != n {
+            self.winner = vec![u64::MAX; n];
+        }
+        // The projection with one division per sample.
+        let kx = 0.5 * w as f32 / (to.tan_half * to.aspect);
+        let ky = 0.5 * h as f32 / to.tan_half;
+        let (right, up) = (to.right * kx, to.up * ky);
+        let (cx, cy) = (0.5 * w as f32, 0.5 * h as f32);
+        for (src, p) in self.points.iter().enumerate() {
+            // (An empty pixel's NaN point fails the depth test.)
+            let v = Vec3::from(*p) - to.eye;
+            let depth = v.dot(to.forward);
+            if depth.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
+                continue;
+            }
+            let r = 1.0 / depth;
+            let (x, y) = (v.dot(right) * r + cx, cy - v.dot(up) * r);
+            if !(x >= 0.0 && y >= 0.0 && x < w as f32 && y < h as f32) {
+                continue;
+            }
+            // Truncation is the floor of these non-negative positions.
+            let i = y as usize * w as usize + x as usize;
+            let key = (u64::from(depth.to_bits()) << 32) | src as u64;
+            let slot = &mut self.winner[i];
+            if key < *slot {
+                *slot = key;
+            }
+        }
+        let (old_points, old_normals, old_colours) = (&self.points, &self.normals, &self.colours);
+        self.spare_points.resize(n, NO_POINT);
+        self.spare_normals.resize(n, NO_NORMAL);
+        self.spare_colours.resize(n, NO_COLOUR);
+        let grid = PixelGrid::new(to, w, h);
+        // The new samples, and the pixels left empty, row by row.
+        let row = w as usize;
+        let holes: Vec<u32> = self
+            .spare_points
+            .par_chunks_mut(row)
+            .zip(self.spare_normals.par_chunks_mut(row))
+            .zip(self.spare_colours.par_chunks_mut(row))
+            .zip(self.winner.par_chunks_mut(row))
+            .enumerate()
+            .with_min_len(8)
+            .flat_map_iter(|(y, (((points, normals), colours), keys))| {
+                let mut holes = Vec::new();
+                let start = grid.centre_ray(y * row);
+                for (x, (((p, nrm), col), key)) in points
+                    .iter_mut()
+                    .zip(normals)
+                    .zip(colours)
+                    .zip(keys)
+                    .enumerate()
+                {
+                    let found = *key;
+                    if found == u64::MAX {
+                        *p = NO_POINT;
+                        *nrm = NO_NORMAL;
+                        *col = NO_COLOUR;
+                        holes.push((y * row + x) as u32);
+                    } else {
+                        // Left at MAX again for the next call.
+                        *key = u64::MAX;
+                        let src = (found & 0xffff_ffff) as usize;
+                        let d = start + grid.right * x as f32;
+                        *p = grid.recentre_along(d, old_points[src], old_normals[src]);
+                        *nrm = old_normals[src];
+                        *col = old_colours[src];
+                    }
+                }
+                holes
+            })
+            .collect();
+        std::mem::swap(&mut self.normals, &mut self.spare_normals);
+        std::mem::swap(&mut self.points, &mut self.spare_points);
+        std::mem::swap(&mut self.colours, &mut self.spare_colours);
+        let holes = self.fill_cracks(&grid, holes);
+        self.holes = holes.len();
+        // A tile with holes has changed as much as its share of holes says.
+        let mut count = vec![0u32; self.tiles.change.len()];
+        for &i in &holes {
+            count[self.tile_of(i)] += 1;
+        }
+        let t = &mut self.tiles;
+        for (c, n) in t.change.iter_mut().zip(count) {
+            *c = c.max(n as f32 / (TILE * TILE) as f32);
+        }
+        holes
+    }
+
+    /// Fills every pixel with the sample of its centre ray in the view `cam` (framed for this
+    /// cache's size) and the colour of the still picture `rgba` of that view (RGBA8, this
+    /// cache's size, tone mapped with its exposure): when the camera starts moving, the
+    /// moving picture starts from the still one. Only the camera rays are traced, in rows on
+    /// the rayon pool; `stop` is asked between rows, and a stopped seed leaves the cache as it
+    /// was. Returns false if it stopped.
+    pub fn seed(
+        &mut self,
+        tracer: &Tracer,
+        cam: &CameraRays,
+        rgba: &[u8],
+        stop: &(dyn Fn() -> bool + Sync),
+    ) -> bool {
+        let (w, n) = (self.width as usize, self.points.len());
+        if rgba.len() != 4 * n {
+            return false;
+        }
+        self.spare_points.resize(n, NO_POINT);
+        self.spare_normals.resize(n, NO_NORMAL);
+        let stopped = std::sync::atomic::AtomicBool::new(false);
+        self.spare_points
+            .par_chunks_mut(w)
+            .zip(self.spare_normals.par_chunks_mut(w))
+            .enumerate()
+            .for_each(|(y, (points, normals))| {
+                if stopped.load(std::sync::atomic::Ordering::Relaxed) {
+                    return;
+                }
+                if stop() {
+                    stopped.store(true, std::sync::atomic::Ordering::Relaxed);
+                    return;
+                }
+                for (x0, (points, normals)) in points
+                    .chunks_mut(PACKET)
+                    .zip(normals.chunks_mut(PACKET))
+                    .enumerate()
+                {
+                    let rays: Vec<Ray> = (0..points.len())
+                        .map(|k| cam.pinhole((x0 * PACKET + k) as f32 + 0.5, y as f32 + 0.5))
+                        .collect();
+                    let mut hits = [None; PACKET];
+                    tracer
+                        .bvh
+                        .intersect_packet(&rays, f32::INFINITY, &mut hits[..rays.len()]);
+                    for (((p, nrm), ray), hit) in
+                        points.iter_mut().zip(normals).zip(&rays).zip(hits)
+                    {
+                        *p = hit
+                            .map_or(ray.origin + ray.dir * FAR, |h| ray.at(h.t))
+                            .into();
+                        *nrm = hit.map_or(NO_NORMAL, |h| {
+                            pack_normal(face_normal(&tracer.scene.mesh.triangles[h.prim as usize]))
+                        });
+                    }
+                }
+            });
+        if stopped.into_inner() {
+            return false;
+        }
+        std::mem::swap(&mut self.points, &mut self.spare_points);
+        std::mem::swap(&mut self.normals, &mut self.spare_normals);
+        self.set_colours(rgba);
+        let t = &mut self.tiles;
+        t.change.iter_mut().for_each(|c| *c = 0.0);
+        t.age.iter_mut().for_each(|a| *a = 0);
+        true
+    }
+
+    /// Replaces every pixel's colour with the still picture's `rgba` (RGBA8, this cache's
+    /// size) of the view the samples were [`Self::seed`]ed for, as it refines.
+    pub fn set_colours(&mut self, rgba: &[u8]) {
+        if rgba.len() != 4 * self.colours.len() {
+            return;
+        }
+        for (c, px) in self.colours.iter_mut().zip(rgba.chunks_exact(4)) {
+            *c = [px[0], px[1], px[2], 255];
+        }
+        self.holes = 0;
+    }
+
+    /// Fills the holes that lie between two samples of one surface, left and right or above
+    /// and below (a surface stretched a little leaves such one-pixel cracks), with the first
+    /// one's sample moved to the hole's centre ray; a hole beside an edge (newly uncovered)
+    /// stays. Returns the holes left, in the order to trace them.
+    fn fill_cracks(&mut self, grid: &PixelGrid, holes: Vec<u32>) -> Vec<u32> {
+        let (w, h) = (self.width, self.height);
+        let points = &self.points;
+        let depth = |i: u32| (Vec3::from(points[i as usize]) - grid.eye).dot(grid.forward);
+        let same_surface = |a: u32, b: u32| {
+            let (da, db) = (depth(a), depth(b));
+            // (Empty neighbours have NaN depths.)
+            (da - db).abs() <= MAX_RECENTRE * da.min(db)
+        };
+        let fills: Vec<Option<u32>> = if self.holes == self.points.len() {
+            vec![None; holes.len()]
+        } else {
+            holes
+                .par_iter()
+                .with_min_len(1024)
+                .map(|&i| {
+                    let (x, y) = (i % w, i / w);
+                    if x > 0 && x + 1 < w && same_surface(i - 1, i + 1) {
+                        Some(i - 1)
+                    } else if y > 0 && y + 1 < h && same_surface(i - w, i + w) {
+                        Some(i - w)
+                    } else {
+                        None
+                    }
+                })
+                .collect()
+        };
+        let mut left = Vec::with_capacity(holes.len());
+        for (&i, fill) in holes.iter().zip(fills) {
+            match fill {
+                Some(from) => {
+                    let (i, from) = (i as usize, from as usize);
+                    self.points[i] = grid.recentre(i, self.points[from], self.normals[from]);
+                    self.normals[i] = self.normals[from];
+                    self.colours[i] = self.colours[from];
+                }
+                None => left.push(i),
+            }
+        }
+        // Spread over the picture, so the first holes traced cover it when there is no time
+        // for all of them, yet in runs of neighbours, so packets stay coherent: by sixteenths
+        // of the ordered-dither rank within their tiles, then by tile (a counting sort).
+        let cols = self.tiles.cols;
+        let tiles = self.tiles.change.len();
+        let key = |i: u32| {
+            let (x, y) = (i % w, i / w);
+            let rank = self.tiles.rank[((y % TILE) * TILE + x % TILE) as usize] as usize;
+            (rank / 16) * tiles + ((y / TILE) * cols + x / TILE) as usize
+        };
+        let mut start = vec![0usize; 16 * tiles + 1];
+        for &i in &left {
+            start[key(i) + 1] += 1;
+        }
+        for r in 1..start.len() {
+            start[r] += start[r - 1];
+        }
+        let mut ordered = vec![0u32; left.len()];
+        for &i in &left {
+            let k = key(i);
+            ordered[start[k]] = i;
+            start[k] += 1;
+        }
+        ordered
+    }
+
+    fn tile_of(&self, pixel: u32) -> usize {
+        let (x, y) = (pixel % self.width, pixel / self.width);
+        ((y / TILE) * self.tiles.cols + x / TILE) as usize
+    }
+
+    /// About `count` pixels for fresh samples: the tiles of highest priority (how much their
+    /// last samples changed, times how long since they were visited) get [`PER_VISIT`] pixels
+    /// each, the next in their ordered-dither order.
+    pub fn next_pixels(&mut self, count: usize) -> Vec<u32> {
+        let t = &mut self.tiles;
+        let n = t.change.len();
+        let mut out = Vec::with_capacity(count);
+        let mut visited = vec![false; n];
+        while out.len() < count {
+            let visits = (count - out.len()).div_ceil(PER_VISIT).min(n);
+            let priority = |i: usize| (t.change[i] + QUIET) * (1 + t.age[i]) as f32;
+            let mut ids: Vec<usize> = (0..n).collect();
+            if visits < n {
+                ids.select_nth_unstable_by(visits, |&a, &b| priority(b).total_cmp(&priority(a)));
+                ids.truncate(visits);
+            }
+            // Neighbouring tiles next to each other, so packets of their pixels stay coherent.
+            ids.sort_unstable();
+            for &tile in &ids {
+                visited[tile] = true;
+                let (tx, ty) = (tile as u32 % t.cols * TILE, tile as u32 / t.cols * TILE);
+                let mut given = 0;
+                for _ in 0..TILE * TILE {
+                    let (dx, dy) = t.order[t.cursor[tile] as usize];
+                    t.cursor[tile] = ((t.cursor[tile] as u32 + 1) % (TILE * TILE)) as u16;
+                    let (x, y) = (tx + dx as u32, ty + dy as u32);
+                    if x < self.width && y < self.height {
+                        out.push(y * self.width + x);
+                        given += 1;
+                        if given == PER_VISIT {
+                            break;
+                        }
+                    }
+                }
+                // Visited tiles start aging again from zero; a second round in the same call
+                // takes the rest in order.
+                t.age[tile] = 0;
+            }
+        }
+        for (age, v) in t.age.iter_mut().zip(&visited) {
+            if !v {
+                *age = age.saturating_add(1);
+            }
+        }
+        out.truncate(count);
+        out
+    }
+
+    /// Traces one sample through the centre of each of `pixels` with `tracer` and the view
+    /// `cam` (framed for this cache's size), camera rays in packets of neighbouring pixels, on
+    /// the rayon pool, and keeps it. Returns the rays traced.
+    pub fn trace(&mut self, tracer: &Tracer, cam: &CameraRays, pixels: &[u32]) -> RayCounts {
+        let w = self.width;
+        let k = self.exposure;
+        // Packets of neighbours: the pixels by 8 x 8 block (row by row of blocks), whatever
+        // order they came in (a packet of scattered rays visits most of the tree).
+        let mut pixels = pixels.to_vec();
+        pixels.sort_unstable_by_key(|&i| {
+            let (x, y) = (i % w, i / w);
+            (u64::from(y / 8 * w.div_ceil(8) + x / 8) << 32) | u64::from(i)
+        });
+        type Sample = ([f32; 3], [i8; 4], [u8; 4]);
+        let results: Vec<(u32, Option<Sample>, RayCounts)> = pixels
+            .par_chunks(PACKET)
+            .flat_map_iter(|chunk| {
+                let rays: Vec<Ray> = chunk
+                    .iter()
+                    .map(|&i| cam.pinhole((i % w) as f32 + 0.5, (i / w) as f32 + 0.5))
+                    .collect();
+                let mut hits = [None; PACKET];
+                tracer
+                    .bvh
+                    .intersect_packet(&rays, f32::INFINITY, &mut hits[..rays.len()]);
+                chunk
+                    .iter()
+                    .zip(rays)
+                    .zip(hits)
+                    .map(|((&i, ray), hit)| {
+                        let mut counts = RayCounts {
+                            camera: 1,
+                            ..Default::default()
+                        };
+                        let sampler = PixelSampler::new(SamplerKind::Random, 0x5eed, i as u64, 0);
+                        let l = tracer.radiance_from_hit(
+                            &ray,
+                            hit,
+                            &mut PathSampler::new(sampler),
+                            &mut counts,
+                        );
+                        let point = hit.map_or(ray.origin + ray.dir * FAR, |h| ray.at(h.t));
+                        let normal = hit.map_or(NO_NORMAL, |h| {
+                            let tri = &tracer.scene.mesh.triangles[h.prim as usize];
+                            pack_normal(face_normal(tri))
+                        });
+                        let sample = (l.is_finite() && point.is_finite())
+                            .then(|| (point.into(), normal, encode_pixel(l, k)));
+                        (i, sample, counts)
+                    })
+                    .collect::<Vec<_>>()
+            })
+            .collect();
+        let mut total = RayCounts::default();
+        let tiles = self.tiles.change.len();
+        let mut changed = vec![(0.0f32, 0u32); tiles];
+        for (i, s, c) in results {
+            let tile = self.tile_of(i);
+            let i = i as usize;
+            if let Some((point, normal, colour)) = s {
+                let old = self.colours[i];
+                let d = if old[3] == 0 {
+                    self.holes -= 1;
+                    1.0
+                } else {
+                    change(old, colour)
+                };
+                changed[tile].0 += d;
+                changed[tile].1 += 1;
+                self.points[i] = point;
+                self.normals[i] = normal;
+                self.colours[i] = colour;
+            }
+            self.tiles.work[tile] += 1;
+            total = total + c;
+        }
+        for (c, (sum, n)) in self.tiles.change.iter_mut().zip(changed) {
+            if n > 0 {
+                *c = 0.5 * *c + 0.5 * (sum / n as f32);
+            }
+        }
+        self.traced += pixels.len() as u64;
+        total
+    }
+
+    /// Samples traced per tile since the last call (row by row of tiles), and zeroes them.
+    pub fn take_work(&mut self) -> Vec<u32> {
+        let n = self.tiles.work.len();
+        std::mem::replace(&mut self.tiles.work, vec![0; n])
+    }
+
+    /// The picture, RGBA8: the colours, holes filled from the nearest filled pixels around
+    /// them (pull-push), black in an empty cache.
+    pub fn to_rgba8(&self) -> Vec<u8> {
+        let mut out = self.colours.as_flattened().to_vec();
+        if self.holes == 0 {
+            return out;
+        }
+        let (w, h) = (self.width, self.height);
+        let (cw, ch) = (w.div_ceil(2), h.div_ceil(2));
+        let colours = &self.colours;
+        let coarse: Vec<Option<Vec3>> = (0..cw * ch)
+            .into_par_iter()
+            .with_min_len(4096)
+            .map(|c| {
+                let (cx, cy) = (c % cw, c / cw);
+                let mut sum = Vec3::ZERO;
+                let mut n = 0;
+                for (dx, dy) in [(0, 0), (1, 0), (0, 1), (1, 1)] {
+                    let (x, y) = (2 * cx + dx, 2 * cy + dy);
+                    if x < w && y < h {
+                        let [r, g, b, a] = colours[(y * w + x) as usize];
+                        if a != 0 {
+                            sum += Vec3::new(r as f32, g as f32, b as f32);
+                            n += 1;
+                        }
+                    }
+                }
+                (n > 0).then(|| sum / n as f32)
+            })
+            .collect();
+        let coarse = pull_push(&coarse, cw, ch);
+        out.par_chunks_mut(4 * 4096).enumerate().for_each(|(c, o)| {
+            for (k, px) in o.chunks_exact_mut(4).enumerate() {
+                if px[3] == 0 {
+                    let i = (c * 4096 + k) as u32;
+                    let (x, y) = (i % w, i / w);
+                    let v = coarse[((y / 2) * cw + x / 2) as usize];
+                    px.copy_from_slice(&[v.x as u8, v.y as u8, v.z as u8, 255]);
+                }
+            }
+        });
+        out
+    }
+}
+
+/// Fills the holes of a picture from coarser averages of its filled pixels (Gortler et al.,
+/// "The Lumigraph", 1996): each level halves the size, averaging the filled pixels of each 2 x 2
+/// block; going back up, a hole takes its block's average.
+fn pull_push(pixels: &[Option<Vec3>], w: u32, h: u32) -> Vec<Vec3> {
+    if w <= 1 && h <= 1 || pixels.iter().all(Option::is_some) {
+        return pixels.iter().map(|p| p.unwrap_or(Vec3::ZERO)).collect();
+    }
+    let (cw, ch) = (w.div_ceil(2), h.div_ceil(2));
+    let coarse: Vec<Option<Vec3>> = (0..cw * ch)
+        .into_par_iter()
+        .with_min_len(1024)
+        .map(|c| {
+            let (cx, cy) = (c % cw, c / cw);
+            let mut sum = Vec3::ZERO;
+            let mut n = 0;
+            for (dx, dy) in [(0, 0), (1, 0), (0, 1), (1, 1)] {
+                let (x, y) = (2 * cx + dx, 2 * cy + dy);
+                if x < w
+                    && y < h
+                    && let Some(p) = pixels[(y * w + x) as usize]
+                {
+                    sum += p;
+                    n += 1;
+                }
+            }
+            (n > 0).then(|| sum / n as f32)
+        })
+        .collect();
+    let coarse = pull_push(&coarse, cw, ch);
+    pixels
+        .par_iter()
+        .enumerate()
+        .with_min_len(4096)
+        .map(|(i, p)| {
+            p.unwrap_or_else(|| {
+                let (x, y) = (i as u32 % w, i as u32 / w);
+                coarse[((y / 2) * cw + x / 2) as usize]
+            })
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_tile_is_visited_and_each_visit_takes_new_pixels() {
+        let mut c = RenderCache::new(40, 33, 1.0);
+        let mut seen = vec![0u32; 40 * 33];
+        // 9 tiles (3 x 3), the edge ones partly outside: enough calls cover every pixel.
+        for _ in 0..200 {
+            for i in c.next_pixels(64) {
+                seen[i as usize] += 1;
+            }
+        }
+        assert!(seen.iter().all(|&n| n > 0), "a pixel was never given");
+        // With equal priorities the first visits go to different tiles.
+        let mut c = RenderCache::new(64, 64, 1.0);
+        let first = c.next_pixels(16 * PER_VISIT);
+        let tiles: std::collections::HashSet<usize> = first.iter().map(|&i| c.tile_of(i)).collect();
+        assert_eq!(tiles.len(), 16);
+    }
+
+    #[test]
+    fn changed_tiles_get_pixels_first() {
+        let mut c = RenderCache::new(64, 64, 1.0);
+        c.tiles.change.iter_mut().for_each(|x| *x = 0.0);
+        c.tiles.change[5] = 1.0;
+        let first = c.next_pixels(PER_VISIT);
+        assert!(first.iter().all(|&i| c.tile_of(i) == 5));
+        // Its new samples matched what it held: the others, older, come next.
+        c.tiles.change[5] = 0.0;
+        let next = c.next_pixels(PER_VISIT);
+        assert!(next.iter().all(|&i| c.tile_of(i) != 5));
+    }
+
+    #[test]
+    fn a_sideways_step_carries_every_sample_of_a_facing_wall_over_by_whole_pixels() {
+        // A wall at distance 4 facing the camera; a step of exactly 3 pixels' width at that
+        // distance moves every sample 3 pixels left, the rightmost 3 columns become holes.
+        let (w, h) = (32u32, 24u32);
+        let cam = CameraRays::from_pose(Vec3::ZERO, glam::Quat::IDENTITY, 0.8, w, h, 0.0, 1.0);
+        let mut cache = RenderCache::new(w, h, 1.0);
+        for y in 0..h {
+            for x in 0..w {
+                let ray = cam.pinhole(x as f32 + 0.5, y as f32 + 0.5);
+                let t = 4.0 / ray.dir.dot(cam.forward);
+                cache.points[(y * w + x) as usize] = ray.at(t).into();
+                cache.normals[(y * w + x) as usize] = pack_normal(-cam.forward);
+                cache.colours[(y * w + x) as usize] = [x as u8, y as u8, 7, 255];
+            }
+        }
+        cache.holes = 0;
+        let pixel = 2.0 * 4.0 * cam.tan_half * cam.aspect / w as f32;
+        let mut moved = cam;
+        moved.eye += cam.right * (3.0 * pixel);
+        let holes = cache.reproject(&moved);
+        assert_eq!(holes.len(), 3 * h as usize);
+        for y in 0..h {
+            for x in 0..w - 3 {
+                assert_eq!(
+                    cache.pixel(x, y),
+                    Some([(x + 3) as u8, y as u8, 7, 255]),
+                    "pixel {x},{y}"
+                );
+            }
+            for x in w - 3..w {
+                assert_eq!(cache.pixel(x, y), None);
+            }
+        }
+    }
+
+    /// A wall seen at an angle, the camera orbiting its centre by a fraction of a pixel per
+    /// step: carried samples stay on their pixels' centre rays, so the steps lose few. Carried
+    /// as they were, they would scatter within their pixels and collide more at every step.
+    #[test]
+    fn carried_samples_stay_on_pixel_centres_through_many_small_steps() {
+        let (w, h) = (64u32, 48u32);
+        let centre = Vec3::new(0.0, 0.0, -4.0);
+        let view = |a: f32| {
+            let q = glam::Quat::from_rotation_y(a);
+            CameraRays::from_pose(
+                centre + q * Vec3::new(0.0, 0.0, 4.0),
+                q,
+                0.8,
+                w,
+                h,
+                0.0,
+                1.0,
+            )
+        };
+        let cam = view(0.0);
+        // The plane through the centre with a normal turned 50 degrees from the view axis.
+        let normal = glam::Quat::from_rotation_y(50f32.to_radians()) * Vec3::Z;
+        let mut cache = RenderCache::new(w, h, 1.0);
+        for y in 0..h {
+            for x in 0..w {
+                let ray = cam.pinhole(x as f32 + 0.5, y as f32 + 0.5);
+                let t = (centre - ray.origin).dot(normal) / ray.dir.dot(normal);
+                let i = (y * w + x) as usize;
+                cache.points[i] = ray.at(t).into();
+                cache.normals[i] = pack_normal(normal);
+                cache.colours[i] = [x as u8, y as u8, 7, 255];
+            }
+        }
+        cache.holes = 0;
+        let steps = 30;
+        let mut last = cam;
+        for k in 1..=steps {
+            last = view(k as f32 * 0.004);
+            cache.reproject(&last);
+        }
+        // Pixels whose centre ray misses the wall's samples: the uncovered edge only.
+        let holes = cache.holes;
+        assert!(
+            holes <= (w * h / 50) as usize,
+            "{holes} of {} pixels lost their samples",
+            w * h
+        );
+        // And each carried sample lies on its pixel's centre ray.
+        for y in 0..h {
+            for x in 0..w {
+                let p = Vec3::from(cache.points[(y * w + x) as usize]);
+                if p.is_finite() {
+                    let d = last.pinhole(x as f32 + 0.5, y as f32 + 0.5).dir;
+                    let v = p - last.eye;
+                    let off = (v - d * v.dot(d)).length() / v.length();
+                    assert!(off < 1e-4, "pixel {x},{y}: {off} off its centre ray");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn pull_push_fills_holes_and_keeps_filled_pixels() {
+        let mut p = vec![None; 8 * 8];
+        p[0] = Some(Vec3::ONE);
+        p[63] = Some(Vec3::splat(3.0));
+        let out = pull_push(&p, 8, 8);
+        assert_eq!(out[0], Vec3::ONE);
+        assert_eq!(out[63], Vec3::splat(3.0));
+        assert!(out.iter().all(|v| v.x >= 1.0 && v.x <= 3.0));
+    }
+}

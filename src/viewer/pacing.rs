@@ -1,0 +1,77 @@
+//! Frame pacing: the app redraws continuously only while something changes (the camera moves,
+//! a key or button is held, the scene, BVH or environment is loading); otherwise it waits for
+//! input, window events or the trace worker's next picture (winit's reactive mode), so the
+//! refining picture keeps the cores and a converged one costs next to no CPU.
+
+use std::time::Duration;
+
+use bevy::prelude::*;
+use bevy::winit::{EventLoopProxyWrapper, UpdateMode, WinitSettings, WinitUserEvent};
+
+use super::scene::SceneLoading;
+use super::trace::{TraceCamera, TraceStats, TraceSystems, TraceWorker};
+
+/// Switches between continuous and reactive updates.
+pub struct PacingPlugin;
+
+impl Plugin for PacingPlugin {
+    fn build(&self, app: &mut App) {
+        app.init_resource::<KeepAwake>()
+            .insert_resource(WinitSettings::continuous())
+            .add_systems(Startup, wake_on_pictures)
+            .add_systems(Last, pace.after(TraceSystems));
+    }
+}
+
+/// Keeps the app updating continuously (scripted runs that count frames).
+#[derive(Resource, Default, Clone, Copy, Debug)]
+pub struct KeepAwake(pub bool);
+
+/// Longest wait between two updates with nothing happening.
+const IDLE_WAIT: Duration = Duration::from_secs(1);
+
+/// The worker wakes the event loop whenever it hands over a picture.
+fn wake_on_pictures(worker: Res<TraceWorker>, proxy: Option<Res<EventLoopProxyWrapper>>) {
+    let Some(proxy) = proxy else {
+        return;
+    };
+    let proxy = (**proxy).clone();
+    if let Ok(mut wake) = worker.0.shared.wake.lock() {
+        *wake = Some(Box::new(move || {
+            // The loop is gone when the app is closing: nothing to wake.
+            let _ = proxy.send_event(WinitUserEvent::WakeUp);
+        }));
+    }
+}
+
+#[allow(clippy::too_many_arguments)]
+fn pace(
+    keep: Res<KeepAwake>,
+    stats: Res<TraceStats>,
+    loading: Res<SceneLoading>,
+    keys: Res<ButtonInput<KeyCode>>,
+    mouse: Res<ButtonInput<MouseButton>>,
+    camera: Query<&Transform, With<TraceCamera>>,
+    mut last_pose: Local<Option<Transform>>,
+    mut settings: ResMut<WinitSettings>,
+) {
+    // The camera controller may write the transform every frame: compare the value.
+    let pose = camera.iter().next().copied();
+    let moved = pose != *last_pose;
+    *last_pose = pose;
+    let busy = keep.0
+        || moved
+        || stats.waiting.is_some()
+        || loading.current().is_some()
+        || keys.get_pressed().next().is_some()
+        || mouse.get_pressed().next().is_some();
+    let mode = if busy {
+        UpdateMode::Continuous
+    } else {
+        UpdateMode::reactive(IDLE_WAIT)
+    };
+    if settings.focused_mode != mode {
+        settings.focused_mode = mode;
+        settings.unfocused_mode = mode;
+    }
+}
