@@ -56,7 +56,9 @@ impl Plugin for CapturePlugin {
                 script: script.clone(),
                 ..default()
             })
-            .insert_resource(super::pacing::KeepAwake(script.orbit_frames == 0))
+            // Frames keep coming until the orbit is over (the first orbit frame must not
+            // include a reactive wait); the convergence after it is measured idle.
+            .insert_resource(super::pacing::KeepAwake(true))
             .add_systems(First, orbit)
             .add_systems(
                 Update,
@@ -204,7 +206,7 @@ fn measure(
     camera: Query<&Transform, With<TraceCamera>>,
 ) {
     // The script's frames count from the first picture of the scene asked for.
-    if script.frame == 0 && !ready.is_ready() {
+    if script.frame == 0 && !ready.is_ready(script.script.orbit_frames > 0) {
         return;
     }
     script.frame += 1;
@@ -338,6 +340,9 @@ fn finish(
         return;
     }
     let orbit = script.script.orbit_frames > 0;
+    if orbit && !script.screenshot_requested && script.idle_from.is_none() {
+        keep_awake.0 = false;
+    }
     let target = script
         .script
         .samples
@@ -382,23 +387,24 @@ fn finish(
     }
 }
 
-/// Whether the scene asked for is up: loaded, its BVH built and a still picture of it shown
-/// (one complete pass: people look before they fly).
+/// Whether the scene asked for is up: loaded, its BVH built and a picture of it shown (for an
+/// orbit, its still picture at the sample limit: people look before they fly).
 #[derive(bevy::ecs::system::SystemParam)]
 struct SceneReady<'w> {
     loading: Res<'w, super::scene::SceneLoading>,
     current: Res<'w, CurrentScene>,
     bvh: Res<'w, SceneBvh>,
     image: Res<'w, TracedImage>,
+    settings: Res<'w, ViewSettings>,
 }
 
 impl SceneReady<'_> {
-    fn is_ready(&self) -> bool {
+    fn is_ready(&self, converged: bool) -> bool {
         self.loading.current().is_none()
             && self.bvh.for_scene(self.current.generation).is_some()
             && self.image.version > 0
-            && !self.image.preview
-            && self.image.samples >= 1
+            && (!converged
+                || !self.image.preview && self.image.samples >= self.settings.max_samples.max(1))
     }
 }
 

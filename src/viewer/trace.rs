@@ -162,7 +162,7 @@ impl Default for ViewSettings {
             mode: RenderMode::Shaded,
             level: 0,
             heat_max: 0.0,
-            moving_budget_ms: 16.0,
+            moving_budget_ms: 20.0,
             still_after_ms: 120.0,
         }
     }

@@ -46,6 +46,10 @@ const STILL_REFRESH: Duration = Duration::from_millis(1000);
 /// While still, a part-way pass is shown at most this often.
 const STILL_PARTIAL: Duration = Duration::from_millis(1000);
 
+/// A still picture that has refined this long seeds the moving picture at each completed pass
+/// (one that finishes sooner, when it finishes).
+const SEED_AFTER: Duration = Duration::from_secs(1);
+
 /// Length of one slice of still tracing between checks for a newer job.
 const STILL_SLICE: Duration = Duration::from_millis(15);
 
@@ -480,17 +484,20 @@ fn moving_step(st: &mut State, job: &Job, shared: &Shared, stale: &dyn Fn() -> b
         m.seeded = false;
     }
     let reprojected = start.elapsed().as_secs_f64();
-    // A new view is shown one moving budget after the last picture (after one batch of
-    // tracing at least, if that is past already), once the pixels the reprojection left empty
-    // are traced (for up to four budgets while no newer view waits); it is shown even if a
-    // newer view came meanwhile (that one's picture follows, a frame late). An unchanged view
-    // is refined until a newer job comes, and shown at the refresh rate. Other content or
+    // A new view gets the moving budget of tracing (the pixels the reprojection left empty
+    // first, for up to four budgets while no newer view waits), then its picture is shown,
+    // even if a newer view came meanwhile (that one's picture follows, a frame late): when the
+    // worker falls behind, it skips views rather than pictures going without samples. A new
+    // cache (other content) is shown one budget after the last picture; an unchanged view is
+    // refined until a newer job comes, and shown at the refresh rate. Other content or
     // settings stop the tracing at once. A budget of 0 only carries the picture over.
     let budget = Duration::from_secs_f32(job.settings.moving_budget_ms.max(0.0) * 1e-3);
     let tracing_from = Instant::now();
     let view_changed = st.view_changed;
     let due = if budget.is_zero() {
         tracing_from
+    } else if view_changed && m.cache.filled() > 0 {
+        tracing_from + budget
     } else if view_changed {
         let since = st.last_shown.map_or(budget, |t| t.elapsed());
         start + budget.saturating_sub(since)
@@ -721,7 +728,10 @@ fn still_step(st: &mut State, job: &Job, shared: &Shared, stale: &dyn Fn() -> bo
         if let Ok(mut slot) = shared.still.lock() {
             *slot = Some(film.clone());
         }
-        if completed && job.settings.mode == RenderMode::Shaded {
+        // Once the still picture is done (the worker would wait), or refining for a second
+        // already (a seed costs a tenth of that), it seeds the moving picture.
+        let long = st.still_start.elapsed() >= SEED_AFTER;
+        if completed && (finished || long) && job.settings.mode == RenderMode::Shaded {
             seed_moving(st, job, shared, &rgba);
         }
         let rgba = resize_rgba8(
