@@ -664,26 +664,10 @@ impl RenderCache {
         let (w, h) = (self.width, self.height);
         let (cw, ch) = (w.div_ceil(2), h.div_ceil(2));
         let colours = &self.colours;
-        let coarse: Vec<Option<Vec3>> = (0..cw * ch)
-            .into_par_iter()
-            .with_min_len(4096)
-            .map(|c| {
-                let (cx, cy) = (c % cw, c / cw);
-                let mut sum = Vec3::ZERO;
-                let mut n = 0;
-                for (dx, dy) in [(0, 0), (1, 0), (0, 1), (1, 1)] {
-                    let (x, y) = (2 * cx + dx, 2 * cy + dy);
-                    if x < w && y < h {
-                        let [r, g, b, a] = colours[(y * w + x) as usize];
-                        if a != 0 {
-                            sum += Vec3::new(r as f32, g as f32, b as f32);
-                            n += 1;
-                        }
-                    }
-                }
-                (n > 0).then(|| sum / n as f32)
-            })
-            .collect();
+        let coarse = halve(w, h, 4096, |i| {
+            let [r, g, b, a] = colours[i];
+            (a != 0).then(|| Vec3::new(r as f32, g as f32, b as f32))
+        });
         let coarse = pull_push(&coarse, cw, ch);
         out.par_chunks_mut(4 * 4096).enumerate().for_each(|(c, o)| {
             for (k, px) in o.chunks_exact_mut(4).enumerate() {
@@ -699,17 +683,18 @@ impl RenderCache {
     }
 }
 
-/// Fills the holes of a picture from coarser averages of its filled pixels (Gortler et al.,
-/// "The Lumigraph", 1996): each level halves the size, averaging the filled pixels of each 2 x 2
-/// block; going back up, a hole takes its block's average.
-fn pull_push(pixels: &[Option<Vec3>], w: u32, h: u32) -> Vec<Vec3> {
-    if w <= 1 && h <= 1 || pixels.iter().all(Option::is_some) {
-        return pixels.iter().map(|p| p.unwrap_or(Vec3::ZERO)).collect();
-    }
+/// The picture of half the size (rounded up) whose pixels average the filled pixels (`pixel(i)`
+/// some) of each 2 x 2 block of a `w x h` one; a block with none stays empty.
+fn halve(
+    w: u32,
+    h: u32,
+    min_len: usize,
+    pixel: impl Fn(usize) -> Option<Vec3> + Sync,
+) -> Vec<Option<Vec3>> {
     let (cw, ch) = (w.div_ceil(2), h.div_ceil(2));
-    let coarse: Vec<Option<Vec3>> = (0..cw * ch)
+    (0..cw * ch)
         .into_par_iter()
-        .with_min_len(1024)
+        .with_min_len(min_len)
         .map(|c| {
             let (cx, cy) = (c % cw, c / cw);
             let mut sum = Vec3::ZERO;
@@ -718,7 +703,7 @@ fn pull_push(pixels: &[Option<Vec3>], w: u32, h: u32) -> Vec<Vec3> {
                 let (x, y) = (2 * cx + dx, 2 * cy + dy);
                 if x < w
                     && y < h
-                    && let Some(p) = pixels[(y * w + x) as usize]
+                    && let Some(p) = pixel((y * w + x) as usize)
                 {
                     sum += p;
                     n += 1;
@@ -726,7 +711,18 @@ fn pull_push(pixels: &[Option<Vec3>], w: u32, h: u32) -> Vec<Vec3> {
             }
             (n > 0).then(|| sum / n as f32)
         })
-        .collect();
+        .collect()
+}
+
+/// Fills the holes of a picture from coarser averages of its filled pixels (Gortler et al.,
+/// "The Lumigraph", 1996): each level halves the size, averaging the filled pixels of each 2 x 2
+/// block; going back up, a hole takes its block's average.
+fn pull_push(pixels: &[Option<Vec3>], w: u32, h: u32) -> Vec<Vec3> {
+    if w <= 1 && h <= 1 || pixels.iter().all(Option::is_some) {
+        return pixels.iter().map(|p| p.unwrap_or(Vec3::ZERO)).collect();
+    }
+    let (cw, ch) = (w.div_ceil(2), h.div_ceil(2));
+    let coarse = halve(w, h, 1024, |i| pixels[i]);
     let coarse = pull_push(&coarse, cw, ch);
     pixels
         .par_iter()

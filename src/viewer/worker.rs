@@ -427,6 +427,12 @@ fn publish(shared: &Shared, job: &Job, mut p: Picture) -> bool {
     true
 }
 
+/// A picture of the traced size resized to the job's display (unchanged at the same size).
+fn to_display(rgba: Vec<u8>, size: UVec2, job: &Job) -> Vec<u8> {
+    let d = job.display;
+    resize_rgba8(rgba, size.x, size.y, d.x, d.y, Filter::Nearest)
+}
+
 /// The tracer of a job (`light_samples`: a cap on area-light shadow rays).
 fn tracer(job: &Job, light_samples: Option<u32>) -> Tracer<'_> {
     let mut plan: RenderPlan = job.settings.plan(&job.scene);
@@ -459,25 +465,7 @@ fn moving_step(st: &mut State, job: &Job, shared: &Shared, stale: &dyn Fn() -> b
     let start = Instant::now();
     let cam = &job.camera;
     let size = UVec2::new(cam.width, cam.height);
-    // The cache keeps colours tone mapped: a new exposure starts it over too.
-    let exposure = job.settings.exposure;
-    let keep = st
-        .moving
-        .as_ref()
-        .is_some_and(|m| m.content == job.content && m.cache.exposure() == exposure);
-    if !keep {
-        st.moving = Some(Moving {
-            cache: RenderCache::new(size.x, size.y, exposure),
-            view: *cam,
-            content: job.content.clone(),
-            holes: Vec::new(),
-            fresh: 0,
-            seeded: false,
-        });
-    }
-    let Some(m) = st.moving.as_mut() else {
-        return;
-    };
+    let m = moving_cache(&mut st.moving, job);
     if !same_view(&m.view, cam) {
         m.holes = m.cache.reproject(cam);
         m.view = *cam;
@@ -554,14 +542,7 @@ fn moving_step(st: &mut State, job: &Job, shared: &Shared, stale: &dyn Fn() -> b
     };
     let holes = (size.x as u64 * size.y as u64).saturating_sub(m.cache.filled() as u64);
     let picture = Picture {
-        rgba: resize_rgba8(
-            rgba,
-            size.x,
-            size.y,
-            job.display.x,
-            job.display.y,
-            Filter::Nearest,
-        ),
+        rgba: to_display(rgba, size, job),
         width: job.display.x,
         height: job.display.y,
         traced: size,
@@ -586,30 +567,35 @@ fn moving_step(st: &mut State, job: &Job, shared: &Shared, stale: &dyn Fn() -> b
     }
 }
 
+/// The moving picture's cache for the job's content (the traced size among it), a new one if
+/// the content or the exposure changed (the cache keeps its colours tone mapped).
+fn moving_cache<'a>(moving: &'a mut Option<Moving>, job: &Job) -> &'a mut Moving {
+    let exposure = job.settings.exposure;
+    let size = (job.camera.width, job.camera.height);
+    let keep = moving.as_ref().is_some_and(|m| {
+        m.content == job.content
+            && m.cache.exposure() == exposure
+            && (m.cache.width(), m.cache.height()) == size
+    });
+    if !keep {
+        *moving = None;
+    }
+    moving.get_or_insert_with(|| Moving {
+        cache: RenderCache::new(size.0, size.1, exposure),
+        view: job.camera,
+        content: job.content.clone(),
+        holes: Vec::new(),
+        fresh: 0,
+        seeded: false,
+    })
+}
+
 /// Makes the moving picture's cache the still picture `rgba` (traced size) of the job's view:
 /// the camera rays' hits traced once per view, the colours replaced as the picture refines. A
 /// newer job stops the seeding (the cache stays as it was).
 fn seed_moving(st: &mut State, job: &Job, shared: &Shared, rgba: &[u8]) {
     let cam = &job.camera;
-    let exposure = job.settings.exposure;
-    let fits = st.moving.as_ref().is_some_and(|m| {
-        m.content == job.content
-            && m.cache.exposure() == exposure
-            && (m.cache.width(), m.cache.height()) == (cam.width, cam.height)
-    });
-    if !fits {
-        st.moving = Some(Moving {
-            cache: RenderCache::new(cam.width, cam.height, exposure),
-            view: *cam,
-            content: job.content.clone(),
-            holes: Vec::new(),
-            fresh: 0,
-            seeded: false,
-        });
-    }
-    let Some(m) = st.moving.as_mut() else {
-        return;
-    };
+    let m = moving_cache(&mut st.moving, job);
     if m.seeded && same_view(&m.view, cam) {
         m.cache.set_colours(rgba);
         return;
@@ -734,14 +720,7 @@ fn still_step(st: &mut State, job: &Job, shared: &Shared, stale: &dyn Fn() -> bo
         if completed && (finished || long) && job.settings.mode == RenderMode::Shaded {
             seed_moving(st, job, shared, &rgba);
         }
-        let rgba = resize_rgba8(
-            rgba,
-            size.x,
-            size.y,
-            job.display.x,
-            job.display.y,
-            Filter::Nearest,
-        );
+        let rgba = to_display(rgba, size, job);
         let picture = Picture {
             rgba,
             width: job.display.x,
