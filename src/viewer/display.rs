@@ -5,7 +5,7 @@
 //! Files dropped on the window are opened.
 
 use bevy::asset::RenderAssetUsages;
-use bevy::camera::{CameraMainTextureUsages, ClearColorConfig};
+use bevy::camera::{CameraMainTextureUsages, ClearColorConfig, SubCameraView};
 use bevy::core_pipeline::Core3dSystems;
 use bevy::core_pipeline::schedule::Core3d;
 use bevy::core_pipeline::tonemapping::{DebandDither, Tonemapping};
@@ -20,6 +20,7 @@ use bevy::render::view::ViewTarget;
 use bevy::window::FileDragAndDrop;
 use bevy::window::PrimaryWindow;
 
+use super::PanelWidth;
 use super::scene::LoadScene;
 use super::trace::{TraceCamera, TraceSystems, TracedImage, ViewportSize};
 use crate::render::resample::{Filter, resize_rgba8};
@@ -101,15 +102,37 @@ fn spawn_view(mut commands: Commands, mut images: ResMut<Assets<Image>>, size: R
     ));
 }
 
+/// The picture fills the window left of the inspector panel: the viewport is that area, and
+/// the camera's projection frames the scene for it (an off-centre frustum over the whole
+/// window, so gizmos drawn over the full frame land on the traced pixels).
 fn track_window_size(
     window: Query<&Window, With<PrimaryWindow>>,
+    panel: Res<PanelWidth>,
     mut viewport: ResMut<ViewportSize>,
+    mut cameras: Query<&mut Camera, With<TracedBackground>>,
 ) {
     let Ok(window) = window.single() else {
         return;
     };
     let physical = UVec2::new(window.physical_width(), window.physical_height()).max(UVec2::ONE);
-    viewport.set_if_neq(ViewportSize(physical));
+    // At least a quarter of the window stays for the picture.
+    let width = physical
+        .x
+        .saturating_sub(panel.0)
+        .max(physical.x / 4)
+        .max(1);
+    let visible = UVec2::new(width, physical.y);
+    viewport.set_if_neq(ViewportSize(visible));
+    let sub = (visible != physical).then_some(SubCameraView {
+        full_size: visible,
+        offset: Vec2::ZERO,
+        size: physical,
+    });
+    for mut camera in &mut cameras {
+        if camera.sub_camera_view != sub {
+            camera.sub_camera_view = sub;
+        }
+    }
 }
 
 /// Hands the newest traced picture to the display texture (the worker made it display-sized;

@@ -8,13 +8,13 @@ use bevy::prelude::*;
 use bevy_egui::input::EguiWantsInput;
 use bevy_egui::{EguiContexts, EguiPrimaryContextPass, egui};
 
-use super::UiFocus;
 use super::bvh::{BvhBuilding, BvhSettings, SceneBvh};
 use super::capture::SavePng;
 use super::debug_ray::{DebugRay, DebugRayGizmos, FocusPicking};
 use super::gizmos::{BvhIndex, BvhLevelGizmos, LeafGizmos, LeafView};
 use super::scene::{CurrentScene, LoadScene, SceneLoading, ViewerStatus, scene_files};
 use super::trace::{EXTERNAL, EnvChoice, RenderMode, TraceStats, ViewSettings};
+use super::{PanelWidth, UiFocus};
 use crate::bvh::SplitMethod;
 use crate::render::debug::ShadowState;
 use crate::render::heatmap::heat_color;
@@ -209,6 +209,9 @@ fn help(mut contexts: EguiContexts, mut state: ResMut<InspectorState>) -> Result
     Ok(())
 }
 
+/// Width of the inspector panel in logical pixels.
+const INSPECTOR_WIDTH: f32 = 330.0;
+
 #[allow(clippy::too_many_arguments)]
 fn inspector(
     mut contexts: EguiContexts,
@@ -225,10 +228,11 @@ fn inspector(
     mut debug: ResMut<DebugRay>,
     mut picking: ResMut<FocusPicking>,
     stats: Res<TraceStats>,
-    mut load: MessageWriter<LoadScene>,
-    mut save: MessageWriter<SavePng>,
+    (mut load, mut save): (MessageWriter<LoadScene>, MessageWriter<SavePng>),
+    mut panel: ResMut<PanelWidth>,
 ) -> Result {
     if !state.visible {
+        panel.set_if_neq(PanelWidth(0));
         return Ok(());
     }
     let ctx = contexts.ctx_mut()?;
@@ -236,29 +240,36 @@ fn inspector(
     // accumulation and rebuilds the BVH) fires exactly when a value changes.
     let mut s = settings.clone();
     let mut b = bvh_settings.0;
-    let height = ctx.content_rect().height() - 24.0;
-    egui::Window::new("Inspector")
-        .anchor(egui::Align2::RIGHT_TOP, egui::vec2(-8.0, 8.0))
-        .default_width(300.0)
-        .default_height(height)
-        .max_height(height)
+    // A side panel: the picture fills the rest of the window (the display and the trace
+    // camera read its width), so nothing of the scene is under it. (bevy_egui hands out a
+    // context, not a root `Ui`, so the panel is shown at the top level.)
+    #[allow(deprecated)]
+    let shown = egui::Panel::right("inspector")
         .resizable(false)
-        .vscroll(true)
+        .exact_size(INSPECTOR_WIDTH)
         .show(ctx, |ui| {
-            scene_section(ui, &state, &current, &status, &mut load);
-            render_section(ui, &mut s, &stats);
-            dof_section(ui, &mut s, &mut picking.0);
-            env_section(ui, &mut s, &state);
-            bvh_section(ui, &mut b, &bvh, &building);
-            gizmo_section(ui, &mut s, &index, &mut leaves, &mut store, &mut debug);
-            ui.separator();
-            if ui.button("Save full-resolution PNG (P)").clicked() {
-                save.write(SavePng(None));
-            }
-            if let Some(n) = &status.notice {
-                ui.label(n);
-            }
+            egui::ScrollArea::vertical().show(ui, |ui| {
+                ui.heading("Inspector");
+                scene_section(ui, &state, &current, &status, &mut load);
+                render_section(ui, &mut s, &stats);
+                dof_section(ui, &mut s, &mut picking.0);
+                env_section(ui, &mut s, &state);
+                bvh_section(ui, &mut b, &bvh, &building);
+                gizmo_section(ui, &mut s, &index, &mut leaves, &mut store, &mut debug);
+                ui.separator();
+                if ui.button("Save full-resolution PNG (P)").clicked() {
+                    save.write(SavePng(None));
+                }
+                if let Some(n) = &status.notice {
+                    ui.label(n);
+                }
+            });
         });
+    // From the panel's left edge to the window's right (the panel's frame included).
+    let width = ((ctx.content_rect().right() - shown.response.rect.left()).max(0.0)
+        * ctx.pixels_per_point())
+    .round() as u32;
+    panel.set_if_neq(PanelWidth(width));
     if s != *settings {
         *settings = s;
     }
@@ -351,7 +362,7 @@ fn render_section(ui: &mut egui::Ui, s: &mut ViewSettings, stats: &TraceStats) {
             );
             ui.add(
                 egui::Slider::new(&mut s.moving_budget_ms, 1.0..=100.0)
-                    .text("ms of tracing per moving picture"),
+                    .text("ms per moving picture"),
             );
             ui.add(
                 egui::Slider::new(&mut s.still_after_ms, 0.0..=1000.0)

@@ -43,6 +43,11 @@ pub struct UiFocus {
     pub keyboard: bool,
 }
 
+/// Width of the inspector's side panel in physical pixels (0 while hidden): the picture
+/// fills the rest of the window.
+#[derive(Resource, Default, Clone, Copy, Debug, PartialEq, Eq)]
+pub struct PanelWidth(pub u32);
+
 /// How the viewer starts.
 #[derive(Clone, Debug)]
 pub struct ViewOptions {
@@ -96,19 +101,21 @@ pub struct CorePlugins {
 
 impl Plugin for CorePlugins {
     fn build(&self, app: &mut App) {
-        app.init_resource::<UiFocus>().add_plugins((
-            scene::ScenePlugin {
-                initial: self.scene.clone(),
-            },
-            bvh::BvhPlugin { options: self.bvh },
-            trace::TracePlugin {
-                settings: self.settings.clone(),
-                viewport: self.viewport,
-            },
-            debug_ray::DebugRayPlugin {
-                interactive: self.interactive,
-            },
-        ));
+        app.init_resource::<UiFocus>()
+            .init_resource::<PanelWidth>()
+            .add_plugins((
+                scene::ScenePlugin {
+                    initial: self.scene.clone(),
+                },
+                bvh::BvhPlugin { options: self.bvh },
+                trace::TracePlugin {
+                    settings: self.settings.clone(),
+                    viewport: self.viewport,
+                },
+                debug_ray::DebugRayPlugin {
+                    interactive: self.interactive,
+                },
+            ));
     }
 }
 
