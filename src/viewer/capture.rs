@@ -615,7 +615,10 @@ fn report(
         // The earlier design's pass: 240x135 for a 16:9 window, as many pixels (32,400) at
         // another shape.
         let ow = ((32_400.0 * aspect).sqrt().round() as u32).clamp(1, display.x);
-        let old = UVec2::new(ow, ((32_400.0 / ow as f64).round() as u32).clamp(1, display.y));
+        let old = UVec2::new(
+            ow,
+            ((32_400.0 / ow as f64).round() as u32).clamp(1, display.y),
+        );
         println!(
             "moving picture against the converged one ({} spp) of the same pose: RMSE {:.2} levels; stretched preview with as many fresh samples ({}x{}): {:.2} levels; the earlier design's {}x{} preview: {:.2} levels",
             film.passes(),

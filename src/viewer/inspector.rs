@@ -148,6 +148,12 @@ fn status_line(
     }
     let ctx = contexts.ctx_mut()?;
     let frame_ms = time.delta_secs_f64() * 1e3;
+    // Idle, the window redraws only on events: the time since the last one is no frame time.
+    let frame = if stats.idle && frame_ms > 250.0 {
+        "frame: idle".to_string()
+    } else {
+        format!("frame {frame_ms:.1} ms")
+    };
     let picture = if stats.moving {
         format!("moving, {} fresh samples", stats.fresh)
     } else if stats.idle {
@@ -156,10 +162,9 @@ fn status_line(
         format!("{} spp", stats.spp)
     };
     let mut text = format!(
-        "{} | {picture} | {:.1} Mrays/s | frame {:.1} ms | BVH {:.1} ms | {}x{}",
+        "{} | {picture} | {:.1} Mrays/s | {frame} | BVH {:.1} ms | {}x{}",
         current.scene.name,
         stats.mrays_per_s,
-        frame_ms,
         bvh.bvh.as_ref().map_or(0.0, |b| b.stats.build_ms),
         stats.size.x,
         stats.size.y,
