@@ -9,7 +9,9 @@
 //! where the new pixel's centre ray meets it: samples stay on the pixel grid, so a smooth
 //! motion carries each pixel's sample to one pixel and only truly stretched or newly uncovered
 //! parts lose samples (carried as they were, samples would scatter within their pixels and
-//! collide more every frame: a third of them lost after a few frames of an orbit). Pixels no sample reaches
+//! collide more every frame: a third of them lost after a few frames of an orbit). (Filling
+//! one-pixel cracks from a neighbour's sample, and tracing the holes spread over the picture,
+//! were tried: both cost more than they gave, half the fresh samples and a worse picture.) Pixels no sample reaches
 //! (newly uncovered) are traced first; then fresh samples go to 16 x 16 tiles by priority
 //! ([`RenderCache::next_pixels`]): tiles whose new samples differed most from what they held
 //! (changed or noisy) and tiles not visited for longest come first, and within a tile pixels
@@ -115,8 +117,6 @@ struct Tiles {
     work: Vec<u32>,
     /// Pixel offsets within a tile in ordered-dither order.
     order: Vec<(u8, u8)>,
-    /// The ordered-dither rank of each offset within a tile (row by row).
-    rank: Vec<u8>,
 }
 
 /// The pixel centres of a view, for moving samples onto them.
@@ -150,14 +150,10 @@ impl PixelGrid {
         self.forward + self.right * (x - self.centre.0) + self.up * (self.centre.1 - y)
     }
 
-    /// Sample point `p` moved to pixel `i`'s centre ray within its tangent plane (normal
-    /// `normal`); a sample that left the scene keeps its depth; one whose depth would change
-    /// by more than [`MAX_RECENTRE`] (a surface seen nearly edge-on) stays where it is.
-    fn recentre(&self, i: usize, p: [f32; 3], normal: [i8; 4]) -> [f32; 3] {
-        self.recentre_along(self.centre_ray(i), p, normal)
-    }
-
-    /// [`Self::recentre`] onto the centre ray `d` (from [`Self::centre_ray`]).
+    /// Sample point `p` moved onto the centre ray `d` of its new pixel (from
+    /// [`Self::centre_ray`]) within its tangent plane (normal `normal`); a sample that left the
+    /// scene keeps its depth; one whose depth would change by more than [`MAX_RECENTRE`] (a
+    /// surface seen nearly edge-on) stays where it is.
     fn recentre_along(&self, d: Vec3, p: [f32; 3], normal: [i8; 4]) -> [f32; 3] {
         let v = Vec3::from(p) - self.eye;
         let depth = v.dot(self.forward);
@@ -215,9 +211,6 @@ impl RenderCache {
                 cursor: vec![0; n],
                 work: vec![0; n],
                 order,
-                rank: (0..TILE * TILE)
-                    .map(|i| bayer_rank(i % TILE, i / TILE) as u8)
-                    .collect(),
             },
             traced: 0,
         }
@@ -257,15 +250,14 @@ impl RenderCache {
     /// Carries every sample to its pixel in the view `to` (the nearest sample wins a pixel; of
     /// equally near ones, the first in memory); samples that fall outside the picture or behind
     /// the camera are dropped. Each carried sample moves onto its new pixel's centre ray
-    /// (within its tangent plane), and one-pixel cracks within a surface take a neighbour's
-    /// sample. Returns the pixels left without a sample, in the order to trace them (spread
-    /// over the picture).
+    /// (within its tangent plane). Returns the pixels left without a sample, row by row (runs
+    /// of neighbours, so their packets stay coherent).
     pub fn reproject(&mut self, to: &CameraRays) -> Vec<u32> {
         let (w, h) = (self.width, self.height);
         let n = self.points.len();
         if self.holes == n {
             // Nothing to carry: every pixel, in tracing order.
-            return self.fill_cracks(&PixelGrid::new(to, w, h), (0..n as u32).collect());
+            return (0..n as u32).collect();
         }
         // Each pixel keeps the smallest (depth, source index): positive floats order like
         // their bits, so the minimum of the packed pair picks the nearest sample. One thread
@@ -347,7 +339,7 @@ impl RenderCache {
         std::mem::swap(&mut self.normals, &mut self.spare_normals);
         std::mem::swap(&mut self.points, &mut self.spare_points);
         std::mem::swap(&mut self.colours, &mut self.spare_colours);
-        let holes = self.fill_cracks(&grid, holes);
+
         self.holes = holes.len();
         // A tile with holes has changed as much as its share of holes says.
         let mut count = vec![0u32; self.tiles.change.len()];
@@ -439,75 +431,6 @@ impl RenderCache {
             *c = [px[0], px[1], px[2], 255];
         }
         self.holes = 0;
-    }
-
-    /// Fills the holes that lie between two samples of one surface, left and right or above
-    /// and below (a surface stretched a little leaves such one-pixel cracks), with the first
-    /// one's sample moved to the hole's centre ray; a hole beside an edge (newly uncovered)
-    /// stays. Returns the holes left, in the order to trace them.
-    fn fill_cracks(&mut self, grid: &PixelGrid, holes: Vec<u32>) -> Vec<u32> {
-        let (w, h) = (self.width, self.height);
-        let points = &self.points;
-        let depth = |i: u32| (Vec3::from(points[i as usize]) - grid.eye).dot(grid.forward);
-        let same_surface = |a: u32, b: u32| {
-            let (da, db) = (depth(a), depth(b));
-            // (Empty neighbours have NaN depths.)
-            (da - db).abs() <= MAX_RECENTRE * da.min(db)
-        };
-        let fills: Vec<Option<u32>> = if self.holes == self.points.len() {
-            vec![None; holes.len()]
-        } else {
-            holes
-                .par_iter()
-                .with_min_len(1024)
-                .map(|&i| {
-                    let (x, y) = (i % w, i / w);
-                    if x > 0 && x + 1 < w && same_surface(i - 1, i + 1) {
-                        Some(i - 1)
-                    } else if y > 0 && y + 1 < h && same_surface(i - w, i + w) {
-                        Some(i - w)
-                    } else {
-                        None
-                    }
-                })
-                .collect()
-        };
-        let mut left = Vec::with_capacity(holes.len());
-        for (&i, fill) in holes.iter().zip(fills) {
-            match fill {
-                Some(from) => {
-                    let (i, from) = (i as usize, from as usize);
-                    self.points[i] = grid.recentre(i, self.points[from], self.normals[from]);
-                    self.normals[i] = self.normals[from];
-                    self.colours[i] = self.colours[from];
-                }
-                None => left.push(i),
-            }
-        }
-        // Spread over the picture, so the first holes traced cover it when there is no time
-        // for all of them, yet in runs of neighbours, so packets stay coherent: by sixteenths
-        // of the ordered-dither rank within their tiles, then by tile (a counting sort).
-        let cols = self.tiles.cols;
-        let tiles = self.tiles.change.len();
-        let key = |i: u32| {
-            let (x, y) = (i % w, i / w);
-            let rank = self.tiles.rank[((y % TILE) * TILE + x % TILE) as usize] as usize;
-            (rank / 16) * tiles + ((y / TILE) * cols + x / TILE) as usize
-        };
-        let mut start = vec![0usize; 16 * tiles + 1];
-        for &i in &left {
-            start[key(i) + 1] += 1;
-        }
-        for r in 1..start.len() {
-            start[r] += start[r - 1];
-        }
-        let mut ordered = vec![0u32; left.len()];
-        for &i in &left {
-            let k = key(i);
-            ordered[start[k]] = i;
-            start[k] += 1;
-        }
-        ordered
     }
 
     fn tile_of(&self, pixel: u32) -> usize {
