@@ -98,8 +98,6 @@ pub struct RenderCache {
     /// Exposure the colours were tone mapped with.
     exposure: f32,
     tiles: Tiles,
-    /// Samples taken since the cache was made.
-    pub traced: u64,
 }
 
 /// Per-tile schedule state.
@@ -212,7 +210,6 @@ impl RenderCache {
                 work: vec![0; n],
                 order,
             },
-            traced: 0,
         }
     }
 
@@ -567,7 +564,6 @@ impl RenderCache {
                 *c = 0.5 * *c + 0.5 * (sum / n as f32);
             }
         }
-        self.traced += pixels.len() as u64;
         total
     }
 

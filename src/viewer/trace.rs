@@ -389,8 +389,6 @@ pub struct Accumulation {
     pub resets: u64,
     /// Complete passes of the still picture of the current job.
     passes: u32,
-    /// Generation of the picture on screen.
-    pub shown: u64,
 }
 
 impl Accumulation {
@@ -618,7 +616,6 @@ fn take_picture(
     let Some(p) = worker.0.take_picture() else {
         return;
     };
-    acc.shown = p.generation;
     stats.moving = p.moving;
     stats.heat = p.heat;
     stats.spp = p.samples;

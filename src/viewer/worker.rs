@@ -100,8 +100,6 @@ pub struct Picture {
     pub width: u32,
     /// Display size.
     pub height: u32,
-    /// Traced size.
-    pub traced: UVec2,
     /// Samples per pixel behind it (0 for the moving picture).
     pub samples: u32,
     /// True for the moving picture.
@@ -127,8 +125,6 @@ pub struct WorkerStats {
     pub still_seconds: f64,
     /// Wall-clock seconds from the still picture's start to its last traced slice.
     pub still_wall: f64,
-    /// Times the still picture started over.
-    pub restarts: u64,
     /// Samples traced into the moving picture, in all.
     pub moving_samples: u64,
     /// Moving pictures published.
@@ -545,7 +541,6 @@ fn moving_step(st: &mut State, job: &Job, shared: &Shared, stale: &dyn Fn() -> b
         rgba: to_display(rgba, size, job),
         width: job.display.x,
         height: job.display.y,
-        traced: size,
         samples: 0,
         moving: true,
         fresh: m.fresh,
@@ -655,7 +650,6 @@ fn still_step(st: &mut State, job: &Job, shared: &Shared, stale: &dyn Fn() -> bo
     if restarted {
         st.still_start = Instant::now();
         if let Ok(mut s) = shared.stats.lock() {
-            s.restarts += 1;
             s.passes = 0;
             s.still_rays = RayCounts::default();
             s.still_seconds = 0.0;
@@ -725,7 +719,6 @@ fn still_step(st: &mut State, job: &Job, shared: &Shared, stale: &dyn Fn() -> bo
             rgba,
             width: job.display.x,
             height: job.display.y,
-            traced: size,
             samples: passes,
             moving: false,
             heat,
