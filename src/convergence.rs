@@ -1,6 +1,9 @@
-//! Error against run time: renders a high-sample reference, then 1, 2, 4, ... samples per
-//! pixel with several independent seeds per sampler, and measures RMSE and relMSE on linear
-//! radiance against the reference, with the render time of each point (BVH build excluded).
+//! Error against run time: renders a high-sample reference (or takes one rendered elsewhere,
+//! an EXR of another renderer), then 1, 2, 4, ... samples per pixel with several independent
+//! seeds per sampler, and measures RMSE and relMSE on linear radiance against the reference,
+//! with the render time of each point (BVH build excluded). A peer's measurements of the same
+//! picture (a CSV of `spp,seconds,rmse`) are drawn beside them, and the time each takes to reach
+//! a given error is read off the measured points.
 
 use std::io::Write;
 use std::path::Path;
@@ -25,8 +28,11 @@ pub struct ConvergenceConfig {
     pub max_spp: u32,
     /// Independent seeds per point.
     pub seeds: u32,
-    /// Samples per pixel of the reference (at least 64 times `max_spp`).
+    /// Samples per pixel of the reference (at least 64 times `max_spp`; unused when the
+    /// reference is given).
     pub reference_spp: u32,
+    /// Largest number of bounces after the camera's hit.
+    pub max_depth: u32,
     /// Samplers to compare.
     pub samplers: Vec<SamplerKind>,
     /// Error at which to compare the samplers' times; default: the first sampler's RMSE at
@@ -36,14 +42,14 @@ pub struct ConvergenceConfig {
 
 impl ConvergenceConfig {
     /// Checks the settings; the message says what is wrong.
-    pub fn validate(&self) -> Result<()> {
+    pub fn validate(&self, external_reference: bool) -> Result<()> {
         if !self.max_spp.is_power_of_two() || self.max_spp < 4 {
             bail!(
                 "--max-spp must be a power of two of at least 4 (three points to fit a slope), got {}",
                 self.max_spp
             );
         }
-        if self.reference_spp < 64 * self.max_spp {
+        if !external_reference && self.reference_spp < 64 * self.max_spp {
             bail!(
                 "the reference needs at least 64 x {} = {} samples per pixel, got {}",
                 self.max_spp,
@@ -99,21 +105,144 @@ pub struct Report {
     pub fits: Vec<Fit>,
     /// The error the samplers' times are compared at.
     pub target_rmse: f64,
-    /// Reference render time in seconds.
+    /// Reference render time in seconds (0 when the reference was given).
     pub reference_seconds: f64,
+    /// Other renderers' measurements of the same picture, drawn beside tracery's.
+    pub peers: Vec<Peer>,
 }
 
-/// Runs the experiment. `progress(done, total)` counts renders.
+/// Another renderer's error against time on the same picture and reference.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Peer {
+    /// What it is (the CSV's first `#` comment, else the file name).
+    pub label: String,
+    /// `(spp, seconds, rmse)` per measurement, in the file's order.
+    pub points: Vec<(u32, f64, f64)>,
+}
+
+impl Peer {
+    /// Reads a peer's CSV: an optional `# label` comment line, a header naming the columns
+    /// `spp`, `seconds` and `rmse` (others are ignored), then one row per measurement.
+    pub fn load(path: &Path) -> Result<Peer> {
+        let text = std::fs::read_to_string(path)
+            .with_context(|| format!("{}: cannot read", path.display()))?;
+        let mut label = None;
+        let mut columns: Option<(usize, usize, usize)> = None;
+        let mut points = Vec::new();
+        for (n, line) in text.lines().enumerate() {
+            let at = || format!("{}:{}", path.display(), n + 1);
+            let line = line.trim();
+            if line.is_empty() {
+                continue;
+            }
+            if let Some(c) = line.strip_prefix('#') {
+                if label.is_none() && points.is_empty() {
+                    label = Some(c.trim().to_string());
+                }
+                continue;
+            }
+            let cells: Vec<&str> = line.split(',').map(str::trim).collect();
+            let Some((i_spp, i_sec, i_rmse)) = columns else {
+                let find = |name: &str| {
+                    cells
+                        .iter()
+                        .position(|c| c.eq_ignore_ascii_case(name))
+                        .with_context(|| format!("{}: no `{name}` column in the header", at()))
+                };
+                columns = Some((find("spp")?, find("seconds")?, find("rmse")?));
+                continue;
+            };
+            let cell = |i: usize, name: &str| -> Result<f64> {
+                let c = cells
+                    .get(i)
+                    .with_context(|| format!("{}: no `{name}` value", at()))?;
+                let v: f64 = c
+                    .parse()
+                    .map_err(|_| anyhow::anyhow!("{}: `{c}` is not a number ({name})", at()))?;
+                if !(v.is_finite() && v >= 0.0) {
+                    bail!("{}: {name} {v} is not a finite non-negative number", at());
+                }
+                Ok(v)
+            };
+            points.push((
+                cell(i_spp, "spp")? as u32,
+                cell(i_sec, "seconds")?,
+                cell(i_rmse, "rmse")?,
+            ));
+        }
+        if points.is_empty() {
+            bail!("{}: no measurements", path.display());
+        }
+        Ok(Peer {
+            label: label.unwrap_or_else(|| crate::scene::name_of(path)),
+            points,
+        })
+    }
+}
+
+/// Seconds at which the error, falling along `(seconds, rmse)` points, first reaches `target`:
+/// interpolated in log-log between the measured points around it (`None` if it never does).
+pub fn time_to(points: &[(f64, f64)], target: f64) -> Option<f64> {
+    let mut p: Vec<(f64, f64)> = points
+        .iter()
+        .copied()
+        .filter(|&(t, e)| t > 0.0 && e > 0.0)
+        .collect();
+    p.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let first = *p.first()?;
+    if first.1 <= target {
+        return Some(first.0);
+    }
+    p.windows(2).find_map(|w| {
+        let ((t0, e0), (t1, e1)) = (w[0], w[1]);
+        (e1 <= target).then(|| {
+            let f = (target.ln() - e0.ln()) / (e1.ln() - e0.ln());
+            (t0.ln() + f * (t1.ln() - t0.ln())).exp()
+        })
+    })
+}
+
+/// Loads a linear RGB reference image (EXR or HDR) of `width x height`.
+pub fn load_reference(path: &Path, width: u32, height: u32) -> Result<Vec<Vec3>> {
+    let img = image::open(path)
+        .with_context(|| format!("{}: cannot read the reference image", path.display()))?
+        .into_rgb32f();
+    if img.width() != width || img.height() != height {
+        bail!(
+            "{}: the reference is {}x{}, the renders {}x{} (give --width and --height to match)",
+            path.display(),
+            img.width(),
+            img.height(),
+            width,
+            height
+        );
+    }
+    let px: Vec<Vec3> = img.pixels().map(|p| Vec3::from_array(p.0)).collect();
+    if let Some(i) = px.iter().position(|p| !p.is_finite()) {
+        bail!(
+            "{}: pixel ({}, {}) is not finite",
+            path.display(),
+            i as u32 % width,
+            i as u32 / width
+        );
+    }
+    Ok(px)
+}
+
+/// Runs the experiment against `reference` (rendered here at `reference_spp` when `None`).
+/// `progress(done, total)` counts renders.
 pub fn run(
     scene: &Scene,
     bvh: &Bvh,
     config: &ConvergenceConfig,
+    reference: Option<Vec<Vec3>>,
     progress: &mut dyn FnMut(usize, usize),
 ) -> Result<Report> {
-    config.validate()?;
+    config.validate(reference.is_some())?;
     let base = RenderSettings {
         width: config.width,
         height: config.height,
+        max_depth: config.max_depth,
         ..RenderSettings::default()
     };
     let plan = RenderPlan::new(scene, &base);
@@ -132,11 +261,18 @@ pub fn run(
     let levels: Vec<u32> = (0..=config.max_spp.trailing_zeros())
         .map(|k| 1 << k)
         .collect();
-    let total = 1 + levels.len() * config.seeds as usize * config.samplers.len();
+    let own = usize::from(reference.is_none());
+    let total = own + levels.len() * config.seeds as usize * config.samplers.len();
     let mut done = 0;
-    let (reference, reference_seconds) = render(config.reference_spp, 0xDEC0DE, SamplerKind::Sobol);
-    done += 1;
-    progress(done, total);
+    let (reference, reference_seconds) = match reference {
+        Some(r) => (r, 0.0),
+        None => {
+            let r = render(config.reference_spp, 0xDEC0DE, SamplerKind::Sobol);
+            done += 1;
+            progress(done, total);
+            r
+        }
+    };
 
     let mut points = Vec::new();
     for &spp in &levels {
@@ -207,6 +343,7 @@ pub fn run(
         fits,
         target_rmse: target,
         reference_seconds,
+        peers: Vec::new(),
     })
 }
 
@@ -255,18 +392,44 @@ pub fn write_csv(path: &Path, report: &Report) -> Result<()> {
         .with_context(|| format!("{}: cannot write", path.display()))
 }
 
+/// An axis label: at most three significant digits, no trailing zeros (`0.009`, `0.01`,
+/// `1.5`, `20`), never the float's full expansion.
+pub fn tick(v: f64) -> String {
+    if v == 0.0 || !v.is_finite() {
+        return format!("{v}");
+    }
+    let digits = (2 - v.abs().log10().floor() as i32).max(0) as usize;
+    let s = format!("{v:.digits$}");
+    if s.contains('.') {
+        s.trim_end_matches('0').trim_end_matches('.').to_string()
+    } else {
+        s
+    }
+}
+
 /// Draws RMSE against render time, log-log, one line per sampler with its fitted slope, and
 /// the target error with each sampler's time to reach it.
 pub fn plot(path: &Path, report: &Report, title: &str) -> Result<()> {
     use plotters::prelude::*;
     crate::plot_font::ensure()?;
     let means = &report.means;
-    let (tmin, tmax) = means
+    let all: Vec<(f64, f64)> = means
         .iter()
-        .fold((f64::MAX, f64::MIN), |a, m| (a.0.min(m.2), a.1.max(m.2)));
-    let (emin, emax) = means
+        .map(|m| (m.2, m.3))
+        .chain(
+            report
+                .peers
+                .iter()
+                .flat_map(|p| p.points.iter().map(|q| (q.1, q.2))),
+        )
+        .filter(|&(t, e)| t > 0.0 && e > 0.0)
+        .collect();
+    let (tmin, tmax) = all
         .iter()
-        .fold((f64::MAX, f64::MIN), |a, m| (a.0.min(m.3), a.1.max(m.3)));
+        .fold((f64::MAX, f64::MIN), |a, m| (a.0.min(m.0), a.1.max(m.0)));
+    let (emin, emax) = all
+        .iter()
+        .fold((f64::MAX, f64::MIN), |a, m| (a.0.min(m.1), a.1.max(m.1)));
     let root = BitMapBackend::new(path, (900, 600)).into_drawing_area();
     root.fill(&WHITE).map_err(|e| anyhow::anyhow!("{e}"))?;
     let mut chart = ChartBuilder::on(&root)
@@ -283,6 +446,8 @@ pub fn plot(path: &Path, report: &Report, title: &str) -> Result<()> {
         .configure_mesh()
         .x_desc("render time (s), BVH build excluded")
         .y_desc("RMSE against the reference (linear radiance)")
+        .x_label_formatter(&|v| tick(*v))
+        .y_label_formatter(&|v| tick(*v))
         .label_style(("sans-serif", 15))
         .draw()
         .map_err(|e| anyhow::anyhow!("{e}"))?;
@@ -298,12 +463,11 @@ pub fn plot(path: &Path, report: &Report, title: &str) -> Result<()> {
             .draw_series(LineSeries::new(pts.clone(), c.stroke_width(2)))
             .map_err(|e| anyhow::anyhow!("{e}"))?
             .label(format!(
-                "{}: slope {:.2} per spp, {:.2} per second; {:.3} s to RMSE {:.4}",
+                "tracery {}: slope {:.2} per spp; {} s to RMSE {}",
                 fit.sampler,
                 fit.slope_spp,
-                fit.slope_time,
-                fit.seconds_to_target,
-                report.target_rmse
+                tick(time_to(&pts, report.target_rmse).unwrap_or(fit.seconds_to_target)),
+                tick(report.target_rmse)
             ))
             .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], c.stroke_width(2)));
         chart
@@ -315,6 +479,25 @@ pub fn plot(path: &Path, report: &Report, title: &str) -> Result<()> {
                 8,
                 c.stroke_width(2),
             )))
+            .map_err(|e| anyhow::anyhow!("{e}"))?;
+    }
+    let peer_colours = [BLACK, CYAN, RGBColor(230, 140, 0)];
+    for (k, peer) in report.peers.iter().enumerate() {
+        let c = peer_colours[k % peer_colours.len()];
+        let pts: Vec<(f64, f64)> = peer.points.iter().map(|p| (p.1, p.2)).collect();
+        let reach = time_to(&pts, report.target_rmse)
+            .map_or("never reaches".into(), |t| format!("{} s to", tick(t)));
+        chart
+            .draw_series(LineSeries::new(pts.clone(), c.stroke_width(2)))
+            .map_err(|e| anyhow::anyhow!("{e}"))?
+            .label(format!(
+                "{}: {reach} RMSE {}",
+                peer.label,
+                tick(report.target_rmse)
+            ))
+            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], c.stroke_width(2)));
+        chart
+            .draw_series(pts.iter().map(|&p| TriangleMarker::new(p, 5, c.filled())))
             .map_err(|e| anyhow::anyhow!("{e}"))?;
     }
     chart

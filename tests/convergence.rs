@@ -4,7 +4,9 @@
 use std::path::Path;
 
 use tracery::bvh::{BuildOptions, Bvh};
-use tracery::convergence::{ConvergenceConfig, least_squares, plot, run, write_csv};
+use tracery::convergence::{
+    ConvergenceConfig, Peer, least_squares, load_reference, plot, run, tick, time_to, write_csv,
+};
 use tracery::sampling::SamplerKind;
 use tracery::scene::Scene;
 
@@ -26,10 +28,11 @@ fn depth_of_field_scene_converges_at_the_expected_rates() {
         max_spp: 64,
         seeds: 5,
         reference_spp: 64 * 64,
+        max_depth: 5,
         samplers: vec![SamplerKind::Random, SamplerKind::Sobol],
         target_rmse: None,
     };
-    let report = run(&scene, &bvh, &config, &mut |_, _| {}).unwrap();
+    let report = run(&scene, &bvh, &config, None, &mut |_, _| {}).unwrap();
     assert_eq!(report.points.len(), 7 * 5 * 2);
     let random = &report.fits[0];
     let sobol = &report.fits[1];
@@ -73,14 +76,78 @@ fn a_reference_with_too_few_samples_is_refused() {
         max_spp: 16,
         seeds: 2,
         reference_spp: 512,
+        max_depth: 5,
         samplers: vec![SamplerKind::Random],
         target_rmse: None,
     };
-    assert!(format!("{:#}", config.validate().unwrap_err()).contains("64 x 16"));
+    assert!(format!("{:#}", config.validate(false).unwrap_err()).contains("64 x 16"));
     let bad = ConvergenceConfig {
         max_spp: 24,
         reference_spp: 64 * 24,
-        ..config
+        ..config.clone()
     };
-    assert!(bad.validate().is_err());
+    assert!(bad.validate(false).is_err());
+    // A reference given from elsewhere needs no samples of its own.
+    assert!(config.validate(true).is_ok());
+}
+
+#[test]
+fn axis_labels_are_short_whatever_the_float() {
+    assert_eq!(tick(0.009000000000001), "0.009");
+    assert_eq!(tick(0.01), "0.01");
+    assert_eq!(tick(0.0123456), "0.0123");
+    assert_eq!(tick(1.5), "1.5");
+    assert_eq!(tick(2.0), "2");
+    assert_eq!(tick(20.000001), "20");
+    assert_eq!(tick(1234.6), "1235");
+}
+
+#[test]
+fn time_to_an_error_is_read_between_the_measured_points() {
+    // RMSE 0.1 / sqrt(t): 0.05 at t = 4, 0.025 at t = 16.
+    let pts: Vec<(f64, f64)> = [1.0, 4.0, 16.0, 64.0]
+        .iter()
+        .map(|&t: &f64| (t, 0.1 / t.sqrt()))
+        .collect();
+    let t = time_to(&pts, 0.025).unwrap();
+    assert!((t - 16.0).abs() < 1e-9, "{t}");
+    let t = time_to(&pts, 0.1 / 8.0f64.sqrt()).unwrap();
+    assert!((t - 8.0).abs() < 1e-9, "log-log interpolation: {t}");
+    assert_eq!(time_to(&pts, 0.2), Some(1.0), "reached at the first point");
+    assert_eq!(time_to(&pts, 0.001), None, "never reached");
+}
+
+#[test]
+fn a_peer_csv_is_read_and_bad_rows_name_the_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let good = dir.path().join("peer.csv");
+    std::fs::write(
+        &good,
+        "# mitsuba 3 llvm_ad_rgb path\nspp,seconds,rmse\n1,0.5,0.4\n4,1.0,0.2\n",
+    )
+    .unwrap();
+    let p = Peer::load(&good).unwrap();
+    assert_eq!(p.label, "mitsuba 3 llvm_ad_rgb path");
+    assert_eq!(p.points, vec![(1, 0.5, 0.4), (4, 1.0, 0.2)]);
+    let bad = dir.path().join("bad.csv");
+    std::fs::write(&bad, "spp,seconds,rmse\n1,0.5,0.4\n4,oops,0.2\n").unwrap();
+    let e = format!("{:#}", Peer::load(&bad).unwrap_err());
+    assert!(e.contains("bad.csv:3") && e.contains("oops"), "{e}");
+    let headless = dir.path().join("headless.csv");
+    std::fs::write(&headless, "spp,time\n1,2\n").unwrap();
+    let e = format!("{:#}", Peer::load(&headless).unwrap_err());
+    assert!(e.contains("headless.csv:1") && e.contains("seconds"), "{e}");
+}
+
+#[test]
+fn an_external_reference_must_match_the_render_size() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("ref.exr");
+    let img = image::Rgb32FImage::from_fn(4, 3, |x, y| image::Rgb([x as f32, y as f32, 1.0]));
+    img.save(&path).unwrap();
+    let px = load_reference(&path, 4, 3).unwrap();
+    assert_eq!(px.len(), 12);
+    assert_eq!(px[4 + 3], glam::Vec3::new(3.0, 1.0, 1.0));
+    let e = format!("{:#}", load_reference(&path, 8, 6).unwrap_err());
+    assert!(e.contains("ref.exr") && e.contains("4x3"), "{e}");
 }

@@ -45,13 +45,7 @@ fn progressive_passes_equal_a_one_shot_render() {
 
         let plan = RenderPlan::new(&scene, &settings);
         let env = EnvironmentMap::load(&scene.environment, plan.environment).unwrap();
-        let tracer = Tracer {
-            scene: &scene,
-            bvh: &bvh,
-            plan,
-            max_depth: settings.max_depth,
-            env: &env,
-        };
+        let tracer = Tracer::new(&scene, &bvh, plan, settings.max_depth, &env);
         let cam = CameraRays::new(&scene.camera, settings.width, settings.height);
         let mut p = Progressive::new(settings.width, settings.height);
         // A zero budget still traces one batch per call: many small steps, as a frame would.
@@ -98,13 +92,7 @@ fn part_way_pass_shows_rows_by_their_own_sample_count() {
     let (scene, bvh) = scene_and_bvh(None);
     let plan = RenderPlan::new(&scene, &RenderSettings::default());
     let env = EnvironmentMap::None;
-    let tracer = Tracer {
-        scene: &scene,
-        bvh: &bvh,
-        plan,
-        max_depth: 5,
-        env: &env,
-    };
+    let tracer = Tracer::new(&scene, &bvh, plan, 5, &env);
     let cam = CameraRays::new(&scene.camera, 32, 64);
     let mut p = Progressive::new(32, 64);
     p.step_shaded(
@@ -173,13 +161,7 @@ fn debug_path_hits_equal_closest_hits() {
     let settings = RenderSettings::default();
     let plan = RenderPlan::new(&scene, &settings);
     let env = EnvironmentMap::load(&scene.environment, plan.environment).unwrap();
-    let tracer = Tracer {
-        scene: &scene,
-        bvh: &bvh,
-        plan,
-        max_depth: settings.max_depth,
-        env: &env,
-    };
+    let tracer = Tracer::new(&scene, &bvh, plan, settings.max_depth, &env);
     let cam = CameraRays::new(&scene.camera, 64, 64);
     let (mut bounces, mut shadows, mut kinds) = (0, 0, [0usize; 3]);
     for y in (0..64).step_by(3) {

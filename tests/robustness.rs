@@ -306,6 +306,7 @@ fn cube_on_floor(offset: Vec3) -> Scene {
             focus_distance: 1.0,
         },
         environment: Environment::None,
+        integrator: tracery::scene::Integrator::Direct,
         warnings: Vec::new(),
     }
 }
@@ -593,13 +594,7 @@ fn a_zero_or_nan_ray_direction_gives_the_fallback_colour() {
         let bvh = Bvh::build(&s.mesh.triangles, &BuildOptions::sah());
         let plan = RenderPlan::everything();
         let map = EnvironmentMap::load(&s.environment, true).unwrap();
-        let tracer = Tracer {
-            scene: &s,
-            bvh: &bvh,
-            plan,
-            max_depth: 5,
-            env: &map,
-        };
+        let tracer = Tracer::new(&s, &bvh, plan, 5, &map);
         for dir in [
             Vec3::ZERO,
             Vec3::NAN,

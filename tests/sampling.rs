@@ -85,7 +85,10 @@ fn lens_radius_zero_gives_the_pinhole_image_bit_for_bit() {
         &bvh,
         &EnvironmentMap::None,
         &settings,
-        RenderPlan::everything(),
+        RenderPlan {
+            thin_lens: true,
+            ..RenderPlan::new(&scene, &settings)
+        },
         &|_| {},
     );
     assert_eq!(pinhole.film, lens.film);

@@ -26,6 +26,7 @@ fn scene(parts: Vec<(Vec<[Vec3; 3]>, Material)>, lights: Vec<Light>, env: Enviro
         lights,
         camera: Camera::canonical(&tracery::geometry::Aabb::new(Vec3::splat(-1.0), Vec3::ONE)),
         environment: env,
+        integrator: tracery::scene::Integrator::Direct,
         warnings: Vec::new(),
     }
 }
@@ -61,13 +62,7 @@ fn radiance(s: &Scene, ray: &Ray) -> (Vec3, RayCounts) {
     let settings = RenderSettings::default();
     let plan = RenderPlan::new(s, &settings);
     let env = EnvironmentMap::load(&s.environment, plan.environment).unwrap();
-    let tracer = Tracer {
-        scene: s,
-        bvh: &bvh,
-        plan,
-        max_depth: settings.max_depth,
-        env: &env,
-    };
+    let tracer = Tracer::new(s, &bvh, plan, settings.max_depth, &env);
     let mut counts = RayCounts::default();
     let mut samples = PathSampler::new(PixelSampler::new(SamplerKind::Sobol, 1, 0, 0));
     let l = tracer.radiance(ray, &mut samples, &mut counts);
@@ -304,7 +299,11 @@ fn leaving_out_unneeded_features_changes_no_pixel_and_traces_none_of_them() {
         &bvh,
         &EnvironmentMap::None,
         &settings,
-        RenderPlan::everything(),
+        // The same integrator (the Cornell box is path traced), every feature on.
+        RenderPlan {
+            integrator: plan.integrator,
+            ..RenderPlan::everything()
+        },
         &|_| {},
     );
     assert_eq!(pruned.film, full.film);

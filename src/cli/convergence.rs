@@ -6,7 +6,8 @@ use anyhow::Result;
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 use tracery::bvh::{BuildOptions, Bvh};
-use tracery::convergence::{self, ConvergenceConfig};
+use tracery::convergence::{self, ConvergenceConfig, Peer, tick, time_to};
+use tracery::render::Integrator;
 use tracery::sampling::SamplerKind;
 
 use super::{ensure_parent, load_scene};
@@ -36,23 +37,58 @@ pub struct ConvergenceArgs {
     /// Samplers to compare, the first one sets the default target error.
     #[arg(long, value_delimiter = ',', default_value = "random,sobol")]
     samplers: Vec<SamplerKind>,
-    /// RMSE at which to compare the samplers' times (default: the first sampler's at --max-spp).
+    /// RMSE at which to compare the times (default: the first peer's at its last point, else
+    /// the first sampler's at --max-spp).
     #[arg(long)]
     target_rmse: Option<f64>,
+    /// A reference image rendered elsewhere (linear EXR or HDR, of --width x --height),
+    /// instead of rendering one.
+    #[arg(long)]
+    reference: Option<PathBuf>,
+    /// Another renderer's measurements of the same picture against the same reference: a CSV
+    /// with `spp,seconds,rmse` columns (a first `# label` line names it); may be repeated.
+    #[arg(long)]
+    peer: Vec<PathBuf>,
+    /// Largest number of bounces after the camera's hit.
+    #[arg(long, default_value_t = 5)]
+    max_depth: u32,
+    /// How light is gathered (default: the scene's).
+    #[arg(long)]
+    integrator: Option<Integrator>,
 }
 
 pub fn run(a: ConvergenceArgs) -> Result<()> {
-    let scene = load_scene(a.scene.as_deref())?;
+    let mut scene = load_scene(a.scene.as_deref())?;
+    if let Some(i) = a.integrator {
+        scene.integrator = i;
+    }
+    let peers = a
+        .peer
+        .iter()
+        .map(|p| Peer::load(p))
+        .collect::<Result<Vec<_>>>()?;
+    let reference = a
+        .reference
+        .as_deref()
+        .map(|p| convergence::load_reference(p, a.width, a.height))
+        .transpose()?;
+    let target_rmse = a.target_rmse.or_else(|| {
+        peers
+            .first()
+            .and_then(|p| p.points.iter().max_by(|x, y| x.1.total_cmp(&y.1)))
+            .map(|q| q.2)
+    });
     let config = ConvergenceConfig {
         width: a.width,
         height: a.height,
         max_spp: a.max_spp,
         seeds: a.seeds,
         reference_spp: a.reference_spp.unwrap_or(64 * a.max_spp),
+        max_depth: a.max_depth,
         samplers: a.samplers,
-        target_rmse: a.target_rmse,
+        target_rmse,
     };
-    config.validate()?;
+    config.validate(reference.is_some())?;
     let bvh = Bvh::build(&scene.mesh.triangles, &BuildOptions::sah());
     let bar = ProgressBar::new(0).with_style(
         ProgressStyle::with_template(
@@ -60,14 +96,18 @@ pub fn run(a: ConvergenceArgs) -> Result<()> {
         )
         .expect("valid template"),
     );
-    bar.set_message(format!(
-        "{}: reference at {} spp, then",
-        scene.name, config.reference_spp
-    ));
-    let report = convergence::run(&scene, &bvh, &config, &mut |done, total| {
+    bar.set_message(match &a.reference {
+        Some(p) => format!("{}: against {},", scene.name, p.display()),
+        None => format!(
+            "{}: reference at {} spp, then",
+            scene.name, config.reference_spp
+        ),
+    });
+    let mut report = convergence::run(&scene, &bvh, &config, reference, &mut |done, total| {
         bar.set_length(total as u64);
         bar.set_position(done as u64);
     })?;
+    report.peers = peers;
     bar.finish_and_clear();
 
     std::fs::create_dir_all(&a.out)?;
@@ -80,32 +120,74 @@ pub fn run(a: ConvergenceArgs) -> Result<()> {
     );
     convergence::plot(&png, &report, &title)?;
 
+    match &a.reference {
+        Some(p) => println!(
+            "{} ({}): against {}; {} renders",
+            scene.name,
+            scene.integrator,
+            p.display(),
+            report.points.len()
+        ),
+        None => println!(
+            "{} ({}): reference {} spp in {:.1} s; {} renders",
+            scene.name,
+            scene.integrator,
+            config.reference_spp,
+            report.reference_seconds,
+            report.points.len()
+        ),
+    }
+    let target = report.target_rmse;
     println!(
-        "{}: reference {} spp in {:.1} s; {} renders",
-        scene.name,
-        config.reference_spp,
-        report.reference_seconds,
-        report.points.len()
-    );
-    println!(
-        "| sampler | RMSE slope per spp | RMSE slope per second | seconds to RMSE {:.5} |",
-        report.target_rmse
+        "| renderer | RMSE slope per spp | seconds to RMSE {} (measured) | (fitted) |",
+        tick(target)
     );
     println!("|---|---:|---:|---:|");
+    let show = |t: Option<f64>| t.map_or("not reached".to_string(), |t| format!("{t:.3}"));
+    let mut measured = Vec::new();
     for f in &report.fits {
+        let pts: Vec<(f64, f64)> = report
+            .means
+            .iter()
+            .filter(|m| m.0 == f.sampler)
+            .map(|m| (m.2, m.3))
+            .collect();
+        let t = time_to(&pts, target);
+        measured.push((format!("tracery {}", f.sampler), t));
         println!(
-            "| {} | {:.3} | {:.3} | {:.4} |",
-            f.sampler, f.slope_spp, f.slope_time, f.seconds_to_target
+            "| tracery {} | {:.3} | {} | {:.3} |",
+            f.sampler,
+            f.slope_spp,
+            show(t),
+            f.seconds_to_target
         );
     }
-    if let [first, rest @ ..] = report.fits.as_slice() {
-        for f in rest {
-            println!(
-                "{} reaches the target error {:.2}x faster than {}",
-                f.sampler,
-                first.seconds_to_target / f.seconds_to_target,
-                first.sampler
-            );
+    for p in &report.peers {
+        let pts: Vec<(f64, f64)> = p.points.iter().map(|q| (q.1, q.2)).collect();
+        let by_spp: Vec<(f64, f64)> = p
+            .points
+            .iter()
+            .filter(|q| q.0 > 0 && q.2 > 0.0)
+            .map(|q| ((q.0 as f64).ln(), q.2.ln()))
+            .collect();
+        let t = time_to(&pts, target);
+        measured.push((p.label.clone(), t));
+        println!(
+            "| {} | {:.3} | {} | |",
+            p.label,
+            convergence::least_squares(&by_spp).0,
+            show(t)
+        );
+    }
+    if let [(first, Some(t0)), rest @ ..] = measured.as_slice() {
+        for (name, t) in rest {
+            if let Some(t) = t {
+                println!(
+                    "{first} reaches RMSE {} in {:.2}x the time of {name}",
+                    tick(target),
+                    t0 / t
+                );
+            }
         }
     }
     println!("wrote {} and {}", csv.display(), png.display());

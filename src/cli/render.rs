@@ -8,7 +8,7 @@ use anyhow::Result;
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 use tracery::bvh::Bvh;
-use tracery::render::{Explain, RenderPlan, RenderSettings, render};
+use tracery::render::{Explain, Integrator, RenderPlan, RenderSettings, render};
 use tracery::sampling::SamplerKind;
 
 use super::{BvhArgs, ensure_parent, load_scene, set_threads};
@@ -36,9 +36,14 @@ pub struct RenderArgs {
     /// Sampler for pixel, lens and light samples: sobol (Owen-scrambled) or random.
     #[arg(long, default_value_t = SamplerKind::Sobol)]
     sampler: SamplerKind,
-    /// Largest number of mirror reflections or transparent surfaces along a path.
+    /// Largest number of bounces after the camera's hit (mirrors, transparent surfaces and,
+    /// with the path integrator, diffuse bounces).
     #[arg(long, default_value_t = 5)]
     max_depth: u32,
+    /// How light is gathered: direct (light from the lights only) or path (global
+    /// illumination); default: the scene's (`[render] integrator`, else direct).
+    #[arg(long)]
+    integrator: Option<Integrator>,
     /// Print the render plan (what the scene needs and what is left out), then render.
     #[arg(long)]
     explain: bool,
@@ -65,7 +70,10 @@ pub fn run(a: RenderArgs) -> Result<()> {
     settings.validate().map_err(anyhow::Error::msg)?;
     tracery::film::OutputKind::of(&a.output)?;
     let options = a.bvh.options()?;
-    let scene = load_scene(a.scene.as_deref())?;
+    let mut scene = load_scene(a.scene.as_deref())?;
+    if let Some(i) = a.integrator {
+        scene.integrator = i;
+    }
     if a.explain {
         let plan = RenderPlan::new(&scene, &settings);
         eprintln!("{}", Explain(&plan, &scene, &settings));
@@ -107,7 +115,7 @@ pub fn run(a: RenderArgs) -> Result<()> {
     let secs = took.as_secs_f64();
     let r = &out.rays;
     println!(
-        "wrote {} ({}x{}, {} spp) in {:.0} ms: rays {} camera, {} shadow, {} reflection, {} transmission; {:.2} Mrays/s{}",
+        "wrote {} ({}x{}, {} spp) in {:.0} ms: rays {} camera, {} shadow, {} reflection, {} transmission, {} bounce; {:.2} Mrays/s{}",
         path.display(),
         settings.width,
         settings.height,
@@ -117,6 +125,7 @@ pub fn run(a: RenderArgs) -> Result<()> {
         r.shadow,
         r.reflection,
         r.transmission,
+        r.bounce,
         out.rays.total() as f64 / secs / 1e6,
         if out.film.rejected > 0 {
             format!("; {} non-finite samples left out", out.film.rejected)

@@ -8,11 +8,13 @@ pub mod cache;
 pub mod debug;
 pub mod environment;
 pub mod heatmap;
+pub mod path;
 pub mod plan;
 pub mod progressive;
 pub mod resample;
 pub mod shade;
 
+pub use crate::scene::Integrator;
 pub use environment::{CubeMap, EnvironmentMap, LinearImage, sky};
 pub use plan::{Explain, RenderPlan};
 pub use progressive::Progressive;
@@ -92,6 +94,8 @@ pub struct RayCounts {
     pub reflection: u64,
     /// Rays continuing through transparent surfaces.
     pub transmission: u64,
+    /// Diffuse bounces of the path integrator.
+    pub bounce: u64,
 }
 
 impl std::ops::Add for RayCounts {
@@ -102,6 +106,7 @@ impl std::ops::Add for RayCounts {
             shadow: self.shadow + o.shadow,
             reflection: self.reflection + o.reflection,
             transmission: self.transmission + o.transmission,
+            bounce: self.bounce + o.bounce,
         }
     }
 }
@@ -109,7 +114,7 @@ impl std::ops::Add for RayCounts {
 impl RayCounts {
     /// All rays.
     pub fn total(&self) -> u64 {
-        self.camera + self.shadow + self.reflection + self.transmission
+        self.camera + self.shadow + self.reflection + self.transmission + self.bounce
     }
 }
 
@@ -149,13 +154,7 @@ pub fn render_with_plan(
     let cam = CameraRays::new(&scene.camera, w, h);
     let mut film = Film::new(w, h);
     let rows_done = AtomicUsize::new(0);
-    let tracer = Tracer {
-        scene,
-        bvh,
-        plan,
-        max_depth: settings.max_depth,
-        env,
-    };
+    let tracer = Tracer::new(scene, bvh, plan, settings.max_depth, env);
     let samples = SampleRange {
         sampler: settings.sampler,
         seed: settings.seed,

@@ -3,17 +3,19 @@
 
 use std::fmt;
 
-use crate::scene::{Environment, Light, Scene};
+use crate::scene::{Environment, Integrator, Light, Scene};
 
 use super::RenderSettings;
 
 /// The features a render uses. Each `false` means that work is skipped entirely.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct RenderPlan {
+    /// How light is gathered: `direct` traces no diffuse bounces at all.
+    pub integrator: Integrator,
     /// Rays that leave the scene sample the environment (else they see black).
     pub environment: bool,
-    /// Shadow rays are traced towards the lights (else every light is seen unblocked: no
-    /// shadows, and no shadow rays).
+    /// Shadow rays are traced towards the lights (and, with the path integrator, emissive
+    /// triangles); else every light is seen unblocked: no shadows, and no shadow rays.
     pub shadows: bool,
     /// Shadow rays pass through transparent surfaces and are attenuated by them (else a
     /// shadow ray is a plain any-hit occlusion test).
@@ -34,6 +36,15 @@ pub struct RenderPlan {
 impl RenderPlan {
     /// Derives the plan from the scene and settings.
     pub fn new(scene: &Scene, settings: &RenderSettings) -> Self {
+        Self::with_integrator(scene, scene.integrator, settings)
+    }
+
+    /// [`RenderPlan::new`] with another integrator than the scene's.
+    pub fn with_integrator(
+        scene: &Scene,
+        integrator: Integrator,
+        settings: &RenderSettings,
+    ) -> Self {
         let transparent = scene.materials.iter().any(|m| m.is_transparent());
         let absorbing = scene
             .materials
@@ -41,8 +52,12 @@ impl RenderPlan {
             .any(|m| m.is_transparent() && m.absorption.max_element() > 0.0);
         let bounces = settings.max_depth > 0;
         Self {
+            integrator,
             environment: !matches!(scene.environment, Environment::None),
-            shadows: !scene.lights.is_empty(),
+            // The path integrator also samples emissive triangles as lights.
+            shadows: !scene.lights.is_empty()
+                || (integrator == Integrator::Path
+                    && scene.materials.iter().any(|m| m.is_emissive())),
             transparent_shadows: transparent,
             reflections: bounces && scene.materials.iter().any(|m| m.is_mirror()),
             transmission: bounces && transparent,
@@ -52,9 +67,11 @@ impl RenderPlan {
         }
     }
 
-    /// Everything on: the reference the tests compare a pruned plan against.
+    /// Everything on, with the direct integrator: the reference the tests compare a pruned
+    /// plan against.
     pub fn everything() -> Self {
         Self {
+            integrator: Integrator::Direct,
             environment: true,
             shadows: true,
             transparent_shadows: true,
@@ -75,6 +92,28 @@ impl fmt::Display for Explain<'_> {
         let (p, scene, s) = (self.0, self.1, self.2);
         let on = |b: bool| if b { "yes" } else { "no, skipped" };
         writeln!(f, "render plan for {}:", scene.name)?;
+        match p.integrator {
+            Integrator::Direct => writeln!(
+                f,
+                "  integrator           direct: light from the lights only, no bounces off diffuse surfaces"
+            )?,
+            Integrator::Path => {
+                let set = super::path::LightSet::new(scene);
+                writeln!(
+                    f,
+                    "  integrator           path: up to {} diffuse bounces (the last collects emission only), \
+                     Russian roulette, light samples weighted against bounces by MIS",
+                    s.max_depth
+                )?;
+                if set.sampled_triangles() > 0 {
+                    writeln!(
+                        f,
+                        "  emissive triangles   {} sampled as lights by area",
+                        set.sampled_triangles()
+                    )?;
+                }
+            }
+        }
         writeln!(
             f,
             "  environment          {}",
@@ -136,10 +175,24 @@ impl fmt::Display for Explain<'_> {
         for (i, l) in scene.lights.iter().enumerate() {
             match l {
                 Light::Point { .. } => writeln!(f, "  light {i}              point: 1 shadow ray")?,
-                Light::Rect { samples, .. } => writeln!(
-                    f,
-                    "  light {i}              rectangle: {samples} shadow rays"
-                )?,
+                Light::Rect { samples, .. } => {
+                    let shown = if p.integrator == Integrator::Path
+                        && super::path::LightSet::new(scene).is_visible(i)
+                    {
+                        " (its emissive triangles are found by bounces: MIS)"
+                    } else {
+                        ""
+                    };
+                    let deeper = if p.integrator == Integrator::Path {
+                        " at the first hit, 1 deeper"
+                    } else {
+                        ""
+                    };
+                    writeln!(
+                        f,
+                        "  light {i}              rectangle: {samples} shadow rays{deeper}{shown}"
+                    )?
+                }
             }
         }
         write!(

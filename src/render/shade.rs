@@ -5,11 +5,12 @@
 use glam::Vec3;
 
 use super::environment::EnvironmentMap;
+use super::path::{Arrival, LightSet};
 use super::{RayCounts, RenderPlan};
 use crate::bvh::{Bvh, Hit};
 use crate::geometry::{Ray, interpolation_error, offset_ray_origin};
 use crate::sampling::PathSampler;
-use crate::scene::{Light, Material, Scene, face_normal};
+use crate::scene::{Integrator, Light, Material, Scene, face_normal};
 
 /// What a ray that cannot be traced (zero, NaN or infinite direction or origin) returns:
 /// black, never NaN.
@@ -27,6 +28,8 @@ pub struct Tracer<'a> {
     pub max_depth: u32,
     /// The environment, loaded (black when the plan has none).
     pub env: &'a EnvironmentMap,
+    /// What the path integrator samples besides the scene's lights (empty for `direct`).
+    pub lights: LightSet,
 }
 
 /// Where a ray met a surface.
@@ -43,14 +46,38 @@ pub(super) struct Surface<'a> {
     pub(super) material: &'a Material,
 }
 
-impl Tracer<'_> {
+impl<'a> Tracer<'a> {
+    /// A tracer of `scene` with the plan's integrator (finding the emissive triangles the
+    /// path integrator samples).
+    pub fn new(
+        scene: &'a Scene,
+        bvh: &'a Bvh,
+        plan: RenderPlan,
+        max_depth: u32,
+        env: &'a EnvironmentMap,
+    ) -> Self {
+        let lights = match plan.integrator {
+            Integrator::Path => LightSet::new(scene),
+            Integrator::Direct => LightSet::default(),
+        };
+        Self {
+            scene,
+            bvh,
+            plan,
+            max_depth,
+            env,
+            lights,
+        }
+    }
+
     /// Radiance arriving at the ray's origin from along the ray.
     pub fn radiance(&self, ray: &Ray, rng: &mut PathSampler, counts: &mut RayCounts) -> Vec3 {
         if !ray.is_valid() {
             // A zero, NaN or infinite direction (or origin) has nowhere to go.
             return FALLBACK;
         }
-        self.trace(ray, 0, rng, counts)
+        let hit = self.bvh.intersect(ray, f32::INFINITY);
+        self.radiance_from_hit(ray, hit, rng, counts)
     }
 
     /// [`Tracer::radiance`] of a ray whose closest hit is already known (`hit` is what
@@ -65,10 +92,16 @@ impl Tracer<'_> {
         if !ray.is_valid() {
             return FALLBACK;
         }
-        self.shade(ray, hit, 0, rng, counts)
+        match self.plan.integrator {
+            Integrator::Direct => self.shade(ray, hit, 0, rng, counts),
+            Integrator::Path => {
+                let a = Arrival::Specular;
+                self.path(ray, hit, 0, a, Vec3::ONE, rng, counts)
+            }
+        }
     }
 
-    fn background(&self, dir: Vec3) -> Vec3 {
+    pub(super) fn background(&self, dir: Vec3) -> Vec3 {
         if self.plan.environment {
             self.env.radiance(dir)
         } else {
@@ -268,7 +301,7 @@ impl Tracer<'_> {
 }
 
 /// Blinn-Phong, energy-normalized: `Kd / pi + Ks (Ns + 8) / (8 pi) cos^Ns(n, h)`.
-fn brdf(m: &Material, n: Vec3, wi: Vec3, wo: Vec3) -> Vec3 {
+pub(super) fn brdf(m: &Material, n: Vec3, wi: Vec3, wo: Vec3) -> Vec3 {
     let mut f = m.diffuse * std::f32::consts::FRAC_1_PI;
     if m.specular != Vec3::ZERO {
         let h = (wi + wo).normalize_or_zero();

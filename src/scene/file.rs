@@ -33,6 +33,9 @@
 //!
 //! [environment]
 //! kind = "sky"               # none, color, sky (the default), cubemap, equirect
+//!
+//! [render]
+//! integrator = "path"        # or "direct" (the default): global illumination or direct light
 //! ```
 
 use std::collections::BTreeMap;
@@ -45,8 +48,8 @@ use serde::Deserialize;
 use toml::Spanned;
 
 use super::{
-    Camera, Environment, Light, Material, Mesh, NormalRule, Scene, line_of, name_of, obj, ply,
-    read_file, shapes,
+    Camera, Environment, Integrator, Light, Material, Mesh, NormalRule, Scene, line_of, name_of,
+    obj, ply, read_file, shapes,
 };
 
 #[derive(Deserialize)]
@@ -60,6 +63,13 @@ struct SceneDef {
     #[serde(default)]
     lights: Vec<LightDef>,
     environment: Option<Spanned<EnvDef>>,
+    render: Option<RenderDef>,
+}
+
+#[derive(Deserialize, Default)]
+#[serde(deny_unknown_fields)]
+struct RenderDef {
+    integrator: Option<Integrator>,
 }
 
 #[derive(Deserialize)]
@@ -368,6 +378,10 @@ pub fn parse(path: &Path, text: &str, read: ReadFn, check_files: bool) -> Result
         lights,
         camera,
         environment,
+        integrator: def
+            .render
+            .and_then(|r| r.integrator)
+            .unwrap_or(Integrator::Direct),
         warnings,
     })
 }

@@ -284,6 +284,42 @@ pub fn face_normal(t: &[Vec3; 3]) -> Vec3 {
         .unwrap_or(Vec3::Z)
 }
 
+/// How light is gathered at the surfaces the camera sees.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Integrator {
+    /// Direct light only: emission, light from the light sources with hard (or transparent)
+    /// shadows, and mirror and transparent surfaces followed.
+    #[default]
+    Direct,
+    /// Unidirectional path tracing: diffuse bounces (cosine-weighted) carry indirect light,
+    /// next-event estimation on the lights is combined with emission found by bounces by
+    /// multiple importance sampling, Russian roulette ends long paths.
+    Path,
+}
+
+impl std::fmt::Display for Integrator {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Integrator::Direct => "direct",
+            Integrator::Path => "path",
+        })
+    }
+}
+
+impl std::str::FromStr for Integrator {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s.to_ascii_lowercase().as_str() {
+            "direct" => Ok(Integrator::Direct),
+            "path" => Ok(Integrator::Path),
+            other => Err(format!(
+                "unknown integrator `{other}` (expected direct or path)"
+            )),
+        }
+    }
+}
+
 /// Everything a render needs.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Scene {
@@ -299,6 +335,8 @@ pub struct Scene {
     pub camera: Camera,
     /// What escaping rays see.
     pub environment: Environment,
+    /// How light is gathered (scene files choose with `[render] integrator`).
+    pub integrator: Integrator,
     /// Problems found while loading that did not stop it (a missing MTL file, say).
     pub warnings: Vec<String>,
 }
@@ -361,6 +399,7 @@ impl Scene {
                 intensity: 0.3,
                 rotation_deg: 0.0,
             },
+            integrator: Integrator::Direct,
             warnings: Vec::new(),
         }
     }

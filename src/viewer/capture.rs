@@ -583,13 +583,7 @@ fn report(
         let ph = ((fresh_per_frame / pw as f64).round() as u32).clamp(1, display.y);
         let mut plan = settings.plan(&scene);
         plan.max_light_samples = Some(1);
-        let tracer = Tracer {
-            scene: &scene,
-            bvh: tree,
-            plan,
-            max_depth: settings.max_depth,
-            env: &views.env.map,
-        };
+        let tracer = Tracer::new(&scene, tree, plan, settings.max_depth, &views.env.map);
         // One pass at a reduced size, stretched to the display as the earlier design did.
         let stretched = |size: UVec2| {
             let mut preview = Progressive::new(size.x, size.y);

@@ -158,13 +158,13 @@ fn shoot(
     if loading.current().is_some() {
         return; // a new scene is on its way: shoot into that one
     }
-    let tracer = Tracer {
-        scene: &current.scene,
-        bvh: tree,
-        plan: settings.plan(&current.scene),
-        max_depth: settings.max_depth,
-        env: &env.map,
-    };
+    let tracer = Tracer::new(
+        &current.scene,
+        tree,
+        settings.plan(&current.scene),
+        settings.max_depth,
+        &env.map,
+    );
     if let Some(p) = debug.pending.take() {
         let ray = ray_through(transform, projection, viewport.0, &settings, p);
         debug.path = tracer.debug_path(&ray);

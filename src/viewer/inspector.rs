@@ -19,6 +19,7 @@ use crate::bvh::SplitMethod;
 use crate::render::debug::ShadowState;
 use crate::render::heatmap::heat_color;
 use crate::sampling::SamplerKind;
+use crate::scene::Integrator;
 
 /// The inspector window, the status line and the key help.
 pub struct InspectorPlugin {
@@ -256,7 +257,7 @@ fn inspector(
             egui::ScrollArea::vertical().show(ui, |ui| {
                 ui.heading("Inspector");
                 scene_section(ui, &state, &current, &status, &mut load);
-                render_section(ui, &mut s, &stats);
+                render_section(ui, &mut s, &stats, current.scene.integrator);
                 dof_section(ui, &mut s, &mut picking.0);
                 env_section(ui, &mut s, &state);
                 bvh_section(ui, &mut b, &bvh, &building);
@@ -327,7 +328,12 @@ fn scene_section(
         });
 }
 
-fn render_section(ui: &mut egui::Ui, s: &mut ViewSettings, stats: &TraceStats) {
+fn render_section(
+    ui: &mut egui::Ui,
+    s: &mut ViewSettings,
+    stats: &TraceStats,
+    scene_integrator: Integrator,
+) {
     egui::CollapsingHeader::new("Render")
         .default_open(true)
         .show(ui, |ui| {
@@ -348,6 +354,22 @@ fn render_section(ui: &mut egui::Ui, s: &mut ViewSettings, stats: &TraceStats) {
                     .logarithmic(true)
                     .text("max samples per pixel"),
             );
+            egui::ComboBox::from_label("integrator")
+                .selected_text(match s.integrator {
+                    None => format!("scene's ({scene_integrator})"),
+                    Some(i) => i.to_string(),
+                })
+                .show_ui(ui, |ui| {
+                    ui.selectable_value(
+                        &mut s.integrator,
+                        None,
+                        format!("scene's ({scene_integrator})"),
+                    );
+                    ui.selectable_value(&mut s.integrator, Some(Integrator::Direct), "direct")
+                        .on_hover_text("light from the lights only, hard shadows");
+                    ui.selectable_value(&mut s.integrator, Some(Integrator::Path), "path")
+                        .on_hover_text("global illumination: diffuse bounces, colour bleeding");
+                });
             ui.add(egui::Slider::new(&mut s.max_depth, 0..=16).text("bounce depth"));
             ui.checkbox(&mut s.shadows, "shadows");
             ui.add_enabled(

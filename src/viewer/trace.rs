@@ -19,7 +19,7 @@ use crate::render::heatmap::{cost_row, cost_summary, heatmap_rgba8, overlap_row}
 use crate::render::progressive::StepReport;
 use crate::render::{EnvironmentMap, Progressive, RayCounts, RenderPlan, RenderSettings, Tracer};
 use crate::sampling::SamplerKind;
-use crate::scene::{Environment, Scene};
+use crate::scene::{Environment, Integrator, Scene};
 
 /// Hands the view to the trace worker and keeps [`TracedImage`] up to date.
 pub struct TracePlugin {
@@ -103,8 +103,10 @@ pub struct ViewSettings {
     pub scale: f32,
     /// Accumulation stops at this many samples per pixel.
     pub max_samples: u32,
-    /// Largest number of mirror or transparent bounces.
+    /// Largest number of bounces (mirror, transparent and, with the path integrator, diffuse).
     pub max_depth: u32,
+    /// How light is gathered (`None`: the scene's choice).
+    pub integrator: Option<Integrator>,
     /// Shadow rays on.
     pub shadows: bool,
     /// Shadow rays pass through transparent surfaces.
@@ -148,6 +150,7 @@ impl Default for ViewSettings {
             scale: 1.0,
             max_samples: 1024,
             max_depth: r.max_depth,
+            integrator: None,
             shadows: true,
             transparent_shadows: true,
             sampler: r.sampler,
@@ -195,8 +198,9 @@ impl ViewSettings {
 
     /// The render plan of `scene` with these settings' switches applied.
     pub fn plan(&self, scene: &Scene) -> RenderPlan {
-        let mut plan = RenderPlan::new(
+        let mut plan = RenderPlan::with_integrator(
             scene,
+            self.integrator.unwrap_or(scene.integrator),
             &RenderSettings {
                 max_depth: self.max_depth,
                 ..RenderSettings::default()

@@ -435,13 +435,7 @@ fn tracer(job: &Job, light_samples: Option<u32>) -> Tracer<'_> {
     if light_samples.is_some() {
         plan.max_light_samples = light_samples;
     }
-    Tracer {
-        scene: &job.scene,
-        bvh: &job.bvh,
-        plan,
-        max_depth: job.settings.max_depth,
-        env: &job.env,
-    }
+    Tracer::new(&job.scene, &job.bvh, plan, job.settings.max_depth, &job.env)
 }
 
 fn same_view(a: &CameraRays, b: &CameraRays) -> bool {
