@@ -180,6 +180,26 @@ impl Peer {
     }
 }
 
+impl Peer {
+    /// `(seconds, rmse)` per sample count, each the mean over the rows of that count (several
+    /// seeds), in order of sample count.
+    pub fn means(&self) -> Vec<(f64, f64)> {
+        let mut spps: Vec<u32> = self.points.iter().map(|p| p.0).collect();
+        spps.sort_unstable();
+        spps.dedup();
+        spps.iter()
+            .map(|&n| {
+                let rows: Vec<_> = self.points.iter().filter(|p| p.0 == n).collect();
+                let k = rows.len() as f64;
+                (
+                    rows.iter().map(|p| p.1).sum::<f64>() / k,
+                    rows.iter().map(|p| p.2).sum::<f64>() / k,
+                )
+            })
+            .collect()
+    }
+}
+
 /// Seconds at which the error, falling along `(seconds, rmse)` points, first reaches `target`:
 /// interpolated in log-log between the measured points around it (`None` if it never does).
 pub fn time_to(points: &[(f64, f64)], target: f64) -> Option<f64> {
@@ -484,7 +504,7 @@ pub fn plot(path: &Path, report: &Report, title: &str) -> Result<()> {
     let peer_colours = [BLACK, CYAN, RGBColor(230, 140, 0)];
     for (k, peer) in report.peers.iter().enumerate() {
         let c = peer_colours[k % peer_colours.len()];
-        let pts: Vec<(f64, f64)> = peer.points.iter().map(|p| (p.1, p.2)).collect();
+        let pts = peer.means();
         let reach = time_to(&pts, report.target_rmse)
             .map_or("never reaches".into(), |t| format!("{} s to", tick(t)));
         chart
@@ -497,7 +517,11 @@ pub fn plot(path: &Path, report: &Report, title: &str) -> Result<()> {
             ))
             .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], c.stroke_width(2)));
         chart
-            .draw_series(pts.iter().map(|&p| TriangleMarker::new(p, 5, c.filled())))
+            .draw_series(
+                peer.points
+                    .iter()
+                    .map(|p| TriangleMarker::new((p.1, p.2), 4, c.mix(0.5).filled())),
+            )
             .map_err(|e| anyhow::anyhow!("{e}"))?;
     }
     chart

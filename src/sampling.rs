@@ -130,9 +130,20 @@ fn unit(x: u32) -> f32 {
 }
 
 /// The second Sobol dimension (the first is the bit-reversed index): with it, the first `2^k`
-/// points form a (0, 2)-sequence, one point in every elementary interval.
+/// points form a (0, 2)-sequence, one point in every elementary interval. The generator
+/// matrix is linear over GF(2), so the index is taken a byte at a time through tables of the
+/// matrix's columns (the same bits as [`sobol_dim1_bitwise`], a fifth of the work).
 #[inline]
-pub fn sobol_dim1(mut i: u32) -> u32 {
+pub fn sobol_dim1(i: u32) -> u32 {
+    let t = &SOBOL_DIM1_TABLES;
+    t[0][(i & 0xff) as usize]
+        ^ t[1][((i >> 8) & 0xff) as usize]
+        ^ t[2][((i >> 16) & 0xff) as usize]
+        ^ t[3][(i >> 24) as usize]
+}
+
+/// [`sobol_dim1`] one bit at a time: column `k + 1` is column `k` xor itself shifted right.
+pub fn sobol_dim1_bitwise(mut i: u32) -> u32 {
     let mut v = 1u32 << 31;
     let mut r = 0;
     while i != 0 {
@@ -143,6 +154,39 @@ pub fn sobol_dim1(mut i: u32) -> u32 {
         v ^= v >> 1;
     }
     r
+}
+
+/// For each byte of the index, the xor of the generator columns its set bits select.
+static SOBOL_DIM1_TABLES: [[u32; 256]; 4] = sobol_dim1_tables();
+
+const fn sobol_dim1_tables() -> [[u32; 256]; 4] {
+    let mut columns = [0u32; 32];
+    let mut v = 1u32 << 31;
+    let mut k = 0;
+    while k < 32 {
+        columns[k] = v;
+        v ^= v >> 1;
+        k += 1;
+    }
+    let mut t = [[0u32; 256]; 4];
+    let mut j = 0;
+    while j < 4 {
+        let mut b = 0;
+        while b < 256 {
+            let mut r = 0;
+            let mut bit = 0;
+            while bit < 8 {
+                if b & (1 << bit) != 0 {
+                    r ^= columns[8 * j + bit];
+                }
+                bit += 1;
+            }
+            t[j][b] = r;
+            b += 1;
+        }
+        j += 1;
+    }
+    t
 }
 
 /// Owen scrambling by hashing (Laine-Karras permutation on the reversed bits, Burley 2020).

@@ -129,6 +129,15 @@ fn a_peer_csv_is_read_and_bad_rows_name_the_line() {
     let p = Peer::load(&good).unwrap();
     assert_eq!(p.label, "mitsuba 3 llvm_ad_rgb path");
     assert_eq!(p.points, vec![(1, 0.5, 0.4), (4, 1.0, 0.2)]);
+    // Rows of one sample count (several seeds) are averaged.
+    let seeds = Peer {
+        label: "x".into(),
+        points: vec![(4, 1.0, 0.2), (1, 0.5, 0.4), (4, 3.0, 0.1), (1, 0.7, 0.6)],
+    };
+    let m = seeds.means();
+    assert_eq!(m.len(), 2);
+    assert!((m[0].0 - 0.6).abs() < 1e-12 && (m[0].1 - 0.5).abs() < 1e-12);
+    assert!((m[1].0 - 2.0).abs() < 1e-12 && (m[1].1 - 0.15).abs() < 1e-12);
     let bad = dir.path().join("bad.csv");
     std::fs::write(&bad, "spp,seconds,rmse\n1,0.5,0.4\n4,oops,0.2\n").unwrap();
     let e = format!("{:#}", Peer::load(&bad).unwrap_err());

@@ -122,3 +122,16 @@ fn thin_lens_rays_meet_on_the_focus_plane() {
         }
     }
 }
+
+#[test]
+fn the_byte_table_sobol_dimension_equals_the_bitwise_one() {
+    use tracery::sampling::{SplitMix64, sobol_dim1, sobol_dim1_bitwise};
+    let mut rng = SplitMix64::new(3);
+    let edge = [0u32, 1, 2, 255, 256, 0xffff, 0x1_0000, u32::MAX, 1 << 31];
+    for i in edge
+        .into_iter()
+        .chain((0..100_000).map(|_| rng.next_u64() as u32))
+    {
+        assert_eq!(sobol_dim1(i), sobol_dim1_bitwise(i), "index {i:#x}");
+    }
+}

@@ -163,7 +163,7 @@ pub fn run(a: ConvergenceArgs) -> Result<()> {
         );
     }
     for p in &report.peers {
-        let pts: Vec<(f64, f64)> = p.points.iter().map(|q| (q.1, q.2)).collect();
+        let pts = p.means();
         let by_spp: Vec<(f64, f64)> = p
             .points
             .iter()
