@@ -468,6 +468,9 @@ pub fn plot(path: &Path, report: &Report, title: &str) -> Result<()> {
         .y_desc("RMSE against the reference (linear radiance)")
         .x_label_formatter(&|v| tick(*v))
         .y_label_formatter(&|v| tick(*v))
+        .x_labels(8)
+        .y_labels(8)
+        .light_line_style(WHITE.mix(0.0))
         .label_style(("sans-serif", 15))
         .draw()
         .map_err(|e| anyhow::anyhow!("{e}"))?;
@@ -483,23 +486,29 @@ pub fn plot(path: &Path, report: &Report, title: &str) -> Result<()> {
             .draw_series(LineSeries::new(pts.clone(), c.stroke_width(2)))
             .map_err(|e| anyhow::anyhow!("{e}"))?
             .label(format!(
-                "tracery {}: slope {:.2} per spp; {} s to RMSE {}",
+                "tracery {}: slope {:.2} per spp; {} to RMSE {}",
                 fit.sampler,
                 fit.slope_spp,
-                tick(time_to(&pts, report.target_rmse).unwrap_or(fit.seconds_to_target)),
+                match time_to(&pts, report.target_rmse) {
+                    Some(t) => format!("{} s", tick(t)),
+                    None => format!("{} s (extrapolated)", tick(fit.seconds_to_target)),
+                },
                 tick(report.target_rmse)
             ))
             .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], c.stroke_width(2)));
         chart
             .draw_series(pts.iter().map(|&p| Circle::new(p, 4, c.filled())))
             .map_err(|e| anyhow::anyhow!("{e}"))?;
-        chart
-            .draw_series(std::iter::once(Cross::new(
-                (fit.seconds_to_target, report.target_rmse),
-                8,
-                c.stroke_width(2),
-            )))
-            .map_err(|e| anyhow::anyhow!("{e}"))?;
+        // Where the measured line crosses the target error.
+        if let Some(t) = time_to(&pts, report.target_rmse) {
+            chart
+                .draw_series(std::iter::once(Cross::new(
+                    (t, report.target_rmse),
+                    8,
+                    c.stroke_width(2),
+                )))
+                .map_err(|e| anyhow::anyhow!("{e}"))?;
+        }
     }
     let peer_colours = [BLACK, CYAN, RGBColor(230, 140, 0)];
     for (k, peer) in report.peers.iter().enumerate() {
@@ -516,6 +525,12 @@ pub fn plot(path: &Path, report: &Report, title: &str) -> Result<()> {
                 tick(report.target_rmse)
             ))
             .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], c.stroke_width(2)));
+        chart
+            .draw_series(
+                time_to(&pts, report.target_rmse)
+                    .map(|t| Cross::new((t, report.target_rmse), 8, c.stroke_width(2))),
+            )
+            .map_err(|e| anyhow::anyhow!("{e}"))?;
         chart
             .draw_series(
                 peer.points

@@ -185,7 +185,8 @@ fn cosine_direction(n: Vec3, u: Vec2) -> Vec3 {
     let d = concentric_disk(u);
     let z = (1.0 - d.length_squared()).max(0.0).sqrt();
     let (t, b) = n.any_orthonormal_pair();
-    (t * d.x + b * d.y + n * z).normalize()
+    // Unit length already: an orthonormal frame and a point of the unit hemisphere.
+    t * d.x + b * d.y + n * z
 }
 
 /// How the ray that reached a surface was chosen: says how emission found there counts.
