@@ -183,3 +183,23 @@ fn an_emissive_quad_lights_the_same_as_the_rectangle_light_that_stands_for_it() 
         assert!(rel < 0.03, "block {i}: triangles {x}, rectangle {y}");
     }
 }
+
+/// `direct` traces no bounce at all (the plan leaves the path integrator out); `path` does.
+#[test]
+fn the_direct_integrator_traces_no_bounce_and_path_does() {
+    let mut s = Scene::cornell_box();
+    let bvh = Bvh::build(&s.mesh.triangles, &BuildOptions::sah());
+    let settings = RenderSettings {
+        width: 32,
+        height: 24,
+        spp: 4,
+        ..RenderSettings::default()
+    };
+    s.integrator = Integrator::Direct;
+    let direct = render(&s, &bvh, &settings, &|_| {}).unwrap();
+    assert_eq!(direct.rays.bounce, 0);
+    s.integrator = Integrator::Path;
+    let path = render(&s, &bvh, &settings, &|_| {}).unwrap();
+    assert!(path.rays.bounce > 0);
+    assert_eq!(path.rays.camera, direct.rays.camera);
+}
