@@ -154,7 +154,8 @@ fn truncated_or_corrupt_images_give_an_error_naming_the_file() {
     let truncated = dir.path().join("truncated.png");
     std::fs::write(&truncated, &bytes[..bytes.len() / 2]).unwrap();
     let corrupt = dir.path().join("corrupt.jpg");
-    std::fs::write(&corrupt, b"\\xff\\xd8\\xff this is not a jpeg").unwrap();
+    // A JPEG's start-of-image marker, then garbage.
+    std::fs::write(&corrupt, b"\xff\xd8\xff this is not a jpeg").unwrap();
     for bad in [&truncated, &corrupt] {
         let mut faces: [std::path::PathBuf; 6] = std::array::from_fn(|_| good.clone());
         faces[3] = bad.clone();
