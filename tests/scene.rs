@@ -268,6 +268,26 @@ fn ply_errors_name_the_file() {
     let bad = PLY_ASCII.replace("1 1 0\n", "1 x 0\n");
     let e = err(Scene::load(&write(dir.path(), "p.ply", bad.as_bytes())));
     assert!(e.contains("p.ply:12"), "{e}");
+    // One line, the faulty text quoted, no parser dump, no position that reads as line 1.
+    assert!(!e.contains('\n') && e.contains("\"1 x 0\""), "{e}");
+    assert!(!e.contains("ParseError") && !e.contains("1:"), "{e}");
+}
+
+/// Blender 2.4 wrote a header line that is not a PLY keyword (`Blender 2.4 export`); assimp
+/// reads such files, and so does tracery (the line counts as a comment).
+#[test]
+fn a_ply_header_line_without_a_keyword_is_read_as_a_comment() {
+    let dir = tempfile::tempdir().unwrap();
+    let blender = PLY_ASCII.replace(
+        "format ascii 1.0\n",
+        "format ascii 1.0\nBlender 2.4 export\n",
+    );
+    let s = Scene::load(&write(dir.path(), "b.ply", blender.as_bytes())).unwrap();
+    assert_eq!(s.triangle_count(), 2);
+    // Line numbers stay those of the file.
+    let bad = blender.replace("1 1 0\n", "1 x 0\n");
+    let e = err(Scene::load(&write(dir.path(), "bb.ply", bad.as_bytes())));
+    assert!(e.contains("bb.ply:13"), "{e}");
 }
 
 #[test]

@@ -5,7 +5,7 @@
 //! read and dropped. Polygons are fan-triangulated as `(0, k, k + 1)`. Without normals in the
 //! file, faces are smoothed across edges below a crease angle ([`super::normals`]).
 
-use std::io::BufReader;
+use std::io::{BufReader, Read};
 use std::path::Path;
 
 use anyhow::{Result, anyhow, bail};
@@ -104,12 +104,18 @@ pub fn load_from(
     data: impl std::io::BufRead,
     rule: Option<NormalRule>,
 ) -> Result<Mesh> {
-    let at = |e: ply_rs_bw::parser::ParseError| match e.line() {
-        // The error's own text already says "Line N"; put it in the file:line form.
-        Some(line) => anyhow!("{}:{line}: {}", path.display(), strip_line(&e.to_string())),
-        None => anyhow!("{}: {e}", path.display()),
+    let at = |e: ply_rs_bw::parser::ParseError| {
+        let msg = one_line(&e.to_string());
+        match e.line() {
+            // The error's own text already says "Line N"; put it in the file:line form.
+            Some(line) => anyhow!("{}:{line}: {}", path.display(), strip_line(&msg)),
+            None => anyhow!("{}: {msg}", path.display()),
+        }
     };
-    let mut reader = Reader::new(data);
+    let mut data = data;
+    let header = tolerant_header(&mut data)
+        .map_err(|e| anyhow!("{}: cannot read the header: {e}", path.display()))?;
+    let mut reader = Reader::new(std::io::Cursor::new(header).chain(data));
     let vparser = Parser::<Vertex>::new();
     let fparser = Parser::<Face>::new();
     let other = Parser::<DefaultElement>::new();
@@ -189,6 +195,87 @@ pub fn load_from(
         let rule = rule.unwrap_or(NormalRule::Crease(DEFAULT_CREASE_DEG));
         Ok(Mesh::from_indexed(&positions, &tris, 0, rule, &[]))
     }
+}
+
+/// The parser's multi-line message (`Couldn't read element line.\n\tString: '1 x 0\n'\n\t
+/// Error: ...`) on one line: `Couldn't read element line: "1 x 0" (Couldn't parse element
+/// line.)`.
+fn one_line(msg: &str) -> String {
+    let mut head = String::new();
+    let mut text = None;
+    let mut cause = Vec::new();
+    for part in msg
+        .lines()
+        .map(str::trim)
+        .filter(|l| !l.is_empty() && *l != "'")
+    {
+        if let Some(t) = part.strip_prefix("String: ") {
+            text = Some(t.trim_matches('\'').trim().to_string());
+        } else if let Some(c) = part.strip_prefix("Error: ") {
+            cause.push(column_only(c.trim_end_matches('.')));
+        } else if head.is_empty() {
+            head = part.trim_end_matches('.').to_string();
+        } else if text.as_deref() == Some("") {
+            // The quoted line itself, when the quote spans two lines.
+            text = Some(part.trim_matches('\'').to_string());
+        }
+    }
+    let mut out = head;
+    if let Some(t) = text {
+        out.push_str(&format!(": \"{t}\""));
+    }
+    if !cause.is_empty() {
+        out.push_str(&format!(" ({})", cause.join("; ")));
+    }
+    out
+}
+
+/// The parser reports a position inside the one line it was given (`error at 1:3: ...`), which
+/// reads like line 1 of the file: keep the column only.
+fn column_only(cause: &str) -> String {
+    let Some((before, rest)) = cause.split_once("error at ") else {
+        return cause.to_string();
+    };
+    let mut parts = rest.splitn(3, ':');
+    match (parts.next(), parts.next(), parts.next()) {
+        (Some(l), Some(c), Some(tail)) if l.parse::<u32>().is_ok() && c.parse::<u32>().is_ok() => {
+            format!("{before}at column {c}:{tail}")
+        }
+        _ => cause.to_string(),
+    }
+}
+
+/// Reads the header up to and including `end_header`, and turns lines no PLY keyword starts
+/// (Blender 2.4 wrote a bare `Blender 2.4 export` line, which assimp also reads) into comments,
+/// so the parser accepts them; every line keeps its number. Nothing after the header is read.
+fn tolerant_header(data: &mut impl std::io::BufRead) -> std::io::Result<Vec<u8>> {
+    const KEYWORDS: [&str; 7] = [
+        "ply",
+        "format",
+        "comment",
+        "obj_info",
+        "element",
+        "property",
+        "end_header",
+    ];
+    let mut out = Vec::new();
+    let mut line = Vec::new();
+    loop {
+        line.clear();
+        if data.read_until(b'\n', &mut line)? == 0 {
+            break;
+        }
+        let text = String::from_utf8_lossy(&line);
+        let word = text.split_whitespace().next().unwrap_or("");
+        if !word.is_empty() && !KEYWORDS.contains(&word) && !out.is_empty() {
+            out.extend_from_slice(b"comment ");
+        }
+        out.extend_from_slice(&line);
+        if word == "end_header" {
+            break;
+        }
+    }
+    Ok(out)
 }
 
 fn strip_line(msg: &str) -> String {
