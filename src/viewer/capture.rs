@@ -165,6 +165,10 @@ struct Script {
     /// Start of the idle measurement: wall clock and process CPU seconds.
     idle_from: Option<(Instant, f64)>,
     screenshot_requested: bool,
+    /// Frames drawn since the gizmos asked for at start were ready.
+    gizmo_frames: u32,
+    /// The orbit report is printed.
+    reported: bool,
     saved: Arc<AtomicBool>,
     exit_in: Option<u32>,
 }
@@ -326,6 +330,7 @@ fn finish(
     settings: Res<ViewSettings>,
     mut keep_awake: ResMut<super::pacing::KeepAwake>,
     views: ReportViews,
+    gizmos: GizmosShown,
     mut exit: MessageWriter<AppExit>,
 ) {
     if let Some(n) = script.exit_in.as_mut() {
@@ -340,7 +345,7 @@ fn finish(
         return;
     }
     let orbit = script.script.orbit_frames > 0;
-    if orbit && !script.screenshot_requested && script.idle_from.is_none() {
+    if orbit && !script.reported && script.idle_from.is_none() {
         keep_awake.0 = false;
     }
     let target = script
@@ -358,7 +363,7 @@ fn finish(
         }
         return;
     }
-    if orbit {
+    if orbit && !script.reported {
         // Converged: measure the CPU use with nothing to do before reporting.
         let Some((t0, cpu0)) = script.idle_from else {
             script.idle_from = Some((Instant::now(), process_cpu_seconds().unwrap_or(0.0)));
@@ -369,8 +374,21 @@ fn finish(
         }
         let idle = process_cpu_seconds().map(|c| (c - cpu0) / t0.elapsed().as_secs_f64());
         report(&script, &stats, &settings, &views, idle);
+        script.reported = true;
         // The screenshot needs frames again.
         keep_awake.0 = true;
+    }
+    // The gizmos switched on are in the picture before it is saved: their BVH indexed, the
+    // debug ray traced, and two frames drawn with them since.
+    if script.script.screenshot.is_some() {
+        if !gizmos.ready() {
+            script.gizmo_frames = 0;
+            return;
+        }
+        script.gizmo_frames += 1;
+        if script.gizmo_frames < 2 {
+            return;
+        }
     }
     match script.script.screenshot.clone() {
         Some(path) => {
@@ -405,6 +423,34 @@ impl SceneReady<'_> {
             && self.image.version > 0
             && (!converged
                 || !self.image.preview && self.image.samples >= self.settings.max_samples.max(1))
+    }
+}
+
+/// Whether the BVH and debug-ray gizmos that are switched on have what they draw.
+#[derive(bevy::ecs::system::SystemParam)]
+struct GizmosShown<'w> {
+    store: Res<'w, GizmoConfigStore>,
+    index: Res<'w, super::gizmos::BvhIndex>,
+    debug: Res<'w, super::debug_ray::DebugRay>,
+    bvh: Res<'w, SceneBvh>,
+    current: Res<'w, CurrentScene>,
+}
+
+impl GizmosShown<'_> {
+    fn ready(&self) -> bool {
+        use super::gizmos::{BvhLevelGizmos, LeafGizmos};
+        let boxes = self.store.config::<BvhLevelGizmos>().0.enabled
+            || self.store.config::<LeafGizmos>().0.enabled;
+        let indexed = match (
+            self.index.bvh(),
+            self.bvh.for_scene(self.current.generation),
+        ) {
+            (Some(a), Some(b)) => Arc::ptr_eq(a, b),
+            _ => false,
+        };
+        let ray_asked = self.debug.pending.is_some() || self.debug.pixel.is_some();
+        let ray_traced = self.debug.pending.is_none() && !self.debug.path.segments.is_empty();
+        (!boxes || indexed) && (!ray_asked || ray_traced)
     }
 }
 
