@@ -9,6 +9,7 @@
 #[cfg(feature = "embree")]
 pub mod embree;
 mod engines;
+#[cfg(feature = "peers")]
 mod obvhs;
 
 use std::io::{BufReader, BufWriter, Read, Write};
@@ -168,6 +169,11 @@ impl BenchConfig {
     pub fn embree_available() -> bool {
         cfg!(feature = "embree")
     }
+
+    /// True when this build can measure obvhs (the `peers` feature).
+    pub fn obvhs_available() -> bool {
+        cfg!(feature = "peers")
+    }
 }
 
 fn pool(threads: usize) -> rayon::ThreadPool {
@@ -312,6 +318,7 @@ pub fn run(
             }),
         ));
     }
+    #[cfg(feature = "peers")]
     if config.obvhs {
         builders.push((
             "obvhs-bvh2".into(),

@@ -80,6 +80,12 @@ pub fn run(a: BenchArgs) -> Result<()> {
         embree: !a.no_peers,
         packets: true,
     };
+    if config.obvhs && !BenchConfig::obvhs_available() {
+        eprintln!(
+            "note: built without the `peers` feature, so obvhs is not measured \
+             (cargo build --release --features peers)"
+        );
+    }
     if config.embree && !BenchConfig::embree_available() {
         eprintln!(
             "note: built without the `embree` feature, so Embree is not measured \
