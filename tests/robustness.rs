@@ -637,3 +637,140 @@ fn a_thousand_stacked_transparent_layers_pass_exactly_the_product() {
         );
     }
 }
+
+// ---------------------------------------------------------------------------------------
+// Far from the origin
+// ---------------------------------------------------------------------------------------
+
+/// The world-space offset the far scenes are moved by.
+const FAR: [f64; 3] = [1e6, 1e6, -1e6];
+
+/// Renders a scene file at 160 x 120, 8 spp, direct light, to 8-bit pixels.
+fn render_file(path: &std::path::Path) -> Vec<u8> {
+    let mut scene = Scene::load(path).unwrap_or_else(|e| panic!("{e:#}"));
+    scene.integrator = tracery::render::Integrator::Direct;
+    let bvh = Bvh::build(&scene.mesh.triangles, &BuildOptions::sah());
+    let settings = RenderSettings {
+        width: 160,
+        height: 120,
+        spp: 8,
+        ..RenderSettings::default()
+    };
+    render(&scene, &bvh, &settings, &|_| {})
+        .unwrap()
+        .film
+        .to_rgba8(1.0)
+}
+
+fn mean_levels(a: &[u8], b: &[u8]) -> f64 {
+    a.iter()
+        .zip(b)
+        .map(|(x, y)| x.abs_diff(*y) as f64)
+        .sum::<f64>()
+        / a.len() as f64
+}
+
+/// `[x, y, z]` of a TOML array moved by `FAR`, written with every digit.
+fn far(p: [f64; 3]) -> String {
+    format!(
+        "[{:?}, {:?}, {:?}]",
+        p[0] + FAR[0],
+        p[1] + FAR[1],
+        p[2] + FAR[2]
+    )
+}
+
+/// The Cornell box with every vertex of its OBJ written a million units away (read in f64
+/// and placed about its centre), and the camera and light moved with it, renders the picture
+/// it renders at the origin (f32 world coordinates are 1/16 apart there: blocks of stairs).
+#[test]
+fn the_cornell_box_a_million_units_away_renders_as_at_the_origin() {
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+    let dir = tempfile::tempdir().unwrap();
+    let obj = std::fs::read_to_string(root.join("assets/models/cornell_box.obj")).unwrap();
+    let moved: String = obj
+        .lines()
+        .map(|l| match l.strip_prefix("v ") {
+            Some(rest) => {
+                let v: Vec<f64> = rest
+                    .split_whitespace()
+                    .map(|x| x.parse().unwrap())
+                    .collect();
+                format!(
+                    "v {:?} {:?} {:?}\n",
+                    v[0] + FAR[0],
+                    v[1] + FAR[1],
+                    v[2] + FAR[2]
+                )
+            }
+            None => format!("{l}\n"),
+        })
+        .collect();
+    std::fs::write(dir.path().join("far.obj"), moved).unwrap();
+    std::fs::copy(
+        root.join("assets/models/cornell_box.mtl"),
+        dir.path().join("cornell_box.mtl"),
+    )
+    .unwrap();
+    let scene = |obj: &str, at: &dyn Fn([f64; 3]) -> String| {
+        format!(
+            "[camera]\nposition = {}\nlook_at = {}\nfov = 39.3\n\n[[meshes]]\npath = \"{obj}\"\n\n\
+             [[lights]]\nkind = \"rect\"\ncorner = {}\nedge_u = [0.0, 0.0, 1.05]\n\
+             edge_v = [-1.30, 0.0, 0.0]\ncolor = [1.0, 0.70588235, 0.23529412]\nintensity = 17.0\n\
+             samples = 4\n\n[environment]\nkind = \"none\"\n",
+            at([2.78, 2.73, -8.0]),
+            at([2.78, 2.73, 0.0]),
+            at([3.43, 5.487, 2.27]),
+        )
+    };
+    let here = dir.path().join("here.toml");
+    let origin_obj = root.join("assets/models/cornell_box.obj");
+    std::fs::write(
+        &here,
+        scene(origin_obj.to_str().unwrap(), &|p| format!("{p:?}")),
+    )
+    .unwrap();
+    let away = dir.path().join("away.toml");
+    std::fs::write(&away, scene("far.obj", &far)).unwrap();
+    let s = Scene::load(&away).unwrap();
+    assert!(
+        (s.mesh.origin - glam::DVec3::from(FAR)).abs().max_element() < 16.0,
+        "the mesh is kept about its own origin: {}",
+        s.mesh.origin
+    );
+    let d = mean_levels(&render_file(&here), &render_file(&away));
+    eprintln!("Cornell box 1e6 away: mean difference {d:.3} levels");
+    assert!(d <= 0.5, "mean difference {d:.3} levels");
+}
+
+/// The bunny scene moved by a million units through its scene file (mesh, floor, camera and
+/// light) renders the picture it renders at the origin.
+#[test]
+fn the_bunny_scene_a_million_units_away_renders_as_at_the_origin() {
+    let Some(bunny) = common::external("bunny/bunny.obj") else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let scene = |at: &dyn Fn([f64; 3]) -> String| {
+        format!(
+            "[camera]\nposition = {}\nlook_at = {}\nfov = 40.0\n\n\
+             [[meshes]]\npath = {:?}\ncrease_angle = 60.0\ntranslate = {}\n\n\
+             [[meshes]]\nshape = \"quad\"\ntranslate = {}\nscale = 12.0\n\n\
+             [[lights]]\nkind = \"point\"\nposition = {}\nintensity = 60.0\n\n\
+             [environment]\nkind = \"sky\"\nintensity = 0.4\n",
+            at([0.0, 0.5, 4.2]),
+            at([0.0, 0.0, 0.0]),
+            bunny.to_str().unwrap(),
+            at([0.0, 0.0, 0.0]),
+            at([0.0, -0.9913, 0.0]),
+            at([2.0, 4.0, 3.0]),
+        )
+    };
+    let here = dir.path().join("here.toml");
+    std::fs::write(&here, scene(&|p| format!("{p:?}"))).unwrap();
+    let away = dir.path().join("away.toml");
+    std::fs::write(&away, scene(&far)).unwrap();
+    let d = mean_levels(&render_file(&here), &render_file(&away));
+    eprintln!("bunny 1e6 away: mean difference {d:.3} levels");
+    assert!(d <= 0.5, "mean difference {d:.3} levels");
+}

@@ -33,7 +33,14 @@ pub fn run(a: CheckMeshArgs) -> ExitCode {
 
 fn check(a: &CheckMeshArgs) -> Result<bool> {
     let scene = load_scene(Some(&a.path))?;
-    let r = check_mesh(&scene.mesh.triangles);
+    let mut r = check_mesh(&scene.mesh.triangles);
+    // Bounds in world coordinates (the mesh is stored about its own origin).
+    let o = scene.mesh.origin;
+    if let Some(b) = r.bounds.as_mut() {
+        for v in b.iter_mut() {
+            *v = std::array::from_fn(|i| (o[i] + v[i] as f64) as f32);
+        }
+    }
     if a.json {
         println!("{}", serde_json::to_string_pretty(&r)?);
     } else {

@@ -43,7 +43,7 @@ use std::io::Cursor;
 use std::path::{Path, PathBuf};
 
 use anyhow::{Result, anyhow, bail};
-use glam::{Affine3A, EulerRot, Quat, Vec3};
+use glam::{DAffine3, DQuat, DVec3, EulerRot, Vec3};
 use serde::Deserialize;
 use toml::Spanned;
 
@@ -75,8 +75,8 @@ struct RenderDef {
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
 struct CameraDef {
-    position: [f32; 3],
-    look_at: [f32; 3],
+    position: [f64; 3],
+    look_at: [f64; 3],
     up: Option<[f32; 3]>,
     fov: Option<f32>,
     lens_radius: Option<f32>,
@@ -107,8 +107,8 @@ enum ShapeDef {
 #[derive(Deserialize)]
 #[serde(untagged)]
 enum ScaleDef {
-    Uniform(f32),
-    PerAxis([f32; 3]),
+    Uniform(f64),
+    PerAxis([f64; 3]),
 }
 
 #[derive(Deserialize)]
@@ -117,9 +117,9 @@ struct MeshDef {
     path: Option<Spanned<String>>,
     shape: Option<ShapeDef>,
     subdivisions: Option<u32>,
-    translate: Option<[f32; 3]>,
+    translate: Option<[f64; 3]>,
     /// Degrees about x, then y, then z.
-    rotate: Option<[f32; 3]>,
+    rotate: Option<[f64; 3]>,
     scale: Option<ScaleDef>,
     material: Option<Spanned<String>>,
     /// Normals the mesh file does not give: smooth across edges below this angle (degrees;
@@ -131,12 +131,12 @@ struct MeshDef {
 #[serde(tag = "kind", rename_all = "lowercase", deny_unknown_fields)]
 enum LightDef {
     Point {
-        position: [f32; 3],
+        position: [f64; 3],
         color: Option<[f32; 3]>,
         intensity: Option<f32>,
     },
     Rect {
-        corner: [f32; 3],
+        corner: [f64; 3],
         edge_u: [f32; 3],
         edge_v: [f32; 3],
         color: Option<[f32; 3]>,
@@ -297,20 +297,30 @@ pub fn parse(path: &Path, text: &str, read: ReadFn, check_files: bool) -> Result
         materials.push(Material::default());
     }
 
-    let lights = def.lights.iter().map(light_from_def).collect();
+    // Camera and lights are given in world coordinates; the scene is traced in the mesh's
+    // local frame (`Mesh::origin`, the world's origin for a scene near it), so they are moved
+    // into it in f64.
+    mesh.settle_origin();
+    let origin = mesh.origin;
+    let local = |p: [f64; 3]| (DVec3::from(p) - origin).as_vec3();
+    let lights = def
+        .lights
+        .iter()
+        .map(|l| light_from_def(l, origin))
+        .collect();
 
     let bounds = mesh.bounds();
     let camera = match &def.camera {
         Some(c) => {
-            let position = Vec3::from(c.position);
-            let look_at = Vec3::from(c.look_at);
+            let (position, look_at) = (local(c.position), local(c.look_at));
+            let distance = (DVec3::from(c.look_at) - DVec3::from(c.position)).length() as f32;
             Camera {
                 position,
                 look_at,
                 up: c.up.map(Vec3::from).unwrap_or(Vec3::Y),
                 vfov_deg: c.fov.unwrap_or(45.0),
                 lens_radius: c.lens_radius.unwrap_or(0.0),
-                focus_distance: c.focus_distance.unwrap_or((look_at - position).length()),
+                focus_distance: c.focus_distance.unwrap_or(distance),
             }
         }
         None => Camera::canonical(&bounds),
@@ -412,16 +422,17 @@ fn load_mesh_file(
     }
 }
 
-fn transform_of(m: &MeshDef) -> Affine3A {
+/// The mesh entry's transform in f64 (a translation of 1e6 keeps its last digits).
+fn transform_of(m: &MeshDef) -> DAffine3 {
     let scale = match m.scale {
-        Some(ScaleDef::Uniform(s)) => Vec3::splat(s),
-        Some(ScaleDef::PerAxis(s)) => Vec3::from(s),
-        None => Vec3::ONE,
+        Some(ScaleDef::Uniform(s)) => DVec3::splat(s),
+        Some(ScaleDef::PerAxis(s)) => DVec3::from(s),
+        None => DVec3::ONE,
     };
-    let r = m.rotate.unwrap_or([0.0; 3]).map(f32::to_radians);
-    let rotation = Quat::from_euler(EulerRot::ZYX, r[2], r[1], r[0]);
-    let translation = Vec3::from(m.translate.unwrap_or([0.0; 3]));
-    Affine3A::from_scale_rotation_translation(scale, rotation, translation)
+    let r = m.rotate.unwrap_or([0.0; 3]).map(f64::to_radians);
+    let rotation = DQuat::from_euler(EulerRot::ZYX, r[2], r[1], r[0]);
+    let translation = DVec3::from(m.translate.unwrap_or([0.0; 3]));
+    DAffine3::from_scale_rotation_translation(scale, rotation, translation)
 }
 
 fn material_from_def(name: &str, m: &MaterialDef) -> Material {
@@ -441,14 +452,16 @@ fn material_from_def(name: &str, m: &MaterialDef) -> Material {
     }
 }
 
-fn light_from_def(l: &LightDef) -> Light {
+/// The light of `l`, moved into the frame whose world position is `origin`.
+fn light_from_def(l: &LightDef, origin: DVec3) -> Light {
+    let local = |p: &[f64; 3]| (DVec3::from(*p) - origin).as_vec3();
     match l {
         LightDef::Point {
             position,
             color,
             intensity,
         } => Light::Point {
-            position: Vec3::from(*position),
+            position: local(position),
             color: color.map(Vec3::from).unwrap_or(Vec3::ONE),
             intensity: intensity.unwrap_or(1.0),
         },
@@ -460,7 +473,7 @@ fn light_from_def(l: &LightDef) -> Light {
             intensity,
             samples,
         } => Light::Rect {
-            corner: Vec3::from(*corner),
+            corner: local(corner),
             edge_u: Vec3::from(*edge_u),
             edge_v: Vec3::from(*edge_v),
             color: color.map(Vec3::from).unwrap_or(Vec3::ONE),

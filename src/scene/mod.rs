@@ -14,7 +14,7 @@ pub mod shapes;
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, bail};
-use glam::Vec3;
+use glam::{DVec3, Vec3};
 
 use crate::geometry::Aabb;
 pub use normals::NormalRule;
@@ -199,20 +199,40 @@ pub enum Environment {
 }
 
 /// Triangles with their shading normals and materials, in file order.
+///
+/// Positions are f32 relative to `origin`, an f64 point in world coordinates: files are read in
+/// f64 and placed near their own centre, so a mesh a million units from the world's origin keeps
+/// the precision it has at the origin (a float at 1e6 is 1/16 apart).
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Mesh {
-    /// Vertex positions, three per triangle.
+    /// Vertex positions relative to `origin`, three per triangle.
     pub triangles: Vec<[Vec3; 3]>,
     /// Shading normals, three per triangle (computed when the file has none).
     pub normals: Vec<[Vec3; 3]>,
     /// Index into [`Scene::materials`] per triangle.
     pub material_ids: Vec<u32>,
+    /// World position of the mesh's local origin (what the user sees is `origin + position`).
+    pub origin: DVec3,
 }
 
 impl Mesh {
     /// Appends another mesh, shifting its material ids by `material_offset`.
     pub fn append(&mut self, other: Mesh, material_offset: u32) {
-        self.triangles.extend(other.triangles);
+        if self.triangles.is_empty() {
+            self.origin = other.origin;
+        }
+        let delta = other.origin - self.origin;
+        if delta == DVec3::ZERO {
+            self.triangles.extend(other.triangles);
+        } else {
+            // Rebased in f64: each vertex rounds once, to the float nearest its position here.
+            self.triangles.extend(
+                other
+                    .triangles
+                    .iter()
+                    .map(|t| t.map(|v| (delta + v.as_dvec3()).as_vec3())),
+            );
+        }
         self.normals.extend(other.normals);
         self.material_ids
             .extend(other.material_ids.into_iter().map(|m| m + material_offset));
@@ -237,6 +257,7 @@ impl Mesh {
             triangles,
             normals,
             material_ids: vec![material; indices.len()],
+            origin: DVec3::ZERO,
         }
     }
 
@@ -248,17 +269,47 @@ impl Mesh {
             triangles,
             normals,
             material_ids,
+            origin: DVec3::ZERO,
         }
     }
 
     /// Applies an affine transform to positions and normals.
-    pub fn transform(&mut self, m: &glam::Affine3A) {
-        let normal_m = m.matrix3.inverse().transpose();
+    pub fn transform(&mut self, m: &glam::DAffine3) {
+        // World position T(origin + v) = T(origin) + L v: the origin moves in f64, the local
+        // positions only turn and scale.
+        let linear = m.matrix3.as_mat3();
+        let normal_m = glam::Mat3A::from(linear).inverse().transpose();
+        self.origin = m.transform_point3(self.origin);
         for t in &mut self.triangles {
-            *t = t.map(|v| m.transform_point3(v));
+            *t = t.map(|v| linear * v);
         }
         for n in &mut self.normals {
             *n = n.map(|v| Vec3::from(normal_m * glam::Vec3A::from(v)).normalize_or_zero());
+        }
+    }
+
+    /// Moves the local frame to `origin` (world coordinates), each vertex rounded once.
+    pub fn rebase(&mut self, origin: DVec3) {
+        let delta = self.origin - origin;
+        if delta != DVec3::ZERO {
+            for t in &mut self.triangles {
+                *t = t.map(|v| (delta + v.as_dvec3()).as_vec3());
+            }
+        }
+        self.origin = origin;
+    }
+
+    /// Puts the local frame back at the world's origin when the mesh spans or nears it (the
+    /// rule of [`local_frame`]), so a scene near the origin has the coordinates it is given.
+    pub fn settle_origin(&mut self) {
+        let b = self.bounds();
+        if self.origin == DVec3::ZERO || b.is_empty() {
+            return;
+        }
+        let (lo, hi) = (Vec3::from(b.min).as_dvec3(), Vec3::from(b.max).as_dvec3());
+        let centre = self.origin + 0.5 * (lo + hi);
+        if centre.abs().max_element() <= (hi - lo).max_element().max(1.0) {
+            self.rebase(DVec3::ZERO);
         }
     }
 
@@ -419,6 +470,35 @@ impl Scene {
     pub fn material_of(&self, prim: u32) -> &Material {
         &self.materials[self.mesh.material_ids[prim as usize] as usize]
     }
+}
+
+/// A local frame for positions read in f64: an origin near the finite ones' centre (the world
+/// origin for a mesh near it), and every position relative to it in f32 (non-finite ones stay
+/// non-finite).
+pub fn local_frame(positions: &[DVec3]) -> (DVec3, Vec<Vec3>) {
+    let (lo, hi) = positions
+        .iter()
+        .filter(|p| p.is_finite())
+        .fold((DVec3::INFINITY, DVec3::NEG_INFINITY), |(lo, hi), p| {
+            (lo.min(*p), hi.max(*p))
+        });
+    if !lo.cmple(hi).all() {
+        return (DVec3::ZERO, positions.iter().map(|p| p.as_vec3()).collect());
+    }
+    let (centre, extent) = (0.5 * (lo + hi), (hi - lo).max_element());
+    // A mesh that already spans or nears the origin stays where it is (nothing to gain, and
+    // the same floats as ever); one farther away is placed about its centre, rounded to a
+    // power of two no smaller than its size so local coordinates stay short.
+    let centre = if centre.abs().max_element() <= extent.max(1.0) {
+        DVec3::ZERO
+    } else {
+        let step = extent.max(f64::MIN_POSITIVE).log2().ceil().exp2();
+        (centre / step).round() * step
+    };
+    (
+        centre,
+        positions.iter().map(|p| (*p - centre).as_vec3()).collect(),
+    )
 }
 
 /// The file stem, for scene names.

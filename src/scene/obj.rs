@@ -159,6 +159,21 @@ pub fn load_from(
     }
     let mut next_face = 0usize;
 
+    // Positions are read in f64 and placed about one origin for the whole file (see
+    // `local_frame`): precise however far from the world's origin the file lies.
+    let all: Vec<glam::DVec3> = models
+        .iter()
+        .flat_map(|m| {
+            m.mesh
+                .positions
+                .chunks_exact(3)
+                .map(|p| glam::DVec3::new(p[0], p[1], p[2]))
+        })
+        .collect();
+    let (origin, local) = super::local_frame(&all);
+    drop(all);
+    let mut first_position = 0usize;
+
     let mut mesh = Mesh::default();
     for model in &models {
         let m = &model.mesh;
@@ -169,15 +184,13 @@ pub fn load_from(
                 default_id
             }
         };
-        let positions: Vec<Vec3> = m
-            .positions
-            .chunks_exact(3)
-            .map(|p| Vec3::new(p[0], p[1], p[2]))
-            .collect();
+        let count = m.positions.len() / 3;
+        let positions = &local[first_position..first_position + count];
+        first_position += count;
         let normals: Vec<Vec3> = m
             .normals
             .chunks_exact(3)
-            .map(|n| Vec3::new(n[0], n[1], n[2]))
+            .map(|n| Vec3::new(n[0] as f32, n[1] as f32, n[2] as f32))
             .collect();
         let has_normals = !m.normal_indices.is_empty() && m.normal_indices.len() == m.indices.len();
 
@@ -218,7 +231,7 @@ pub fn load_from(
             let idx: Vec<[u32; 3]> = faces.iter().map(|f| f.map(|c| m.indices[c])).collect();
             let rule = rule.unwrap_or(NormalRule::Groups);
             mesh.append(
-                Mesh::from_indexed(&positions, &idx, material, rule, &face_groups),
+                Mesh::from_indexed(positions, &idx, material, rule, &face_groups),
                 0,
             );
         }
@@ -226,6 +239,7 @@ pub fn load_from(
     if need_default || mats.is_empty() {
         mats.push(Material::default());
     }
+    mesh.origin = origin;
     Ok(ObjData {
         mesh,
         materials: mats,
@@ -234,7 +248,9 @@ pub fn load_from(
 }
 
 fn convert_material(m: &tobj::Material) -> Material {
-    let v = |a: Option<[f32; 3]>, d: Vec3| a.map(Vec3::from).unwrap_or(d);
+    // tobj reads in f64 (positions need it); material values are f32 here.
+    let v = |a: Option<[f64; 3]>, d: Vec3| a.map(|c| Vec3::from(c.map(|x| x as f32))).unwrap_or(d);
+    let f = |x: Option<f64>| x.map(|x| x as f32);
     let param = |k: &str| {
         m.unknown_param
             .get(k)
@@ -242,14 +258,13 @@ fn convert_material(m: &tobj::Material) -> Material {
     };
     let illum = m.illumination_model.unwrap_or(2) as u32;
     let specular = v(m.specular, Vec3::ZERO);
-    let opacity = m
-        .dissolve
+    let opacity = f(m.dissolve)
         .or_else(|| param("Tr").map(|tr| 1.0 - tr))
         .unwrap_or(1.0)
         .clamp(0.0, 1.0);
     let emission = m
         .emissive
-        .map(Vec3::from)
+        .map(|c| Vec3::from(c.map(|x| x as f32)))
         .or_else(|| {
             m.unknown_param.get("Ke").and_then(|s| {
                 let v: Vec<f32> = s
@@ -264,10 +279,10 @@ fn convert_material(m: &tobj::Material) -> Material {
         name: m.name.clone(),
         diffuse: v(m.diffuse, Vec3::splat(0.7)),
         specular,
-        shininess: m.shininess.unwrap_or(1.0),
+        shininess: f(m.shininess).unwrap_or(1.0),
         emission,
         opacity,
-        ior: m.optical_density.unwrap_or(1.0),
+        ior: f(m.optical_density).unwrap_or(1.0),
         mirror: if matches!(illum, 3 | 5 | 7) {
             specular
         } else {

@@ -32,7 +32,7 @@ fn scalar(p: &Property) -> Option<f64> {
 
 #[derive(Default)]
 struct Vertex {
-    p: [f32; 3],
+    p: [f64; 3],
     n: [f32; 3],
     has: u8, // bit 0..2 position, 3..5 normal
 }
@@ -55,7 +55,7 @@ impl PropertyAccess for Vertex {
             return PropertyAccessResult::UnsupportedType;
         };
         if slot < 3 {
-            self.p[slot] = v as f32;
+            self.p[slot] = v;
         } else {
             self.n[slot - 3] = v as f32;
         }
@@ -151,7 +151,13 @@ pub fn load_from(
     {
         bail!("{}: vertices need x, y and z properties", path.display());
     }
-    let positions: Vec<Vec3> = vertices.iter().map(|v| Vec3::from(v.p)).collect();
+    // Read in f64 and placed about their centre: precise however far from the origin.
+    let (origin, positions) = super::local_frame(
+        &vertices
+            .iter()
+            .map(|v| glam::DVec3::from(v.p))
+            .collect::<Vec<_>>(),
+    );
     let has_normals = vertices
         .first()
         .is_some_and(|v| v.has & 0b111000 == 0b111000);
@@ -190,10 +196,13 @@ pub fn load_from(
             mesh.triangles.push(tri);
             mesh.material_ids.push(0);
         }
+        mesh.origin = origin;
         Ok(mesh)
     } else {
         let rule = rule.unwrap_or(NormalRule::Crease(DEFAULT_CREASE_DEG));
-        Ok(Mesh::from_indexed(&positions, &tris, 0, rule, &[]))
+        let mut mesh = Mesh::from_indexed(&positions, &tris, 0, rule, &[]);
+        mesh.origin = origin;
+        Ok(mesh)
     }
 }
 

@@ -252,6 +252,12 @@ fn start_pose(
     if !ready {
         return;
     }
+    // Given in world coordinates; the scene is traced in its mesh's local frame.
+    let o = current.scene.mesh.origin;
+    let (eye, target) = (
+        (eye.as_dvec3() - o).as_vec3(),
+        (target.as_dvec3() - o).as_vec3(),
+    );
     let forward = (target - eye).normalize_or_zero();
     let up = if forward.cross(Vec3::Y).length_squared() > 1e-6 {
         Vec3::Y
