@@ -207,3 +207,47 @@ fn packets_give_every_ray_its_single_ray_hit() {
         }
     }
 }
+
+/// A ray with a NaN, infinite or zero direction, or a NaN origin, has nowhere to go: every
+/// query answers "nothing" without walking the tree (the visiting traversal reports no node).
+#[test]
+fn invalid_rays_get_no_hit_and_visit_no_node() {
+    let tris = shapes::icosphere(3);
+    let bvh = Bvh::build(&tris, &tracery::bvh::BuildOptions::sah());
+    let nan = f32::NAN;
+    for ray in [
+        Ray::new(Vec3::new(0.0, 0.0, -3.0), Vec3::new(nan, 0.0, 1.0)),
+        Ray::new(
+            Vec3::new(0.0, 0.0, -3.0),
+            Vec3::new(0.0, f32::INFINITY, 1.0),
+        ),
+        Ray::new(Vec3::new(0.0, 0.0, -3.0), Vec3::ZERO),
+        Ray::new(Vec3::new(nan, 0.0, -3.0), Vec3::Z),
+    ] {
+        assert!(bvh.intersect(&ray, f32::INFINITY).is_none(), "{ray:?}");
+        assert!(!bvh.occluded(&ray, f32::INFINITY), "{ray:?}");
+        assert_eq!(
+            bvh.transmittance(&ray, f32::INFINITY, |_, _| Vec3::ZERO),
+            Vec3::ONE
+        );
+        let mut visits = 0;
+        assert!(
+            bvh.intersect_visit(&ray, f32::INFINITY, |_| visits += 1)
+                .is_none()
+        );
+        assert_eq!(visits, 0, "{ray:?}: no node visited");
+        let mut out = [Some(tracery::bvh::Hit {
+            t: 1.0,
+            prim: 0,
+            u: 0.0,
+            v: 0.0,
+        })];
+        bvh.intersect_packet(&[ray], f32::INFINITY, &mut out);
+        assert!(out[0].is_none(), "{ray:?}");
+    }
+    // The same ray made valid hits: the checks above are not vacuous.
+    assert!(
+        bvh.intersect(&Ray::new(Vec3::new(0.0, 0.0, -3.0), Vec3::Z), f32::INFINITY)
+            .is_some()
+    );
+}

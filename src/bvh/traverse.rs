@@ -112,10 +112,11 @@ impl Bvh {
         t_max: f32,
         mut visit: impl FnMut(Visit),
     ) -> Option<Hit> {
-        let ray = &PreparedRay::new(ray);
-        if self.tris.is_empty() || t_max.is_nan() || t_max <= 0.0 {
+        // A zero, NaN or infinite ray has nowhere to go: no hit, and no node visited.
+        if self.tris.is_empty() || t_max.is_nan() || t_max <= 0.0 || !ray.is_valid() {
             return None;
         }
+        let ray = &PreparedRay::new(ray);
         let mut best = Best {
             t: t_max,
             slot: usize::MAX,
