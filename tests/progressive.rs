@@ -223,3 +223,73 @@ fn heatmap_counts_the_nodes_the_traversal_enters() {
     assert_eq!(heat_color(2.0), heat_color(1.0));
     assert_eq!(heat_color(f32::NAN), heat_color(0.0));
 }
+
+/// Nodes from the root to the leaf holding triangle `prim`, both included (walked over the
+/// node array, not by a traversal).
+fn path_to_prim(bvh: &Bvh, prim: u32) -> Option<usize> {
+    fn walk(bvh: &Bvh, node: usize, prim: u32, depth: usize) -> Option<usize> {
+        let n = &bvh.nodes[node];
+        if n.is_leaf() {
+            let slots = n.first as usize..(n.first + n.count) as usize;
+            return bvh.prim_ids[slots].contains(&prim).then_some(depth + 1);
+        }
+        walk(bvh, n.first as usize, prim, depth + 1)
+            .or_else(|| walk(bvh, n.first as usize + 1, prim, depth + 1))
+    }
+    walk(bvh, 0, prim, 0)
+}
+
+/// Nodes whose box (grown a little) the ray crosses before `t_end`: every node of the array
+/// tested on its own with a plain slab test. No traversal enters another.
+fn nodes_crossed(bvh: &Bvh, ray: &Ray, t_end: f32) -> usize {
+    let mut count = 0;
+    for (i, n) in bvh.nodes.iter().enumerate() {
+        if i == 1 {
+            continue; // the unused slot
+        }
+        let (mut t0, mut t1) = (0.0f32, t_end * 1.001 + 1e-4);
+        for a in 0..3 {
+            let pad = 1e-4 * (1.0 + n.max[a].abs().max(n.min[a].abs()));
+            let inv = 1.0 / ray.dir[a];
+            let lo = (n.min[a] - pad - ray.origin[a]) * inv;
+            let hi = (n.max[a] + pad - ray.origin[a]) * inv;
+            let (lo, hi) = if lo <= hi { (lo, hi) } else { (hi, lo) };
+            if !lo.is_nan() {
+                t0 = t0.max(lo);
+            }
+            if !hi.is_nan() {
+                t1 = t1.min(hi);
+            }
+        }
+        if t0 <= t1 {
+            count += 1;
+        }
+    }
+    count
+}
+
+/// The heatmap's count against bounds found without the traversal: at least the nodes from
+/// the root to the leaf of the hit (all of them are entered to find it), at most the nodes
+/// whose boxes the ray crosses at all (before the hit is known, a traversal may enter boxes
+/// that lie beyond it, never one the ray misses).
+#[test]
+fn heatmap_cost_lies_between_the_hit_path_and_the_boxes_crossed() {
+    let (scene, bvh) = scene_and_bvh(Some("assets/scenes/cornell_mirror_glass.toml"));
+    let cam = CameraRays::new(&scene.camera, 48, 36);
+    let mut checked = 0;
+    for y in 0..36 {
+        for x in 0..48 {
+            let ray = cam.pinhole(x as f32 + 0.5, y as f32 + 0.5);
+            let cost = pixel_cost(&bvh, &cam, x, y).nodes as usize;
+            let hit = bvh.intersect(&ray, f32::INFINITY);
+            let most = nodes_crossed(&bvh, &ray, f32::INFINITY);
+            assert!(cost <= most, "pixel {x},{y}: {cost} nodes, {most} crossed");
+            if let Some(h) = hit {
+                let least = path_to_prim(&bvh, h.prim).unwrap();
+                assert!(cost >= least, "pixel {x},{y}: {cost} nodes, path {least}");
+                checked += 1;
+            }
+        }
+    }
+    assert!(checked > 1000, "{checked} hits checked");
+}
