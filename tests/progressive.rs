@@ -187,6 +187,21 @@ fn debug_path_hits_equal_closest_hits() {
                 if let Some(root) = seg.nodes.first() {
                     assert_eq!(root.found_hit, seg.hit.is_some());
                 }
+                // Checked without the traversal too: every node on the way from the root to
+                // the hit's leaf is among them, and the ray crosses every box among them.
+                if let Some(h) = seg.hit {
+                    let path = nodes_on_path(&bvh, h.prim);
+                    for n in &path {
+                        assert!(seg.nodes.iter().any(|e| e.index == *n), "node {n} missing");
+                    }
+                }
+                for e in &seg.nodes {
+                    assert!(
+                        crosses(&bvh.nodes[e.index as usize], &seg.ray),
+                        "node {}",
+                        e.index
+                    );
+                }
                 kinds[seg.kind as usize] += 1;
             }
             bounces += path.segments.len() - 1;
@@ -224,48 +239,53 @@ fn heatmap_counts_the_nodes_the_traversal_enters() {
     assert_eq!(heat_color(f32::NAN), heat_color(0.0));
 }
 
-/// Nodes from the root to the leaf holding triangle `prim`, both included (walked over the
-/// node array, not by a traversal).
-fn path_to_prim(bvh: &Bvh, prim: u32) -> Option<usize> {
-    fn walk(bvh: &Bvh, node: usize, prim: u32, depth: usize) -> Option<usize> {
-        let n = &bvh.nodes[node];
-        if n.is_leaf() {
-            let slots = n.first as usize..(n.first + n.count) as usize;
-            return bvh.prim_ids[slots].contains(&prim).then_some(depth + 1);
+/// The indices of the nodes from the root to the leaf holding triangle `prim`.
+fn nodes_on_path(bvh: &Bvh, prim: u32) -> Vec<u32> {
+    fn walk(bvh: &Bvh, node: u32, prim: u32, path: &mut Vec<u32>) -> bool {
+        path.push(node);
+        let n = &bvh.nodes[node as usize];
+        let found = if n.is_leaf() {
+            bvh.prim_ids[n.first as usize..(n.first + n.count) as usize].contains(&prim)
+        } else {
+            walk(bvh, n.first, prim, path) || walk(bvh, n.first + 1, prim, path)
+        };
+        if !found {
+            path.pop();
         }
-        walk(bvh, n.first as usize, prim, depth + 1)
-            .or_else(|| walk(bvh, n.first as usize + 1, prim, depth + 1))
+        found
     }
-    walk(bvh, 0, prim, 0)
+    let mut path = Vec::new();
+    walk(bvh, 0, prim, &mut path);
+    path
 }
 
-/// Nodes whose box (grown a little) the ray crosses before `t_end`: every node of the array
-/// tested on its own with a plain slab test. No traversal enters another.
-fn nodes_crossed(bvh: &Bvh, ray: &Ray, t_end: f32) -> usize {
-    let mut count = 0;
-    for (i, n) in bvh.nodes.iter().enumerate() {
-        if i == 1 {
-            continue; // the unused slot
+/// True when the ray crosses the node's box (grown a little), by a plain slab test.
+fn crosses(n: &tracery::bvh::BvhNode, ray: &Ray) -> bool {
+    let (mut t0, mut t1) = (0.0f32, f32::INFINITY);
+    for a in 0..3 {
+        let pad = 1e-4 * (1.0 + n.max[a].abs().max(n.min[a].abs()));
+        let inv = 1.0 / ray.dir[a];
+        let lo = (n.min[a] - pad - ray.origin[a]) * inv;
+        let hi = (n.max[a] + pad - ray.origin[a]) * inv;
+        let (lo, hi) = if lo <= hi { (lo, hi) } else { (hi, lo) };
+        if !lo.is_nan() {
+            t0 = t0.max(lo);
         }
-        let (mut t0, mut t1) = (0.0f32, t_end * 1.001 + 1e-4);
-        for a in 0..3 {
-            let pad = 1e-4 * (1.0 + n.max[a].abs().max(n.min[a].abs()));
-            let inv = 1.0 / ray.dir[a];
-            let lo = (n.min[a] - pad - ray.origin[a]) * inv;
-            let hi = (n.max[a] + pad - ray.origin[a]) * inv;
-            let (lo, hi) = if lo <= hi { (lo, hi) } else { (hi, lo) };
-            if !lo.is_nan() {
-                t0 = t0.max(lo);
-            }
-            if !hi.is_nan() {
-                t1 = t1.min(hi);
-            }
-        }
-        if t0 <= t1 {
-            count += 1;
+        if !hi.is_nan() {
+            t1 = t1.min(hi);
         }
     }
-    count
+    t0 <= t1
+}
+
+/// Nodes whose box (grown a little) the ray crosses: every node of the array tested on its own
+/// with a plain slab test. No traversal enters another.
+fn nodes_crossed(bvh: &Bvh, ray: &Ray) -> usize {
+    bvh.nodes
+        .iter()
+        .enumerate()
+        .filter(|&(i, n)| i != 1 && crosses(n, ray)) // slot 1 is unused
+        .count()
 }
 
 /// The heatmap's count against bounds found without the traversal: at least the nodes from
@@ -282,10 +302,11 @@ fn heatmap_cost_lies_between_the_hit_path_and_the_boxes_crossed() {
             let ray = cam.pinhole(x as f32 + 0.5, y as f32 + 0.5);
             let cost = pixel_cost(&bvh, &cam, x, y).nodes as usize;
             let hit = bvh.intersect(&ray, f32::INFINITY);
-            let most = nodes_crossed(&bvh, &ray, f32::INFINITY);
+            let most = nodes_crossed(&bvh, &ray);
             assert!(cost <= most, "pixel {x},{y}: {cost} nodes, {most} crossed");
             if let Some(h) = hit {
-                let least = path_to_prim(&bvh, h.prim).unwrap();
+                let least = nodes_on_path(&bvh, h.prim).len();
+                assert!(least > 0, "the hit's triangle is in some leaf");
                 assert!(cost >= least, "pixel {x},{y}: {cost} nodes, path {least}");
                 checked += 1;
             }
