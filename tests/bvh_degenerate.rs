@@ -175,3 +175,55 @@ fn stats_describe_the_tree() {
     let median = Bvh::build(&tris, &BuildOptions::median()).stats.sah_cost;
     assert!(sah < median, "sah {sah} median {median}");
 }
+
+/// Triangles at x = 2^-126 13^k up to 1e38 (69 of them, f32's normal range), one per leaf:
+/// each is 13 times the next, so binned SAH with 12 bins finds only the largest outside the
+/// first bin and peels it off alone at every level: 68 levels deep. The
+/// builders switch to count splits at depth `MAX_DEPTH - 32` = 64, which this input reaches,
+/// the tree stays within `MAX_DEPTH`, and every ray still finds brute force's hit. (Before the
+/// bins were fixed, a centroid went to its nearest bin boundary's bin, the two largest were
+/// peeled together where their ratio allowed, and this input stopped at 48 levels.)
+#[test]
+fn a_geometric_row_of_triangles_reaches_the_count_split_and_stays_within_the_depth() {
+    let xs: Vec<f32> = (0..)
+        .map(|k| f32::MIN_POSITIVE as f64 * 13f64.powi(k))
+        .take_while(|&x| x < 1e38)
+        .map(|x| x as f32)
+        .collect();
+    let tris: Vec<[Vec3; 3]> = xs
+        .iter()
+        .map(|&x| {
+            [
+                Vec3::new(x, 0.0, 0.0),
+                Vec3::new(x, 1.0, 0.0),
+                Vec3::new(x, 0.0, 1.0),
+            ]
+        })
+        .collect();
+    // One triangle per leaf: nothing stops the peeling but the depth.
+    let options = BuildOptions {
+        max_leaf_size: 1,
+        ..BuildOptions::sah()
+    };
+    let bvh = Bvh::build(&tris, &options);
+    check_invariants(&bvh);
+    let levels = bvh.stats.levels as usize;
+    eprintln!("geometric row: {} triangles, {levels} levels", tris.len());
+    assert!(
+        levels > MAX_DEPTH - 32,
+        "the input must reach the count split ({levels} levels)"
+    );
+    let bf = tracery::bvh::BruteForce::new(&tris);
+    for &x in &xs {
+        for ray in [
+            Ray::new(Vec3::new(x, 0.25, -1.0), Vec3::Z),
+            Ray::new(Vec3::new(-1.0, 0.25, 0.25), Vec3::X),
+        ] {
+            assert_eq!(
+                bvh.intersect(&ray, f32::INFINITY).map(|h| h.prim),
+                bf.closest(&ray, f32::INFINITY).map(|h| h.prim),
+                "{ray:?}"
+            );
+        }
+    }
+}

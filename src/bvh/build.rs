@@ -493,8 +493,11 @@ fn bin_index(c: f32, lo: f32, scale: f32, last: u32) -> u32 {
     // Round `v - 0.5` to an integer by adding 1.5 * 2^23, where the spacing of f32 values is
     // exactly 1, and read the integer back from the bits: cheaper than a saturating cast. `v`
     // lies in [0, bins]; NaN or anything out of range lands in some valid bin after the
-    // `min`, so this never indexes out of range.
+    // `min`, so this never indexes out of range. The `- 0.5` is applied to `v` first: added to
+    // the constant (`MAGIC - 0.5`, as an earlier version did) it vanished, since f32 values at
+    // that magnitude are 1 apart, and every centroid went to the nearest bin boundary's bin (bin
+    // 0 half as wide, the last one and a half).
     const MAGIC: f32 = 12_582_912.0;
-    let v = (c - lo) * scale + (MAGIC - 0.5);
+    let v = ((c - lo) * scale - 0.5) + MAGIC;
     v.to_bits().wrapping_sub(MAGIC.to_bits()).min(last)
 }
