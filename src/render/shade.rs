@@ -29,7 +29,7 @@ pub struct Tracer<'a> {
     /// The environment, loaded (black when the plan has none).
     pub env: &'a EnvironmentMap,
     /// What the path integrator samples besides the scene's lights (empty for `direct`).
-    pub lights: LightSet,
+    pub lights: std::sync::Arc<LightSet>,
 }
 
 /// Where a ray met a surface.
@@ -60,6 +60,26 @@ impl<'a> Tracer<'a> {
             Integrator::Path => LightSet::new(scene),
             Integrator::Direct => LightSet::default(),
         };
+        Self::with_lights(
+            scene,
+            bvh,
+            plan,
+            max_depth,
+            env,
+            std::sync::Arc::new(lights),
+        )
+    }
+
+    /// [`Tracer::new`] with the light set already found (the viewer keeps one per scene
+    /// instead of finding it for every slice of tracing).
+    pub fn with_lights(
+        scene: &'a Scene,
+        bvh: &'a Bvh,
+        plan: RenderPlan,
+        max_depth: u32,
+        env: &'a EnvironmentMap,
+        lights: std::sync::Arc<LightSet>,
+    ) -> Self {
         Self {
             scene,
             bvh,

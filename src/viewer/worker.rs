@@ -31,8 +31,9 @@ use crate::bvh::Bvh;
 use crate::camera::CameraRays;
 use crate::render::cache::{RenderCache, TILE};
 use crate::render::heatmap::heatmap_rgba8;
+use crate::render::path::LightSet;
 use crate::render::resample::{Filter, resize_rgba8};
-use crate::render::{EnvironmentMap, Progressive, RayCounts, RenderPlan, Tracer};
+use crate::render::{EnvironmentMap, Integrator, Progressive, RayCounts, RenderPlan, Tracer};
 use crate::scene::Scene;
 
 /// While the view stays the same, the moving picture is shown again this often.
@@ -303,6 +304,8 @@ struct State {
     last_shown: Option<Instant>,
     /// Show the picture again though nothing was traced (exposure or display changed).
     reshow: bool,
+    /// The light set of the last scene traced (by scene and integrator).
+    lights: LightCache,
     done: bool,
 }
 
@@ -325,6 +328,7 @@ fn run(rx: Receiver<Job>, shared: Arc<Shared>) {
         still_start: Instant::now(),
         last_shown: None,
         reshow: false,
+        lights: None,
         done: true,
     };
     loop {
@@ -429,14 +433,37 @@ fn to_display(rgba: Vec<u8>, size: UVec2, job: &Job) -> Vec<u8> {
     resize_rgba8(rgba, size.x, size.y, d.x, d.y, Filter::Nearest)
 }
 
-/// The tracer of a job (`light_samples`: a cap on area-light shadow rays).
-fn tracer(job: &Job, light_samples: Option<u32>) -> Tracer<'_> {
+/// The tracer of a job (`light_samples`: a cap on area-light shadow rays) with the light set
+/// kept for its scene.
+fn tracer<'a>(job: &'a Job, light_samples: Option<u32>, lights: Arc<LightSet>) -> Tracer<'a> {
     let mut plan: RenderPlan = job.settings.plan(&job.scene);
     if light_samples.is_some() {
         plan.max_light_samples = light_samples;
     }
-    Tracer::new(&job.scene, &job.bvh, plan, job.settings.max_depth, &job.env)
+    let max_depth = job.settings.max_depth;
+    Tracer::with_lights(&job.scene, &job.bvh, plan, max_depth, &job.env, lights)
 }
+
+/// The path integrator's light set for the job's scene: found once per scene and integrator,
+/// not for every slice (with many emissive triangles it walks them all).
+fn lights_for(cache: &mut LightCache, job: &Job) -> Arc<LightSet> {
+    let integrator = job.settings.plan(&job.scene).integrator;
+    let key = (job.content.scene, integrator);
+    if let Some((k, lights)) = cache.as_ref()
+        && *k == key
+    {
+        return lights.clone();
+    }
+    let lights = Arc::new(match integrator {
+        Integrator::Path => LightSet::new(&job.scene),
+        Integrator::Direct => LightSet::default(),
+    });
+    *cache = Some((key, lights.clone()));
+    lights
+}
+
+/// The light set kept for a scene (its generation) and integrator.
+type LightCache = Option<((u64, Integrator), Arc<LightSet>)>;
 
 fn same_view(a: &CameraRays, b: &CameraRays) -> bool {
     a.eye == b.eye
@@ -484,7 +511,7 @@ fn moving_step(st: &mut State, job: &Job, shared: &Shared, stale: &dyn Fn() -> b
     };
     let holes_until = tracing_from + 4 * budget;
     let content_stale = || !shared.slot.lock().is_ok_and(|s| s.accepts(job.generation));
-    let t = tracer(job, Some(1));
+    let t = tracer(job, Some(1), lights_for(&mut st.lights, job));
     let mut rays = RayCounts::default();
     let chunk = ((size.x * size.y) as usize / 64).clamp(1024, 16384);
     let mut traced = 0u64;
@@ -589,7 +616,7 @@ fn seed_moving(st: &mut State, job: &Job, shared: &Shared, rgba: &[u8]) {
         m.cache.set_colours(rgba);
         return;
     }
-    let t = tracer(job, Some(1));
+    let t = tracer(job, Some(1), lights_for(&mut st.lights, job));
     let stop = || shared.newest.load(Ordering::SeqCst) != job.generation;
     if m.cache.seed(&t, cam, rgba, &stop) {
         m.view = *cam;
@@ -658,7 +685,7 @@ fn still_step(st: &mut State, job: &Job, shared: &Shared, stale: &dyn Fn() -> bo
     };
     let mut completed = false;
     if film.passes() < target {
-        let t = tracer(job, None);
+        let t = tracer(job, None, lights_for(&mut st.lights, job));
         let r = step_mode(film, &job.settings, &t, &job.bvh, cam, STILL_SLICE, target);
         if stale() {
             return;
