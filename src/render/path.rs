@@ -20,7 +20,7 @@ use std::collections::HashMap;
 use glam::{Vec2, Vec3};
 
 use super::RayCounts;
-use super::shade::{Surface, Tracer, brdf, reflect, transmit};
+use super::shade::{RectSample, Surface, Tracer, brdf, rect_sample, reflect, transmit};
 use crate::bvh::Hit;
 use crate::geometry::{Ray, offset_ray_origin};
 use crate::sampling::{PathSampler, concentric_disk};
@@ -337,10 +337,7 @@ impl Tracer<'_> {
         if depth > 0 {
             return 1;
         }
-        self.plan
-            .max_light_samples
-            .map_or(samples, |cap| samples.min(cap.max(1)))
-            .max(1)
+        self.capped_samples(samples).max(1)
     }
 
     /// Next-event estimation at `s`: every point and rectangle light, and one sample of the
@@ -354,7 +351,7 @@ impl Tracer<'_> {
         counts: &mut RayCounts,
     ) -> Vec3 {
         let m = s.material;
-        if m.diffuse == Vec3::ZERO && m.specular == Vec3::ZERO {
+        if !m.reflects() {
             return Vec3::ZERO;
         }
         let origin = offset_ray_origin(s.p, s.p_err, s.ng);
@@ -365,16 +362,7 @@ impl Tracer<'_> {
                     position,
                     color,
                     intensity,
-                } => {
-                    let to = position - s.p;
-                    let d2 = to.length_squared();
-                    let wi = to / d2.sqrt();
-                    if s.n.dot(wi) <= 0.0 || s.ng.dot(to) <= 0.0 {
-                        continue;
-                    }
-                    let pass = self.shadow(origin, position - origin, 1.0, counts);
-                    brdf(m, s.n, wi, wo) * s.n.dot(wi) * color * intensity * pass / d2
-                }
+                } => self.point_light(s, origin, wo, position, color * intensity, counts),
                 Light::Rect {
                     corner,
                     edge_u,
@@ -390,16 +378,12 @@ impl Tracer<'_> {
                     let visible = self.lights.visible[i];
                     let mut acc = Vec3::ZERO;
                     for _ in 0..n {
-                        let u = rng.next_2d();
-                        let q = corner + u.x * edge_u + u.y * edge_v;
-                        let to = q - s.p;
-                        let d2 = to.length_squared();
-                        let wi = to / d2.sqrt();
-                        let cos_l = -ln.dot(wi);
-                        let cos = s.n.dot(wi);
-                        if cos <= 0.0 || cos_l <= 0.0 || s.ng.dot(to) <= 0.0 {
+                        let Some(RectSample { q, wi, d2, cos_l }) =
+                            rect_sample(s, corner, edge_u, edge_v, ln, rng.next_2d())
+                        else {
                             continue;
-                        }
+                        };
+                        let cos = s.n.dot(wi);
                         let weight = if visible {
                             let p_light = d2 / (cos_l * area);
                             power(n as f32, p_light, cos * std::f32::consts::FRAC_1_PI)
@@ -451,7 +435,7 @@ impl Tracer<'_> {
         counts: &mut RayCounts,
     ) -> Vec3 {
         let m = s.material;
-        if m.diffuse == Vec3::ZERO && m.specular == Vec3::ZERO {
+        if !m.reflects() {
             return Vec3::ZERO;
         }
         if depth == self.max_depth && self.lights.owner.is_empty() && !self.plan.environment {

@@ -207,7 +207,7 @@ impl<'a> Tracer<'a> {
     /// Light arriving directly from the light sources, reflected towards `wo`.
     fn direct(&self, s: &Surface, wo: Vec3, rng: &mut PathSampler, counts: &mut RayCounts) -> Vec3 {
         let m = s.material;
-        if m.diffuse == Vec3::ZERO && m.specular == Vec3::ZERO {
+        if !m.reflects() {
             return Vec3::ZERO;
         }
         let origin = offset_ray_origin(s.p, s.p_err, s.ng);
@@ -218,18 +218,7 @@ impl<'a> Tracer<'a> {
                     position,
                     color,
                     intensity,
-                } => {
-                    // The light's direction and distance from the surface point itself; only
-                    // the shadow ray starts from the offset origin.
-                    let to = position - s.p;
-                    let d2 = to.length_squared();
-                    let wi = to / d2.sqrt();
-                    if s.n.dot(wi) <= 0.0 || s.ng.dot(to) <= 0.0 {
-                        continue;
-                    }
-                    let pass = self.shadow(origin, position - origin, 1.0, counts);
-                    brdf(m, s.n, wi, wo) * s.n.dot(wi) * color * intensity * pass / d2
-                }
+                } => self.point_light(s, origin, wo, position, color * intensity, counts),
                 Light::Rect {
                     corner,
                     edge_u,
@@ -241,21 +230,14 @@ impl<'a> Tracer<'a> {
                     let normal = edge_u.cross(edge_v);
                     let area = normal.length();
                     let ln = normal / area;
-                    let samples = self
-                        .plan
-                        .max_light_samples
-                        .map_or(samples, |cap| samples.min(cap.max(1)));
+                    let samples = self.capped_samples(samples);
                     let mut acc = Vec3::ZERO;
                     for _ in 0..samples {
-                        let u = rng.next_2d();
-                        let q = corner + u.x * edge_u + u.y * edge_v;
-                        let to = q - s.p;
-                        let d2 = to.length_squared();
-                        let wi = to / d2.sqrt();
-                        let cos_l = -ln.dot(wi);
-                        if s.n.dot(wi) <= 0.0 || cos_l <= 0.0 || s.ng.dot(to) <= 0.0 {
+                        let Some(RectSample { q, wi, d2, cos_l }) =
+                            rect_sample(s, corner, edge_u, edge_v, ln, rng.next_2d())
+                        else {
                             continue;
-                        }
+                        };
                         // Stop just short of the light so its own quad does not shadow it.
                         let pass = self.shadow(origin, q - origin, 1.0 - 1e-4, counts);
                         acc += brdf(m, s.n, wi, wo) * s.n.dot(wi) * cos_l * area / d2 * pass;
@@ -265,6 +247,36 @@ impl<'a> Tracer<'a> {
             };
         }
         sum
+    }
+
+    /// Light a point light of radiant intensity `intensity` sends to `s` and `s` reflects
+    /// towards `wo`, shadow ray from `origin` included (zero from behind the surface).
+    pub(super) fn point_light(
+        &self,
+        s: &Surface,
+        origin: Vec3,
+        wo: Vec3,
+        position: Vec3,
+        intensity: Vec3,
+        counts: &mut RayCounts,
+    ) -> Vec3 {
+        // The light's direction and distance from the surface point itself; only the shadow
+        // ray starts from the offset origin.
+        let to = position - s.p;
+        let d2 = to.length_squared();
+        let wi = to / d2.sqrt();
+        if s.n.dot(wi) <= 0.0 || s.ng.dot(to) <= 0.0 {
+            return Vec3::ZERO;
+        }
+        let pass = self.shadow(origin, position - origin, 1.0, counts);
+        brdf(s.material, s.n, wi, wo) * s.n.dot(wi) * intensity * pass / d2
+    }
+
+    /// A rectangle light's `samples` after the plan's cap.
+    pub(super) fn capped_samples(&self, samples: u32) -> u32 {
+        self.plan
+            .max_light_samples
+            .map_or(samples, |cap| samples.min(cap.max(1)))
     }
 
     /// Fraction of light passing from `origin + to * t_max` back to `origin`, per channel.
@@ -318,6 +330,39 @@ impl<'a> Tracer<'a> {
         }
         pass
     }
+}
+
+/// A point on a rectangle light seen from a surface.
+pub(super) struct RectSample {
+    /// The point.
+    pub(super) q: Vec3,
+    /// Unit direction from the surface to it.
+    pub(super) wi: Vec3,
+    /// Squared distance.
+    pub(super) d2: f32,
+    /// Cosine at the light (positive: its front faces the surface).
+    pub(super) cos_l: f32,
+}
+
+/// The point `u` of the rectangle `corner + u.x edge_u + u.y edge_v` (unit normal `ln`) as seen
+/// from `s`, or `None` when it lies behind the surface or shows the surface its back.
+pub(super) fn rect_sample(
+    s: &Surface,
+    corner: Vec3,
+    edge_u: Vec3,
+    edge_v: Vec3,
+    ln: Vec3,
+    u: glam::Vec2,
+) -> Option<RectSample> {
+    let q = corner + u.x * edge_u + u.y * edge_v;
+    let to = q - s.p;
+    let d2 = to.length_squared();
+    let wi = to / d2.sqrt();
+    let cos_l = -ln.dot(wi);
+    if s.n.dot(wi) <= 0.0 || cos_l <= 0.0 || s.ng.dot(to) <= 0.0 {
+        return None;
+    }
+    Some(RectSample { q, wi, d2, cos_l })
 }
 
 /// Blinn-Phong, energy-normalized: `Kd / pi + Ks (Ns + 8) / (8 pi) cos^Ns(n, h)`.

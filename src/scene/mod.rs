@@ -72,6 +72,11 @@ impl Material {
         self.mirror.max_element() > 0.0
     }
 
+    /// True when the surface reflects light (some diffuse or specular colour).
+    pub fn reflects(&self) -> bool {
+        self.diffuse != Vec3::ZERO || self.specular != Vec3::ZERO
+    }
+
     /// True when the surface emits light.
     pub fn is_emissive(&self) -> bool {
         self.emission.max_element() > 0.0
