@@ -37,7 +37,7 @@ pub struct ConvergenceArgs {
     /// Samplers to compare, the first one sets the default target error.
     #[arg(long, value_delimiter = ',', default_value = "random,sobol")]
     samplers: Vec<SamplerKind>,
-    /// RMSE at which to compare the times (default: the first peer's at its last point, else
+    /// RMSE at which to compare the times (default: the first peer's mean at its largest spp, else
     /// the first sampler's at --max-spp).
     #[arg(long)]
     target_rmse: Option<f64>,
@@ -73,10 +73,11 @@ pub fn run(a: ConvergenceArgs) -> Result<()> {
         .map(|p| convergence::load_reference(p, a.width, a.height))
         .transpose()?;
     let target_rmse = a.target_rmse.or_else(|| {
+        // The first peer's mean error over its seeds at its largest sample count.
         peers
             .first()
-            .and_then(|p| p.points.iter().max_by(|x, y| x.1.total_cmp(&y.1)))
-            .map(|q| q.2)
+            .and_then(|p| p.means().last().copied())
+            .map(|(_, rmse)| rmse)
     });
     let config = ConvergenceConfig {
         width: a.width,
