@@ -379,14 +379,14 @@ fn finish(
         keep_awake.0 = true;
     }
     // The gizmos switched on are in the picture before it is saved: their BVH indexed, the
-    // debug ray traced, and two frames drawn with them since.
+    // debug ray traced, and eight frames drawn with them since.
     if script.script.screenshot.is_some() {
         if !gizmos.ready() {
             script.gizmo_frames = 0;
             return;
         }
         script.gizmo_frames += 1;
-        if script.gizmo_frames < 2 {
+        if script.gizmo_frames < 8 {
             return;
         }
     }
