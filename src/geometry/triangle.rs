@@ -97,20 +97,87 @@ fn sheared<const KX: usize, const KY: usize, const KZ: usize>(
     let t_scaled = (u * a_z + v * b_z + w * c_z) * sz;
     let inv = 1.0 / det;
     let t = t_scaled * inv;
+    // Products of three coordinates beyond f32's range (an object ~1e13 across or more): the
+    // f32 distance or its error bound is infinite (or NaN), so the f64 path decides.
+    let overflow = || {
+        intersect_exact(
+            [(ax, ay), (bx, by), (cx, cy)],
+            [a_z, b_z, c_z],
+            ray.shear,
+            t_max,
+        )
+    };
+    if !(t_scaled.abs() < f32::INFINITY) {
+        return overflow();
+    }
     if !(t > 0.0 && t < t_max) {
         return None;
     }
-    if t <= t_error_bound(
+    let bound = t_error_bound(
         [ax, bx, cx],
         [ay, by, cy],
         [a_z, b_z, c_z],
         ray.shear,
         [u, v, w],
         inv,
-    ) {
+    );
+    if !(bound < f32::INFINITY) {
+        return overflow();
+    }
+    if t <= bound {
         return None;
     }
     Some((t, v * inv, w * inv))
+}
+
+/// The arithmetic [`t_error_bound`] needs, so that one statement of the bound serves the f32
+/// fast path and the f64 exact path.
+trait BoundFloat:
+    Copy + PartialOrd + std::ops::Add<Output = Self> + std::ops::Mul<Output = Self>
+{
+    fn abs(self) -> Self;
+    fn max(self, other: Self) -> Self;
+    /// `gamma(n)` (the f32 rounding bound: the coordinates were rounded in f32 either way).
+    fn gamma(n: u32) -> Self;
+    fn from_f32(x: f32) -> Self;
+}
+
+impl BoundFloat for f32 {
+    #[inline(always)]
+    fn abs(self) -> Self {
+        f32::abs(self)
+    }
+    #[inline(always)]
+    fn max(self, other: Self) -> Self {
+        f32::max(self, other)
+    }
+    #[inline(always)]
+    fn gamma(n: u32) -> Self {
+        super::gamma(n)
+    }
+    #[inline(always)]
+    fn from_f32(x: f32) -> Self {
+        x
+    }
+}
+
+impl BoundFloat for f64 {
+    #[inline(always)]
+    fn abs(self) -> Self {
+        f64::abs(self)
+    }
+    #[inline(always)]
+    fn max(self, other: Self) -> Self {
+        f64::max(self, other)
+    }
+    #[inline(always)]
+    fn gamma(n: u32) -> Self {
+        super::gamma(n) as f64
+    }
+    #[inline(always)]
+    fn from_f32(x: f32) -> Self {
+        x as f64
+    }
 }
 
 /// Bound on the rounding error of the test's distance `t` (Pharr, Jakob and Humphreys, pbrt
@@ -127,30 +194,32 @@ fn sheared<const KX: usize, const KY: usize, const KZ: usize>(
 /// difference `v - o` before the shear is rounded too). An axis-aligned ray (`sx = sy = 0`)
 /// then keeps a tight bound, and a needle of aspect 1e6 hit head-on is not rejected.
 #[inline(always)]
-fn t_error_bound(
-    x: [f32; 3],
-    y: [f32; 3],
-    z: [f32; 3],
-    shear: [f32; 3],
-    e: [f32; 3],
-    inv_det: f32,
-) -> f32 {
-    use super::gamma;
-    let max3 = |a: [f32; 3]| a[0].abs().max(a[1].abs()).max(a[2].abs());
+fn t_error_bound<F: BoundFloat>(
+    x: [F; 3],
+    y: [F; 3],
+    z: [F; 3],
+    shear: [F; 3],
+    e: [F; 3],
+    inv_det: F,
+) -> F {
+    let max3 = |a: [F; 3]| a[0].abs().max(a[1].abs()).max(a[2].abs());
     let [sx, sy, sz] = shear;
+    let two = F::from_f32(2.0);
     let max_z = max3(z);
     let max_zt = max_z * sz.abs();
     let max_x = max3(x);
     let max_y = max3(y);
-    let delta_z = gamma(3) * max_zt;
-    let delta_x = gamma(5) * (max_x + 2.0 * sx.abs() * max_z);
-    let delta_y = gamma(5) * (max_y + 2.0 * sy.abs() * max_z);
-    let delta_e = 2.0 * (gamma(2) * max_x * max_y + delta_y * max_x + delta_x * max_y);
+    let delta_z = F::gamma(3) * max_zt;
+    let delta_x = F::gamma(5) * (max_x + two * sx.abs() * max_z);
+    let delta_y = F::gamma(5) * (max_y + two * sy.abs() * max_z);
+    let delta_e = two * (F::gamma(2) * max_x * max_y + delta_y * max_x + delta_x * max_y);
     let max_e = max3(e);
-    3.0 * (gamma(3) * max_e * max_zt + delta_e * max_zt + delta_z * max_e) * inv_det.abs()
+    F::from_f32(3.0)
+        * (F::gamma(3) * max_e * max_zt + delta_e * max_zt + delta_z * max_e)
+        * inv_det.abs()
 }
 
-/// The rare path: some edge function was exactly zero in f32.
+/// The rare path: some edge function was exactly zero in f32, or the f32 distance overflowed.
 #[cold]
 #[inline(never)]
 fn intersect_exact(
@@ -189,14 +258,26 @@ fn intersect_exact(
         return None;
     }
     let t = (e[0] * z[0] as f64 + e[1] * z[1] as f64 + e[2] * z[2] as f64) / det;
-    let t = t as f32;
-    if !(t > 0.0 && t < t_max) {
+    if !(t > 0.0 && t < t_max as f64) {
         return None;
     }
-    // The edge functions are exact here, the sheared coordinates are not: the same bound.
+    // The edge functions are exact here, the sheared coordinates are not: the same bound, in
+    // f64 (its products of three coordinates may overflow f32).
+    let wide = |a: [f32; 3]| a.map(f64::from);
     let (x, y) = (p.map(|q| q.0), p.map(|q| q.1));
-    let ef = e.map(|v| v as f32);
-    if t <= t_error_bound(x, y, z_unscaled, shear, ef, (1.0 / det) as f32) {
+    let bound = t_error_bound(
+        wide(x),
+        wide(y),
+        wide(z_unscaled),
+        wide(shear),
+        e,
+        1.0 / det,
+    );
+    if t <= bound {
+        return None;
+    }
+    let t = t as f32;
+    if !(t > 0.0 && t < t_max) {
         return None;
     }
     Some((t, (e[1] / det) as f32, (e[2] / det) as f32))

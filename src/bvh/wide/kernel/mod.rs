@@ -17,8 +17,8 @@
 //!   `+-inf` box), so the fast path skips that fix; the others take the `SAFE` path.
 //! - Triangle test: the operations of [`crate::geometry::intersect_triangle`] in the same
 //!   order, without fused multiply-adds, so every lane's `t` has the same bits as the scalar
-//!   test's; lanes where an edge function is exactly zero are handed to the scalar test (its
-//!   exact f64 path and tie rule).
+//!   test's; lanes where an edge function is exactly zero, or whose distance or its error
+//!   bound overflowed f32, are handed to the scalar test (its f64 path and tie rule).
 
 mod scalar;
 pub(crate) mod stack;
@@ -234,7 +234,7 @@ pub(crate) trait Lanes: Sized {
 
     /// The watertight test on the four lanes of `b` for `0 < t < limit`: returns the lanes hit
     /// (their distances and barycentric coordinates in `out`) and the lanes the scalar test must
-    /// decide (an edge function was exactly zero).
+    /// decide (an edge function was exactly zero, or the f32 distance overflowed).
     fn block(b: &TriBlock, r: &Self::TriRay, limit: f32, out: &mut BlockHits) -> (u32, u32);
 }
 

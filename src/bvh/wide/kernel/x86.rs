@@ -172,12 +172,23 @@ fn block_sse(b: &TriBlock, r: &TriRay4, limit: f32, out: &mut BlockHits) -> (u32
             ),
             abs4(inv),
         );
-        // Kept unless `t <= bound` (a NaN bound keeps it, as in the scalar test).
+        // Kept unless `t <= bound`.
         let ok = _mm_and_ps(in_range, _mm_cmpnle_ps(t, bound));
+        // A distance or bound that is infinite or NaN (products beyond f32's range): the
+        // scalar test's f64 path decides, as it does in the scalar test.
+        let inf = _mm_set1_ps(f32::INFINITY);
+        let big = _mm_or_ps(
+            _mm_cmpnlt_ps(abs4(t_scaled), inf),
+            _mm_cmpnlt_ps(bound, inf),
+        );
+        let overflow = _mm_movemask_ps(big) as u32 & inside;
         _mm_storeu_ps(out.t.as_mut_ptr(), t);
         _mm_storeu_ps(out.u.as_mut_ptr(), _mm_mul_ps(v, inv));
         _mm_storeu_ps(out.v.as_mut_ptr(), _mm_mul_ps(w, inv));
-        (_mm_movemask_ps(ok) as u32 & inside, exact)
+        (
+            _mm_movemask_ps(ok) as u32 & inside & !overflow,
+            exact | overflow,
+        )
     }
 }
 
@@ -677,13 +688,20 @@ fn triangle_rays8(
             abs8(inv),
         );
         let ok = _mm256_and_ps(in_range, _mm256_cmp_ps::<_CMP_NLE_UQ>(t, bound));
-        let hits = _mm256_movemask_ps(ok) as u32 & inside;
+        // Infinite or NaN distance or bound: to the scalar test's f64 path (see `block_sse`).
+        let inf = _mm256_set1_ps(f32::INFINITY);
+        let big = _mm256_or_ps(
+            _mm256_cmp_ps::<_CMP_NLT_UQ>(abs8(t_scaled), inf),
+            _mm256_cmp_ps::<_CMP_NLT_UQ>(bound, inf),
+        );
+        let overflow = _mm256_movemask_ps(big) as u32 & inside;
+        let hits = _mm256_movemask_ps(ok) as u32 & inside & !overflow;
         if hits != 0 {
             _mm256_storeu_ps(out[0].as_mut_ptr(), t);
             _mm256_storeu_ps(out[1].as_mut_ptr(), _mm256_mul_ps(v, inv));
             _mm256_storeu_ps(out[2].as_mut_ptr(), _mm256_mul_ps(w, inv));
         }
-        (hits, exact)
+        (hits, exact | overflow)
     }
 }
 
