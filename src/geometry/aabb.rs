@@ -128,10 +128,11 @@ impl Aabb {
         let near = Vec3A::select(ray.neg_mask, t1, t0);
         let far = Vec3A::select(ray.neg_mask, t0, t1) * FAR_SCALE;
         // A NaN lane (origin on the plane of a slab the ray runs parallel to) constrains
-        // nothing: `max(NaN, -inf)` and `min(NaN, +inf)` give the infinity with both the SSE
-        // instruction (which returns its second operand on NaN) and f32::max/min.
-        let near = near.max(Vec3A::NEG_INFINITY);
-        let far = far.min(Vec3A::INFINITY);
+        // nothing: it is replaced by the infinity explicitly (`x == x` is false only for NaN),
+        // not left to `max`/`min`, whose NaN rule differs between targets (SSE's `maxps`
+        // returns its second operand, NEON's `vmaxq` returns NaN).
+        let near = Vec3A::select(near.cmpeq(near), near, Vec3A::NEG_INFINITY);
+        let far = Vec3A::select(far.cmpeq(far), far, Vec3A::INFINITY);
         (near.max_element(), far.min_element())
     }
 }
