@@ -228,7 +228,7 @@ impl Tracer<'_> {
         let wo = -ray.dir.normalize();
         let mut l = Vec3::ZERO;
         if m.is_emissive() {
-            l += alpha * self.emission_found(ray, &hit, m.emission, arrival);
+            l += alpha * self.emission_found(ray, &hit, s.emission, arrival);
         }
         // The bounce from the last vertex only collects emission.
         if depth <= self.max_depth {
@@ -257,7 +257,7 @@ impl Tracer<'_> {
                 counts.transmission += 1;
                 let (dir, side) = transmit(ray.dir, &s);
                 let through = Ray::new(offset_ray_origin(s.p, s.p_err, side), dir);
-                let tint = (1.0 - alpha) * m.diffuse.min(Vec3::ONE);
+                let tint = (1.0 - alpha) * s.diffuse.min(Vec3::ONE);
                 // Shadow rays pass straight through transparent surfaces: light a bounce
                 // finds beyond one is weighted as if the bounce had found it directly.
                 let arrival = match arrival {
@@ -394,7 +394,7 @@ impl Tracer<'_> {
                             continue;
                         }
                         let pass = self.shadow(origin, q - origin, 1.0 - 1e-4, counts);
-                        acc += brdf(m, s.n, wi, wo) * cos * cos_l * area / d2 * pass * weight;
+                        acc += brdf(s, wi, wo) * cos * cos_l * area / d2 * pass * weight;
                     }
                     acc * color * intensity / n as f32
                 }
@@ -404,7 +404,8 @@ impl Tracer<'_> {
             let (prim, u) = self.lights.pick(rng.next_2d());
             let tri = &self.scene.mesh.triangles[prim as usize];
             let su = u.x.sqrt();
-            let q = tri[0] * (1.0 - su) + tri[1] * (su * (1.0 - u.y)) + tri[2] * (su * u.y);
+            let (b1, b2) = (su * (1.0 - u.y), su * u.y);
+            let q = tri[0] * (1.0 - su) + tri[1] * b1 + tri[2] * b2;
             let to = q - s.p;
             let d2 = to.length_squared();
             let wi = to / d2.sqrt();
@@ -415,8 +416,9 @@ impl Tracer<'_> {
                 let weight = power(1.0, p_light, cos * std::f32::consts::FRAC_1_PI);
                 if weight > 0.0 {
                     let pass = self.shadow(origin, q - origin, 1.0 - 1e-4, counts);
-                    let le = self.scene.material_of(prim).emission;
-                    sum += brdf(m, s.n, wi, wo) * cos * le * pass * weight / p_light;
+                    let mat = self.scene.material_of(prim);
+                    let le = super::shade::textured(self.scene, mat, prim, b1, b2).1;
+                    sum += brdf(s, wi, wo) * cos * le * pass * weight / p_light;
                 }
             }
         }
@@ -449,7 +451,7 @@ impl Tracer<'_> {
             return Vec3::ZERO;
         }
         let pdf = cos * std::f32::consts::FRAC_1_PI;
-        let mut weight = brdf(m, s.n, wi, wo) * cos / pdf;
+        let mut weight = brdf(s, wi, wo) * cos / pdf;
         if depth >= ROULETTE_DEPTH {
             let survive = (beta * weight).max_element().min(MAX_SURVIVAL);
             if rng.next_2d().x >= survive {

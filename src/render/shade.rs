@@ -44,6 +44,10 @@ pub(super) struct Surface<'a> {
     /// True when the ray arrived on the side the triangle's winding calls outside.
     pub(super) entering: bool,
     pub(super) material: &'a Material,
+    /// The material's diffuse colour here (its texture applied).
+    pub(super) diffuse: Vec3,
+    /// The material's emitted radiance here (its texture applied).
+    pub(super) emission: Vec3,
 }
 
 impl<'a> Tracer<'a> {
@@ -145,13 +149,17 @@ impl<'a> Tracer<'a> {
         if n.dot(ng) < 0.0 {
             n = -n;
         }
+        let material = scene.material_of(prim);
+        let (diffuse, emission) = textured(scene, material, prim, u, v);
         Surface {
             p,
             p_err,
             ng,
             n,
             entering,
-            material: scene.material_of(prim),
+            material,
+            diffuse,
+            emission,
         }
     }
 
@@ -181,7 +189,7 @@ impl<'a> Tracer<'a> {
         };
         let wo = -ray.dir.normalize();
 
-        let mut l = alpha * (m.emission + self.direct(&s, wo, rng, counts));
+        let mut l = alpha * (s.emission + self.direct(&s, wo, rng, counts));
         if self.plan.reflections && m.is_mirror() && depth < self.max_depth {
             let r = reflect(ray.dir, s.n);
             if r.dot(s.ng) > 0.0 {
@@ -194,7 +202,7 @@ impl<'a> Tracer<'a> {
             counts.transmission += 1;
             let (dir, side) = transmit(ray.dir, &s);
             let through = Ray::new(offset_ray_origin(s.p, s.p_err, side), dir);
-            let tint = (1.0 - alpha) * m.diffuse.min(Vec3::ONE);
+            let tint = (1.0 - alpha) * s.diffuse.min(Vec3::ONE);
             l += tint * self.trace(&through, depth + 1, rng, counts);
         }
         if self.plan.absorption && !s.entering && m.is_transparent() {
@@ -240,7 +248,7 @@ impl<'a> Tracer<'a> {
                         };
                         // Stop just short of the light so its own quad does not shadow it.
                         let pass = self.shadow(origin, q - origin, 1.0 - 1e-4, counts);
-                        acc += brdf(m, s.n, wi, wo) * s.n.dot(wi) * cos_l * area / d2 * pass;
+                        acc += brdf(s, wi, wo) * s.n.dot(wi) * cos_l * area / d2 * pass;
                     }
                     acc * color * intensity / samples as f32
                 }
@@ -269,7 +277,7 @@ impl<'a> Tracer<'a> {
             return Vec3::ZERO;
         }
         let pass = self.shadow(origin, position - origin, 1.0, counts);
-        brdf(s.material, s.n, wi, wo) * s.n.dot(wi) * intensity * pass / d2
+        brdf(s, wi, wo) * s.n.dot(wi) * intensity * pass / d2
     }
 
     /// A rectangle light's `samples` after the plan's cap.
@@ -365,9 +373,28 @@ pub(super) fn rect_sample(
     Some(RectSample { q, wi, d2, cos_l })
 }
 
-/// Blinn-Phong, energy-normalized: `Kd / pi + Ks (Ns + 8) / (8 pi) cos^Ns(n, h)`.
-pub(super) fn brdf(m: &Material, n: Vec3, wi: Vec3, wo: Vec3) -> Vec3 {
-    let mut f = m.diffuse * std::f32::consts::FRAC_1_PI;
+/// The diffuse colour and emission of `m` at barycentric `(u, v)` of triangle `prim`: the
+/// material's factors times its textures, read at the triangle's texture coordinates.
+pub(super) fn textured(scene: &Scene, m: &Material, prim: u32, u: f32, v: f32) -> (Vec3, Vec3) {
+    if !m.is_textured() {
+        return (m.diffuse, m.emission);
+    }
+    let uv = scene.mesh.uv_at(prim, u, v);
+    let read = |map: &Option<std::sync::Arc<crate::scene::Texture>>, factor: Vec3| match map {
+        Some(t) => factor * t.sample(uv).truncate(),
+        None => factor,
+    };
+    (
+        read(&m.diffuse_map, m.diffuse),
+        read(&m.emission_map, m.emission),
+    )
+}
+
+/// Blinn-Phong, energy-normalized: `Kd / pi + Ks (Ns + 8) / (8 pi) cos^Ns(n, h)`, with the
+/// surface's (textured) diffuse colour.
+pub(super) fn brdf(s: &Surface, wi: Vec3, wo: Vec3) -> Vec3 {
+    let (m, n) = (s.material, s.n);
+    let mut f = s.diffuse * std::f32::consts::FRAC_1_PI;
     if m.specular != Vec3::ZERO {
         let h = (wi + wo).normalize_or_zero();
         let c = n.dot(h).max(0.0);

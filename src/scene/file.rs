@@ -396,7 +396,8 @@ pub fn parse(path: &Path, text: &str, read: ReadFn, check_files: bool) -> Result
     })
 }
 
-/// Loads an OBJ or PLY through `read`: mesh, its materials, warnings.
+/// Loads an OBJ, PLY or glTF through `read`: mesh, its materials, warnings (a glTF's own
+/// camera and lights are not used: the scene file gives them).
 fn load_mesh_file(
     file: &Path,
     read: ReadFn,
@@ -418,7 +419,12 @@ fn load_mesh_file(
             vec![Material::default()],
             Vec::new(),
         )),
-        _ => bail!("unknown mesh type (expected .obj or .ply)"),
+        Some("gltf" | "glb") => {
+            let dir = file.parent().unwrap_or(Path::new("")).to_path_buf();
+            let d = super::gltf::load_from(file, &bytes, &|p: &Path| read(&dir.join(p)))?;
+            Ok((d.mesh, d.materials, d.warnings))
+        }
+        _ => bail!("unknown mesh type (expected .obj, .ply, .gltf or .glb)"),
     }
 }
 
@@ -449,6 +455,8 @@ fn material_from_def(name: &str, m: &MaterialDef) -> Material {
         mirror: v(m.mirror, d.mirror),
         absorption: v(m.absorption, d.absorption),
         illum: d.illum,
+        diffuse_map: None,
+        emission_map: None,
     }
 }
 

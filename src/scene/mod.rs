@@ -1,23 +1,27 @@
 //! Scenes: triangles with per-triangle materials, lights, a camera and an environment.
 //!
-//! Loaded from a scene file (TOML, [`file`]), a bare OBJ with its MTL ([`obj`]) or a PLY
-//! ([`ply`]); or made in code ([`shapes`], [`Scene::cornell_box`]). Every loader reports errors
+//! Loaded from a scene file (TOML, [`file`]), a bare OBJ with its MTL ([`obj`]), a PLY
+//! ([`ply`]) or a glTF 2.0 file ([`gltf`]); or made in code ([`shapes`], [`Scene::cornell_box`]). Every loader reports errors
 //! as `file:line: message` where a line is known.
 
 pub mod check;
 pub mod file;
+pub mod gltf;
 pub mod normals;
 pub mod obj;
 pub mod ply;
 pub mod shapes;
+pub mod texture;
 
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 
 use anyhow::{Context, Result, bail};
-use glam::{DVec3, Vec3};
+use glam::{DVec3, Vec2, Vec3};
 
 use crate::geometry::Aabb;
 pub use normals::NormalRule;
+pub use texture::{Texture, Wrap};
 
 /// Surface properties, following the MTL file's fields.
 #[derive(Clone, Debug, PartialEq)]
@@ -42,6 +46,11 @@ pub struct Material {
     pub absorption: Vec3,
     /// MTL illumination model number, kept for reference.
     pub illum: u32,
+    /// Image multiplying `diffuse` (OBJ `map_Kd`, glTF base colour texture), read at the
+    /// triangle's texture coordinates.
+    pub diffuse_map: Option<Arc<Texture>>,
+    /// Image multiplying `emission` (glTF emissive texture).
+    pub emission_map: Option<Arc<Texture>>,
 }
 
 impl Default for Material {
@@ -57,6 +66,8 @@ impl Default for Material {
             mirror: Vec3::ZERO,
             absorption: Vec3::ZERO,
             illum: 2,
+            diffuse_map: None,
+            emission_map: None,
         }
     }
 }
@@ -80,6 +91,11 @@ impl Material {
     /// True when the surface emits light.
     pub fn is_emissive(&self) -> bool {
         self.emission.max_element() > 0.0
+    }
+
+    /// True when a texture changes the surface's colour from point to point.
+    pub fn is_textured(&self) -> bool {
+        self.diffuse_map.is_some() || self.emission_map.is_some()
     }
 }
 
@@ -216,6 +232,9 @@ pub struct Mesh {
     pub normals: Vec<[Vec3; 3]>,
     /// Index into [`Scene::materials`] per triangle.
     pub material_ids: Vec<u32>,
+    /// Texture coordinates, three per triangle; empty when no triangle has any (a triangle
+    /// without them among others that have them gets `(0, 0)`).
+    pub uvs: Vec<[Vec2; 3]>,
     /// World position of the mesh's local origin (what the user sees is `origin + position`).
     pub origin: DVec3,
 }
@@ -238,9 +257,27 @@ impl Mesh {
                     .map(|t| t.map(|v| (delta + v.as_dvec3()).as_vec3())),
             );
         }
+        let before = self.normals.len();
         self.normals.extend(other.normals);
+        if !self.uvs.is_empty() || !other.uvs.is_empty() {
+            self.uvs.resize(before, [Vec2::ZERO; 3]);
+            if other.uvs.is_empty() {
+                self.uvs.resize(self.normals.len(), [Vec2::ZERO; 3]);
+            } else {
+                self.uvs.extend(other.uvs);
+            }
+        }
         self.material_ids
             .extend(other.material_ids.into_iter().map(|m| m + material_offset));
+    }
+
+    /// The texture coordinate at barycentric `(u, v)` of triangle `prim` (`(0, 0)` when the
+    /// mesh has none).
+    pub fn uv_at(&self, prim: u32, u: f32, v: f32) -> Vec2 {
+        match self.uvs.get(prim as usize) {
+            Some(t) => t[0] * (1.0 - u - v) + t[1] * u + t[2] * v,
+            None => Vec2::ZERO,
+        }
     }
 
     /// Builds a mesh from an indexed triangle list, with normals computed by `rule`
@@ -262,6 +299,7 @@ impl Mesh {
             triangles,
             normals,
             material_ids: vec![material; indices.len()],
+            uvs: Vec::new(),
             origin: DVec3::ZERO,
         }
     }
@@ -274,6 +312,7 @@ impl Mesh {
             triangles,
             normals,
             material_ids,
+            uvs: Vec::new(),
             origin: DVec3::ZERO,
         }
     }
@@ -398,7 +437,8 @@ pub struct Scene {
 }
 
 impl Scene {
-    /// Loads a scene file (`.toml`), an OBJ (`.obj`, with its MTL) or a PLY (`.ply`).
+    /// Loads a scene file (`.toml`), an OBJ (`.obj`, with its MTL), a PLY (`.ply`) or a glTF
+    /// (`.gltf`, `.glb`).
     pub fn load(path: &Path) -> Result<Scene> {
         let ext = path
             .extension()
@@ -420,8 +460,9 @@ impl Scene {
                     vec![Material::default()],
                 ))
             }
+            Some("gltf" | "glb") => gltf::load(path),
             _ => bail!(
-                "{}: unknown file type (expected .toml, .obj or .ply)",
+                "{}: unknown file type (expected .toml, .obj, .ply, .gltf or .glb)",
                 path.display()
             ),
         }

@@ -3,17 +3,39 @@
 //! Polygons are fan-triangulated as `(0, k, k + 1)` in file order (the benchmark convention),
 //! negative (relative) indices are resolved by `tobj`, missing normals follow the file's
 //! smoothing groups (`s`; flat outside them, see [`super::normals`]), and the MTL fields `Kd Ks Ns Ke d Tr Ni illum` become a
-//! [`Material`]. `tobj` reports what went wrong but not where; the loader then finds the first
+//! [`Material`], `map_Kd` its diffuse texture (an image that cannot be read is a warning). `tobj` reports what went wrong but not where; the loader then finds the first
 //! offending line itself so that the error reads `file:line: message`.
 
 use std::io::BufReader;
 use std::path::Path;
 
+use std::collections::HashMap;
+use std::sync::Arc;
+
 use anyhow::{Result, anyhow};
-use glam::Vec3;
+use glam::{Vec2, Vec3};
 
 use super::normals::NormalRule;
-use super::{Material, Mesh, face_normal, read_file};
+use super::{Material, Mesh, Texture, face_normal, read_file};
+
+/// Images named by the MTL file, each decoded once however many materials use it.
+#[derive(Default)]
+struct TextureCache(HashMap<String, Arc<Texture>>);
+
+impl TextureCache {
+    /// The colour image a `map_Kd` line names (its last word: options such as `-s 1 1 1` come
+    /// before the file name), read beside the OBJ through `read`.
+    fn get(&mut self, spec: &str, read: &dyn Fn(&Path) -> Result<Vec<u8>>) -> Result<Arc<Texture>> {
+        let file = spec.split_whitespace().last().unwrap_or(spec).to_string();
+        if let Some(t) = self.0.get(&file) {
+            return Ok(t.clone());
+        }
+        let bytes = read(Path::new(&file))?;
+        let t = Arc::new(Texture::decode(&file, &bytes, true)?);
+        self.0.insert(file, t.clone());
+        Ok(t)
+    }
+}
 
 /// What an OBJ load produced: triangles, materials, and warnings (a missing MTL file, say)
 /// that did not stop the load.
@@ -125,7 +147,25 @@ pub fn load_from(
 
     let mut warnings = Vec::new();
     let mut mats: Vec<Material> = match materials {
-        Ok(m) => m.iter().map(convert_material).collect(),
+        Ok(m) => {
+            let mut cache = TextureCache::default();
+            m.iter()
+                .map(|tm| {
+                    let mut mat = convert_material(tm);
+                    if let Some(spec) = &tm.diffuse_texture {
+                        match cache.get(spec, read_mtl) {
+                            Ok(t) => mat.diffuse_map = Some(t),
+                            Err(e) => warnings.push(format!(
+                                "{}: material {}: map_Kd not used ({e:#})",
+                                path.display(),
+                                tm.name
+                            )),
+                        }
+                    }
+                    mat
+                })
+                .collect()
+        }
         Err(e) => {
             let why = mtl_error.borrow().clone().unwrap_or_else(|| e.to_string());
             warnings.push(format!(
@@ -213,6 +253,24 @@ pub fn load_from(
             offset += arity;
         }
 
+        // Texture coordinates, `v` flipped: OBJ counts it from the image's bottom row.
+        let has_uvs = !m.texcoords.is_empty() && m.texcoord_indices.len() == m.indices.len();
+        let uvs: Option<Vec<[Vec2; 3]>> = has_uvs.then(|| {
+            faces
+                .iter()
+                .map(|f| {
+                    f.map(|c| {
+                        let i = m.texcoord_indices[c] as usize;
+                        match m.texcoords.get(2 * i..2 * i + 2) {
+                            Some(t) => Vec2::new(t[0] as f32, 1.0 - t[1] as f32),
+                            None => Vec2::ZERO,
+                        }
+                    })
+                })
+                .collect()
+        });
+        let before = mesh.triangles.len();
+
         if has_normals {
             for f in &faces {
                 let tri = f.map(|c| positions[m.indices[c] as usize]);
@@ -235,6 +293,13 @@ pub fn load_from(
                 0,
             );
         }
+        if let Some(uvs) = uvs {
+            mesh.uvs.resize(before, [Vec2::ZERO; 3]);
+            mesh.uvs.extend(uvs);
+        }
+    }
+    if !mesh.uvs.is_empty() {
+        mesh.uvs.resize(mesh.triangles.len(), [Vec2::ZERO; 3]);
     }
     if need_default || mats.is_empty() {
         mats.push(Material::default());
@@ -290,6 +355,8 @@ fn convert_material(m: &tobj::Material) -> Material {
         },
         absorption: Vec3::ZERO,
         illum,
+        diffuse_map: None,
+        emission_map: None,
     }
 }
 

@@ -68,6 +68,7 @@ pub fn smooth_sphere(tris: Vec<[Vec3; 3]>) -> Mesh {
         triangles: tris,
         normals,
         material_ids,
+        uvs: Vec::new(),
         origin: glam::DVec3::ZERO,
     }
 }

@@ -1,0 +1,969 @@
+//! glTF 2.0 scenes (`.gltf` with external or embedded buffers, `.glb`), through the `gltf`
+//! crate.
+//!
+//! What is read, and what it becomes:
+//! - The default scene (else the first; a file with no scene but with nodes draws its root
+//!   nodes, with a warning), its node hierarchy with transforms composed in f64. A mesh used by
+//!   several nodes is placed once per node.
+//! - Triangle primitives (`TRIANGLES`, `TRIANGLE_STRIP`, `TRIANGLE_FAN`), indexed or not;
+//!   points and lines are counted and left out with a warning. Positions, `NORMAL` (flat
+//!   normals where a primitive has none, as the glTF specification asks) and `TEXCOORD_0`.
+//!   Triangles with a non-finite vertex are left out, with a warning.
+//! - Materials (metallic-roughness) as [`Material`]s: see [`convert_material`].
+//! - The first perspective camera in the scene becomes the scene camera;
+//!   `KHR_lights_punctual` lights become point lights (see [`Scene`] assembly in [`load_from`]).
+//!   With no light, the default lighting of a bare mesh.
+//!
+//! Ignored: skins, morph targets, animations, orthographic cameras, texture coordinate sets
+//! other than 0, `KHR_texture_transform`, and the material extensions not named above.
+//!
+//! Bad input never panics: every accessor is checked against its buffer view and buffer before
+//! it is read, and errors name the file and the JSON path (`meshes[0].primitives[1]: index 74
+//! out of range (24 vertices)`).
+
+use std::collections::HashMap;
+use std::path::Path;
+use std::sync::Arc;
+
+use ::gltf::accessor::{DataType, Dimensions};
+use ::gltf::mesh::Mode;
+use anyhow::{Result, anyhow, bail};
+use base64::Engine as _;
+use glam::{DMat3, DMat4, DVec3, Vec2, Vec3};
+
+use super::{Camera, Environment, Integrator, Light, Material, Mesh, Scene, Texture, Wrap};
+
+/// What a glTF load produced besides the scene (used by scene files, which give their own
+/// camera and lights).
+pub struct GltfData {
+    /// Triangles in a local frame (see [`super::local_frame`]), material ids into `materials`.
+    pub mesh: Mesh,
+    /// The materials (at least one).
+    pub materials: Vec<Material>,
+    /// The first perspective camera, in world coordinates.
+    pub camera: Option<GltfCamera>,
+    /// The punctual lights, in world coordinates.
+    pub lights: Vec<GltfLight>,
+    /// Problems that did not stop the load.
+    pub warnings: Vec<String>,
+}
+
+/// A glTF camera placed by its node.
+#[derive(Clone, Debug, PartialEq)]
+pub struct GltfCamera {
+    /// Eye position (world).
+    pub position: DVec3,
+    /// Unit viewing direction (the node's `-z`).
+    pub forward: DVec3,
+    /// Unit up direction (the node's `+y`).
+    pub up: DVec3,
+    /// Vertical field of view in degrees.
+    pub vfov_deg: f32,
+}
+
+/// A `KHR_lights_punctual` light placed by its node.
+#[derive(Clone, Debug, PartialEq)]
+pub struct GltfLight {
+    /// Point, spot or directional.
+    pub kind: LightKind,
+    /// Position (world; unused for directional lights).
+    pub position: DVec3,
+    /// Unit direction the light shines (the node's `-z`; spot and directional lights).
+    pub direction: DVec3,
+    /// Linear RGB colour.
+    pub color: Vec3,
+    /// Candela for point and spot lights, lux for directional ones.
+    pub intensity: f32,
+}
+
+/// The kinds of `KHR_lights_punctual`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum LightKind {
+    /// Light in every direction from a point.
+    Point,
+    /// A point light limited to a cone (drawn as a point light: the renderer has no cones).
+    Spot,
+    /// Parallel light from infinitely far away.
+    Directional,
+}
+
+/// Loads a `.gltf` or `.glb` file as a scene: its camera and lights when it has them, the
+/// defaults of a bare mesh otherwise.
+pub fn load(path: &Path) -> Result<Scene> {
+    let bytes = super::read_file(path)?;
+    let dir = path.parent().unwrap_or(Path::new(".")).to_path_buf();
+    let d = load_from(path, &bytes, &|p: &Path| super::read_file(&dir.join(p)))?;
+    Ok(scene_of(super::name_of(path), d))
+}
+
+/// Builds the scene of a loaded glTF: camera and lights moved into the mesh's local frame.
+pub fn scene_of(name: String, d: GltfData) -> Scene {
+    let mut scene = Scene::from_mesh(name, d.mesh, d.materials);
+    scene.warnings = d.warnings;
+    let origin = scene.mesh.origin;
+    let local = |p: DVec3| (p - origin).as_vec3();
+    if let Some(c) = &d.camera {
+        let distance = {
+            let b = scene.mesh.bounds();
+            if b.is_empty() {
+                1.0
+            } else {
+                let centre = (Vec3::from(b.min) + Vec3::from(b.max)) * 0.5;
+                (centre - local(c.position)).length().max(1e-3)
+            }
+        };
+        scene.camera = Camera {
+            position: local(c.position),
+            look_at: local(c.position + c.forward * distance as f64),
+            up: c.up.as_vec3(),
+            vfov_deg: c.vfov_deg,
+            lens_radius: 0.0,
+            focus_distance: distance,
+        };
+    }
+    if !d.lights.is_empty() {
+        let b = scene.mesh.bounds();
+        let (centre, radius) = if b.is_empty() {
+            (Vec3::ZERO, 1.0)
+        } else {
+            let (lo, hi) = (Vec3::from(b.min), Vec3::from(b.max));
+            ((lo + hi) * 0.5, ((hi - lo).length() * 0.5).max(1e-3))
+        };
+        scene.lights = d
+            .lights
+            .iter()
+            .map(|l| match l.kind {
+                LightKind::Point | LightKind::Spot => Light::Point {
+                    position: local(l.position),
+                    color: l.color,
+                    intensity: l.intensity,
+                },
+                // Far away along the light's direction, bright enough to give the scene the
+                // light's illuminance: a point light at distance D of intensity E D^2.
+                LightKind::Directional => {
+                    let d = 1000.0 * radius;
+                    Light::Point {
+                        position: centre - l.direction.as_vec3() * d,
+                        color: l.color,
+                        intensity: l.intensity * d * d,
+                    }
+                }
+            })
+            .collect();
+        // The file's own lights light it: no sky on top of them.
+        scene.environment = Environment::Sky {
+            intensity: 0.1,
+            rotation_deg: 0.0,
+        };
+    }
+    scene.integrator = Integrator::Direct;
+    scene
+}
+
+/// Loads glTF bytes named `path` (for messages), reading external buffers and images through
+/// `read` (paths relative to the file's folder).
+pub fn load_from(
+    path: &Path,
+    bytes: &[u8],
+    read: &dyn Fn(&Path) -> Result<Vec<u8>>,
+) -> Result<GltfData> {
+    let name = path.display().to_string();
+    let doc =
+        ::gltf::Gltf::from_slice_without_validation(bytes).map_err(|e| parse_error(&name, e))?;
+    for ext in doc.extensions_required() {
+        if !SUPPORTED_EXTENSIONS.contains(&ext) {
+            bail!("{name}: needs the extension {ext}, which Tracery does not read");
+        }
+    }
+    validate(&doc).map_err(|e| parse_error(&name, e))?;
+    let mut warnings = Vec::new();
+    let buffers = doc
+        .buffers()
+        .map(|b| load_buffer(&name, &b, doc.blob.as_deref(), read))
+        .collect::<Vec<_>>();
+
+    let mut loader = Loader {
+        name: &name,
+        doc: &doc,
+        buffers: &buffers,
+        read,
+        warnings: &mut warnings,
+        positions: Vec::new(),
+        normals: Vec::new(),
+        uvs: Vec::new(),
+        material_ids: Vec::new(),
+        primitives: HashMap::new(),
+        materials: Vec::new(),
+        material_index: HashMap::new(),
+        textures: HashMap::new(),
+        camera: None,
+        lights: Vec::new(),
+        left_out: HashMap::new(),
+        any_uvs: false,
+    };
+
+    let roots: Vec<usize> = match doc.default_scene().or_else(|| doc.scenes().next()) {
+        Some(s) => s.nodes().map(|n| n.index()).collect(),
+        None => {
+            let mut child = vec![false; doc.nodes().len()];
+            for n in doc.nodes() {
+                for c in n.children() {
+                    child[c.index()] = true;
+                }
+            }
+            let roots: Vec<usize> = (0..child.len()).filter(|&i| !child[i]).collect();
+            if !roots.is_empty() {
+                loader.warnings.push(format!(
+                    "{name}: no scene; drawing the {} root node(s)",
+                    roots.len()
+                ));
+            }
+            roots
+        }
+    };
+    let mut on_path = vec![false; doc.nodes().len()];
+    for root in roots {
+        loader.visit(root, DMat4::IDENTITY, &mut on_path, 0)?;
+    }
+    loader.finish()
+}
+
+/// Extensions a file may require that the loader reads or can safely do without.
+const SUPPORTED_EXTENSIONS: &[&str] = &[
+    "KHR_lights_punctual",
+    "KHR_materials_transmission",
+    "KHR_materials_ior",
+    "KHR_materials_emissive_strength",
+    "KHR_materials_unlit",
+    "KHR_texture_transform",
+];
+
+/// Deepest node hierarchy followed (a deeper one is reported, not followed into a stack
+/// overflow).
+const MAX_NODE_DEPTH: usize = 1024;
+
+/// The glTF crate's validation (every index in range, required fields present: after it,
+/// looking an index up cannot fail), less two rules the loader does not need: accessor `min`
+/// and `max` (bounds are computed from the positions; exporters often leave them out) and
+/// required extensions (checked before, with a clearer message).
+fn validate(doc: &::gltf::Gltf) -> std::result::Result<(), ::gltf::Error> {
+    use ::gltf::json::validation::{Error, Validate};
+    let root = doc.as_json();
+    let mut errors = Vec::new();
+    root.validate(root, ::gltf::json::Path::new, &mut |path, err| {
+        let p = path();
+        let at = p.to_string();
+        let bounds = at.ends_with(".min") || at.ends_with(".max");
+        if (matches!(err, Error::Missing) && bounds)
+            || (matches!(err, Error::Unsupported) && at.starts_with("extensionsRequired"))
+        {
+            return;
+        }
+        errors.push((p, err));
+    });
+    if errors.is_empty() {
+        Ok(())
+    } else {
+        Err(::gltf::Error::Validation(errors))
+    }
+}
+
+/// A parse or validation error as one message naming the file (and line and column, or the
+/// JSON path).
+fn parse_error(name: &str, e: ::gltf::Error) -> anyhow::Error {
+    match e {
+        ::gltf::Error::Deserialize(e) => {
+            anyhow!("{name}:{}:{}: invalid glTF JSON: {e}", e.line(), e.column())
+        }
+        ::gltf::Error::Validation(errors) => {
+            let shown: Vec<String> = errors
+                .iter()
+                .take(3)
+                .map(|(path, err)| format!("{path}: {err}"))
+                .collect();
+            let more = match errors.len() {
+                0..=3 => String::new(),
+                n => format!(" (and {} more)", n - 3),
+            };
+            anyhow!("{name}: invalid glTF: {}{more}", shown.join("; "))
+        }
+        ::gltf::Error::Binary(e) => anyhow!("{name}: invalid GLB container: {e}"),
+        e => anyhow!("{name}: {e}"),
+    }
+}
+
+/// A buffer's bytes, or why they cannot be had (reported when an accessor needs them).
+type Buffer = std::result::Result<Vec<u8>, String>;
+
+fn load_buffer(
+    name: &str,
+    b: &::gltf::Buffer,
+    blob: Option<&[u8]>,
+    read: &dyn Fn(&Path) -> Result<Vec<u8>>,
+) -> Buffer {
+    let i = b.index();
+    let data = match b.source() {
+        ::gltf::buffer::Source::Bin => match blob {
+            Some(d) => d.to_vec(),
+            None => {
+                return Err(format!(
+                    "{name}: buffers[{i}]: the file has no binary chunk"
+                ));
+            }
+        },
+        ::gltf::buffer::Source::Uri(uri) => {
+            uri_bytes(uri, read).map_err(|e| format!("{name}: buffers[{i}]: {e:#}"))?
+        }
+    };
+    if data.len() < b.length() {
+        return Err(format!(
+            "{name}: buffers[{i}]: holds {} bytes, its byteLength says {}",
+            data.len(),
+            b.length()
+        ));
+    }
+    Ok(data)
+}
+
+/// The bytes a URI names: a `data:` URI decoded, or a file beside the glTF (percent-decoded).
+fn uri_bytes(uri: &str, read: &dyn Fn(&Path) -> Result<Vec<u8>>) -> Result<Vec<u8>> {
+    if let Some(rest) = uri.strip_prefix("data:") {
+        let Some((_, payload)) = rest.split_once(";base64,") else {
+            bail!("data URI is not base64");
+        };
+        return base64::engine::general_purpose::STANDARD
+            .decode(payload.trim())
+            .map_err(|e| anyhow!("data URI: bad base64: {e}"));
+    }
+    if uri.contains("://") {
+        bail!("{uri}: only files beside the glTF and data URIs are read");
+    }
+    let file = percent_encoding::percent_decode_str(uri).decode_utf8_lossy();
+    read(Path::new(file.as_ref()))
+}
+
+/// One primitive's vertices and triangles as the file gives them (before any node transform).
+struct Primitive {
+    positions: Vec<Vec3>,
+    normals: Option<Vec<Vec3>>,
+    uvs: Option<Vec<Vec2>>,
+    triangles: Vec<[u32; 3]>,
+    material: u32,
+}
+
+struct Loader<'a> {
+    name: &'a str,
+    doc: &'a ::gltf::Gltf,
+    buffers: &'a [Buffer],
+    read: &'a dyn Fn(&Path) -> Result<Vec<u8>>,
+    warnings: &'a mut Vec<String>,
+    /// World positions, three per triangle.
+    positions: Vec<DVec3>,
+    /// World normals, three per triangle (`None` for flat).
+    normals: Vec<Option<[Vec3; 3]>>,
+    uvs: Vec<[Vec2; 3]>,
+    material_ids: Vec<u32>,
+    /// Primitives read once, by (mesh, primitive), for every node that places them.
+    primitives: HashMap<(usize, usize), Option<Arc<Primitive>>>,
+    materials: Vec<Material>,
+    /// glTF material index (`None`: the default material) to index in `materials`.
+    material_index: HashMap<Option<usize>, u32>,
+    /// Decoded images by (image, sRGB), each decoded once.
+    textures: HashMap<(usize, bool), Option<Arc<Texture>>>,
+    camera: Option<GltfCamera>,
+    lights: Vec<GltfLight>,
+    /// Primitives left out, by reason.
+    left_out: HashMap<String, usize>,
+    any_uvs: bool,
+}
+
+impl Loader<'_> {
+    fn visit(
+        &mut self,
+        index: usize,
+        parent: DMat4,
+        on_path: &mut [bool],
+        depth: usize,
+    ) -> Result<()> {
+        if on_path[index] {
+            bail!(
+                "{}: nodes[{index}]: the node hierarchy has a cycle (nodes[{index}] is its own ancestor)",
+                self.name
+            );
+        }
+        if depth > MAX_NODE_DEPTH {
+            bail!(
+                "{}: nodes[{index}]: the node hierarchy is deeper than {MAX_NODE_DEPTH} levels",
+                self.name
+            );
+        }
+        let doc = self.doc;
+        let Some(node) = doc.nodes().nth(index) else {
+            bail!("{}: nodes[{index}] does not exist", self.name);
+        };
+        let local = DMat4::from_cols_array_2d(&node.transform().matrix().map(|c| c.map(f64::from)));
+        let world = parent * local;
+        if !world.is_finite() {
+            bail!("{}: nodes[{index}]: its transform is not finite", self.name);
+        }
+        if let Some(mesh) = node.mesh() {
+            for prim in mesh.primitives() {
+                self.place(mesh.index(), prim, &world)?;
+            }
+        }
+        if self.camera.is_none()
+            && let Some(cam) = node.camera()
+        {
+            match cam.projection() {
+                ::gltf::camera::Projection::Perspective(p) => {
+                    let forward = world.transform_vector3(-DVec3::Z).normalize_or_zero();
+                    let up = world.transform_vector3(DVec3::Y).normalize_or_zero();
+                    if forward != DVec3::ZERO && up != DVec3::ZERO {
+                        self.camera = Some(GltfCamera {
+                            position: world.transform_point3(DVec3::ZERO),
+                            forward,
+                            up,
+                            vfov_deg: p.yfov().to_degrees().clamp(1.0, 179.0),
+                        });
+                    }
+                }
+                ::gltf::camera::Projection::Orthographic(_) => self.warnings.push(format!(
+                    "{}: cameras[{}]: orthographic cameras are not supported; skipped",
+                    self.name,
+                    cam.index()
+                )),
+            }
+        }
+        if let Some(light) = node.light() {
+            use ::gltf::khr_lights_punctual::Kind;
+            let kind = match light.kind() {
+                Kind::Point => LightKind::Point,
+                Kind::Spot { .. } => LightKind::Spot,
+                Kind::Directional => LightKind::Directional,
+            };
+            let intensity = light.intensity();
+            if intensity.is_finite() && intensity >= 0.0 {
+                self.lights.push(GltfLight {
+                    kind,
+                    position: world.transform_point3(DVec3::ZERO),
+                    direction: world.transform_vector3(-DVec3::Z).normalize_or(-DVec3::Z),
+                    color: Vec3::from(light.color()),
+                    intensity,
+                });
+            }
+        }
+        on_path[index] = true;
+        for child in node.children() {
+            self.visit(child.index(), world, on_path, depth + 1)?;
+        }
+        on_path[index] = false;
+        Ok(())
+    }
+
+    /// Places one primitive with the node's world transform.
+    fn place(&mut self, mesh: usize, prim: ::gltf::Primitive, world: &DMat4) -> Result<()> {
+        let key = (mesh, prim.index());
+        let data = match self.primitives.get(&key) {
+            Some(d) => d.clone(),
+            None => {
+                let d = self.read_primitive(mesh, &prim)?.map(Arc::new);
+                self.primitives.insert(key, d.clone());
+                d
+            }
+        };
+        let Some(p) = data else {
+            return Ok(());
+        };
+        let linear = DMat3::from_mat4(*world);
+        let normal_m = linear.inverse().transpose();
+        // A mirroring transform turns the winding around: corners are swapped back so that
+        // the front face stays the front face.
+        let flip = linear.determinant() < 0.0;
+        let order: [usize; 3] = if flip { [0, 2, 1] } else { [0, 1, 2] };
+        for t in &p.triangles {
+            let c = order.map(|k| t[k] as usize);
+            self.positions
+                .extend(c.map(|i| world.transform_point3(p.positions[i].as_dvec3())));
+            self.normals.push(
+                p.normals
+                    .as_ref()
+                    .map(|n| c.map(|i| (normal_m * n[i].as_dvec3()).normalize_or_zero().as_vec3())),
+            );
+            self.uvs.push(match &p.uvs {
+                Some(uv) => c.map(|i| uv[i]),
+                None => [Vec2::ZERO; 3],
+            });
+            self.material_ids.push(p.material);
+        }
+        Ok(())
+    }
+
+    /// Reads a primitive's vertices and triangles, or `None` when it is left out (with the
+    /// reason counted for the warnings).
+    fn read_primitive(
+        &mut self,
+        mesh: usize,
+        prim: &::gltf::Primitive,
+    ) -> Result<Option<Primitive>> {
+        let at = format!("{}: meshes[{mesh}].primitives[{}]", self.name, prim.index());
+        let mode = prim.mode();
+        if !matches!(
+            mode,
+            Mode::Triangles | Mode::TriangleStrip | Mode::TriangleFan
+        ) {
+            *self.left_out.entry(format!("{mode:?}")).or_default() += 1;
+            return Ok(None);
+        }
+        let Some(pos_acc) = prim.get(&::gltf::Semantic::Positions) else {
+            *self.left_out.entry("without POSITION".into()).or_default() += 1;
+            return Ok(None);
+        };
+        self.check_accessor(
+            &at,
+            "POSITION",
+            &pos_acc,
+            &[DataType::F32],
+            Dimensions::Vec3,
+        )?;
+        let buffers = self.buffers;
+        let reader = prim.reader(|b| buffers.get(b.index()).and_then(|d| d.as_deref().ok()));
+        let positions: Vec<Vec3> = reader
+            .read_positions()
+            .ok_or_else(|| anyhow!("{at}: POSITION cannot be read"))?
+            .map(Vec3::from)
+            .collect();
+        let n = positions.len();
+
+        let normals = match prim.get(&::gltf::Semantic::Normals) {
+            Some(acc) => {
+                self.check_accessor(&at, "NORMAL", &acc, &[DataType::F32], Dimensions::Vec3)?;
+                let normals: Vec<Vec3> = reader
+                    .read_normals()
+                    .map(|r| r.map(Vec3::from).collect())
+                    .unwrap_or_default();
+                if normals.len() == n {
+                    Some(normals)
+                } else {
+                    self.warnings.push(format!(
+                        "{at}: NORMAL has {} entries for {n} vertices; flat normals used",
+                        normals.len()
+                    ));
+                    None
+                }
+            }
+            None => None,
+        };
+        let uvs = match prim.get(&::gltf::Semantic::TexCoords(0)) {
+            Some(acc) => {
+                self.check_accessor(
+                    &at,
+                    "TEXCOORD_0",
+                    &acc,
+                    &[DataType::F32, DataType::U8, DataType::U16],
+                    Dimensions::Vec2,
+                )?;
+                let uvs: Vec<Vec2> = reader
+                    .read_tex_coords(0)
+                    .map(|r| r.into_f32().map(Vec2::from).collect())
+                    .unwrap_or_default();
+                if uvs.len() == n {
+                    Some(uvs)
+                } else {
+                    self.warnings.push(format!(
+                        "{at}: TEXCOORD_0 has {} entries for {n} vertices; ignored",
+                        uvs.len()
+                    ));
+                    None
+                }
+            }
+            None => None,
+        };
+
+        let indices: Vec<u32> = match prim.indices() {
+            Some(acc) => {
+                self.check_accessor(
+                    &at,
+                    "indices",
+                    &acc,
+                    &[DataType::U8, DataType::U16, DataType::U32],
+                    Dimensions::Scalar,
+                )?;
+                let indices: Vec<u32> = reader
+                    .read_indices()
+                    .ok_or_else(|| anyhow!("{at}: indices cannot be read"))?
+                    .into_u32()
+                    .collect();
+                if let Some(bad) = indices.iter().find(|&&i| i as usize >= n) {
+                    bail!("{at}: index {bad} out of range ({n} vertices)");
+                }
+                indices
+            }
+            None => (0..n as u32).collect(),
+        };
+        let triangles = triangles_of(mode, &indices);
+        if mode == Mode::Triangles && indices.len() % 3 != 0 {
+            self.warnings.push(format!(
+                "{at}: {} {} is not a multiple of 3; the last {} left out",
+                indices.len(),
+                if prim.indices().is_some() {
+                    "indices"
+                } else {
+                    "vertices"
+                },
+                indices.len() % 3
+            ));
+        }
+
+        // Triangles with a non-finite vertex have no surface: left out, and said.
+        let finite: Vec<bool> = positions.iter().map(|p| p.is_finite()).collect();
+        let before = triangles.len();
+        let triangles: Vec<[u32; 3]> = triangles
+            .into_iter()
+            .filter(|t| t.iter().all(|&i| finite[i as usize]))
+            .collect();
+        if triangles.len() < before {
+            self.warnings.push(format!(
+                "{at}: {} triangle(s) with a non-finite vertex left out",
+                before - triangles.len()
+            ));
+        }
+        if uvs.is_some() {
+            self.any_uvs = true;
+        }
+        let material = self.material(prim.material())?;
+        Ok(Some(Primitive {
+            positions,
+            normals,
+            uvs,
+            triangles,
+            material,
+        }))
+    }
+
+    /// Checks that an accessor can be read as `dims` of one of `types`, and that every byte it
+    /// covers lies inside its buffer view and buffer.
+    fn check_accessor(
+        &self,
+        at: &str,
+        what: &str,
+        acc: &::gltf::Accessor,
+        types: &[DataType],
+        dims: Dimensions,
+    ) -> Result<()> {
+        let i = acc.index();
+        let at = format!("{at}: {what} (accessors[{i}])");
+        if !types.contains(&acc.data_type()) || acc.dimensions() != dims {
+            bail!(
+                "{at}: {:?} {:?}, expected {dims:?} of {types:?}",
+                acc.dimensions(),
+                acc.data_type()
+            );
+        }
+        if acc.sparse().is_some() {
+            bail!("{at}: sparse accessors are not supported");
+        }
+        let count = acc.count();
+        if count == 0 {
+            bail!("{at}: no elements");
+        }
+        let Some(view) = acc.view() else {
+            bail!("{at}: no bufferView");
+        };
+        let size = acc.size();
+        let stride = view.stride().unwrap_or(size);
+        if stride < size {
+            bail!("{at}: byteStride {stride} is smaller than an element ({size} bytes)");
+        }
+        let span = (count - 1)
+            .checked_mul(stride)
+            .and_then(|s| s.checked_add(size))
+            .and_then(|s| s.checked_add(acc.offset()));
+        match span {
+            Some(end) if end <= view.length() => {}
+            _ => bail!(
+                "{at}: {count} elements from byte {} (stride {stride}) run past bufferViews[{}] ({} bytes)",
+                acc.offset(),
+                view.index(),
+                view.length()
+            ),
+        }
+        let b = view.buffer().index();
+        let data = match self.buffers.get(b) {
+            Some(Ok(d)) => d,
+            Some(Err(why)) => bail!("{why}"),
+            None => bail!("{at}: buffers[{b}] does not exist"),
+        };
+        match view.offset().checked_add(view.length()) {
+            Some(end) if end <= data.len() => Ok(()),
+            _ => bail!(
+                "{at}: bufferViews[{}] (bytes {}..+{}) runs past buffers[{b}] ({} bytes)",
+                view.index(),
+                view.offset(),
+                view.length(),
+                data.len()
+            ),
+        }
+    }
+
+    /// The index in `materials` of glTF material `m`, converting it on first use.
+    fn material(&mut self, m: ::gltf::Material) -> Result<u32> {
+        let key = m.index();
+        if let Some(&id) = self.material_index.get(&key) {
+            return Ok(id);
+        }
+        let mut mat = match key {
+            // No material: the renderer's default grey, not glTF's black metal.
+            None => Material::default(),
+            Some(_) => convert_material(&m),
+        };
+        let label = match key {
+            Some(i) => format!("{}: materials[{i}]", self.name),
+            None => self.name.to_string(),
+        };
+        let pbr = m.pbr_metallic_roughness();
+        if let Some(info) = pbr.base_color_texture() {
+            mat.diffuse_map = self.texture(&label, "baseColorTexture", &info);
+        }
+        if let Some(info) = m.emissive_texture() {
+            mat.emission_map = self.texture(&label, "emissiveTexture", &info);
+        }
+        let id = self.materials.len() as u32;
+        self.materials.push(mat);
+        self.material_index.insert(key, id);
+        Ok(id)
+    }
+
+    /// A colour texture (sRGB), or `None` with a warning when its image cannot be had.
+    fn texture(
+        &mut self,
+        label: &str,
+        what: &str,
+        info: &::gltf::texture::Info,
+    ) -> Option<Arc<Texture>> {
+        if info.tex_coord() != 0 {
+            self.warnings.push(format!(
+                "{label}: {what} uses TEXCOORD_{}; only TEXCOORD_0 is read",
+                info.tex_coord()
+            ));
+        }
+        let tex = info.texture();
+        let image = tex.source();
+        let key = (image.index(), true);
+        let decoded = match self.textures.get(&key) {
+            Some(t) => t.clone(),
+            None => {
+                let t = match self.image_bytes(&image) {
+                    Ok(bytes) => {
+                        let name = format!("{}#images[{}]", self.name, image.index());
+                        Texture::decode(&name, &bytes, true).map(Arc::new)
+                    }
+                    Err(e) => Err(e),
+                };
+                let t = match t {
+                    Ok(t) => Some(t),
+                    Err(e) => {
+                        self.warnings
+                            .push(format!("{label}: {what} not used ({e:#})"));
+                        None
+                    }
+                };
+                self.textures.insert(key, t.clone());
+                t
+            }
+        }?;
+        let sampler = tex.sampler();
+        let wrap = |w: ::gltf::texture::WrappingMode| match w {
+            ::gltf::texture::WrappingMode::ClampToEdge => Wrap::ClampToEdge,
+            ::gltf::texture::WrappingMode::MirroredRepeat => Wrap::MirroredRepeat,
+            ::gltf::texture::WrappingMode::Repeat => Wrap::Repeat,
+        };
+        let (wu, wv) = (wrap(sampler.wrap_s()), wrap(sampler.wrap_t()));
+        if decoded.wrap_u == wu && decoded.wrap_v == wv {
+            return Some(decoded);
+        }
+        // The same image with another sampler: a copy with its own wrap modes.
+        let mut t = (*decoded).clone();
+        t.wrap_u = wu;
+        t.wrap_v = wv;
+        Some(Arc::new(t))
+    }
+
+    /// The encoded bytes of an image: a buffer view or a URI.
+    fn image_bytes(&self, image: &::gltf::Image) -> Result<Vec<u8>> {
+        match image.source() {
+            ::gltf::image::Source::View { view, .. } => {
+                let b = view.buffer().index();
+                let data = match self.buffers.get(b) {
+                    Some(Ok(d)) => d,
+                    Some(Err(why)) => bail!("{why}"),
+                    None => bail!("buffers[{b}] does not exist"),
+                };
+                view.offset()
+                    .checked_add(view.length())
+                    .and_then(|end| data.get(view.offset()..end))
+                    .map(<[u8]>::to_vec)
+                    .ok_or_else(|| anyhow!("bufferViews[{}] runs past buffers[{b}]", view.index()))
+            }
+            ::gltf::image::Source::Uri { uri, .. } => uri_bytes(uri, self.read),
+        }
+    }
+
+    /// The mesh, with positions placed in a local frame and flat normals where the file has
+    /// none; warnings for what was left out.
+    fn finish(self) -> Result<GltfData> {
+        let mut left: Vec<(String, usize)> = self.left_out.into_iter().collect();
+        left.sort();
+        for (why, count) in left {
+            self.warnings.push(format!(
+                "{}: {count} primitive(s) {} left out (only triangles are drawn)",
+                self.name,
+                if why.starts_with("without") {
+                    why
+                } else {
+                    format!("of mode {why}")
+                }
+            ));
+        }
+        let (origin, local) = super::local_frame(&self.positions);
+        let triangles: Vec<[Vec3; 3]> = local.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect();
+        let normals = triangles
+            .iter()
+            .zip(&self.normals)
+            .map(|(t, n)| {
+                let flat = super::face_normal(t);
+                match n {
+                    Some(n) => n.map(|v| {
+                        if v.is_finite() && v != Vec3::ZERO {
+                            v
+                        } else {
+                            flat
+                        }
+                    }),
+                    None => [flat; 3],
+                }
+            })
+            .collect();
+        if triangles.is_empty() {
+            self.warnings
+                .push(format!("{}: the scene holds no triangles", self.name));
+        }
+        let mut materials = self.materials;
+        if materials.is_empty() {
+            materials.push(Material::default());
+        }
+        Ok(GltfData {
+            mesh: Mesh {
+                triangles,
+                normals,
+                material_ids: self.material_ids,
+                uvs: if self.any_uvs { self.uvs } else { Vec::new() },
+                origin,
+            },
+            materials,
+            camera: self.camera,
+            lights: self.lights,
+            warnings: std::mem::take(self.warnings),
+        })
+    }
+}
+
+/// Triangles of a primitive's index list by its mode (strips alternate their winding so every
+/// triangle faces the same way; degenerate ones, with a repeated index, are kept: the BVH
+/// leaves zero-area triangles out).
+fn triangles_of(mode: Mode, idx: &[u32]) -> Vec<[u32; 3]> {
+    match mode {
+        Mode::Triangles => idx.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect(),
+        Mode::TriangleStrip => (2..idx.len())
+            .map(|i| {
+                if i % 2 == 0 {
+                    [idx[i - 2], idx[i - 1], idx[i]]
+                } else {
+                    [idx[i - 1], idx[i - 2], idx[i]]
+                }
+            })
+            .collect(),
+        Mode::TriangleFan => (2..idx.len())
+            .map(|i| [idx[0], idx[i - 1], idx[i]])
+            .collect(),
+        _ => Vec::new(),
+    }
+}
+
+/// A glTF metallic-roughness material as the renderer's [`Material`] (textures are attached by
+/// the loader):
+/// - diffuse: base colour times `1 - metallic` (texture applied when shading);
+/// - specular: Blinn-Phong with the Fresnel colour at normal incidence (`0.04` for a
+///   dielectric, the base colour for a metal) and exponent `2 / a^2 - 2`, `a = roughness^2`;
+/// - mirror instead, with that colour, when metallic >= 0.5 and roughness <= 0.2;
+/// - emission: emissive factor times `KHR_materials_emissive_strength`;
+/// - opacity: base alpha for `BLEND`, 0 or 1 against the cutoff for `MASK`, 1 for `OPAQUE`;
+///   `KHR_materials_transmission` makes it glass: opacity `1 - transmission`, index of
+///   refraction from `KHR_materials_ior` (1.5 by default).
+pub fn convert_material(m: &::gltf::Material) -> Material {
+    let pbr = m.pbr_metallic_roughness();
+    let [r, g, b, alpha] = pbr.base_color_factor();
+    let base = Vec3::new(r, g, b).clamp(Vec3::ZERO, Vec3::ONE);
+    let metallic = pbr.metallic_factor().clamp(0.0, 1.0);
+    let roughness = pbr.roughness_factor().clamp(0.0, 1.0);
+    let f0 = Vec3::splat(0.04).lerp(base, metallic);
+    let a = (roughness * roughness).max(1e-3);
+    let shininess = (2.0 / (a * a) - 2.0).clamp(0.0, 10_000.0);
+    let mirror_like = metallic >= 0.5 && roughness <= 0.2;
+    let strength = m.emissive_strength().unwrap_or(1.0).max(0.0);
+    let emission = Vec3::from(m.emissive_factor()).max(Vec3::ZERO) * strength;
+    let mut opacity = match m.alpha_mode() {
+        ::gltf::material::AlphaMode::Opaque => 1.0,
+        ::gltf::material::AlphaMode::Mask => {
+            if alpha >= m.alpha_cutoff().unwrap_or(0.5) {
+                1.0
+            } else {
+                0.0
+            }
+        }
+        ::gltf::material::AlphaMode::Blend => alpha.clamp(0.0, 1.0),
+    };
+    let mut ior = 1.0;
+    if let Some(t) = m.transmission() {
+        let t = t.transmission_factor().clamp(0.0, 1.0);
+        if t > 0.0 {
+            opacity *= 1.0 - t;
+            ior = m.ior().unwrap_or(1.5);
+        }
+    }
+    let diffuse = base * (1.0 - metallic);
+    Material {
+        name: m.name().unwrap_or("material").to_string(),
+        diffuse,
+        specular: if mirror_like { Vec3::ZERO } else { f0 },
+        shininess,
+        emission,
+        opacity,
+        ior,
+        mirror: if mirror_like { f0 } else { Vec3::ZERO },
+        absorption: Vec3::ZERO,
+        illum: 2,
+        diffuse_map: None,
+        emission_map: None,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn strips_keep_one_winding_and_fans_turn_about_the_first_vertex() {
+        assert_eq!(
+            triangles_of(Mode::TriangleStrip, &[0, 1, 2, 3]),
+            vec![[0, 1, 2], [2, 1, 3]]
+        );
+        assert_eq!(
+            triangles_of(Mode::TriangleFan, &[0, 1, 2, 3]),
+            vec![[0, 1, 2], [0, 2, 3]]
+        );
+        assert_eq!(
+            triangles_of(Mode::Triangles, &[0, 1, 2, 3]),
+            vec![[0, 1, 2]]
+        );
+    }
+}
