@@ -168,8 +168,13 @@ pub fn load_from(
     read: &dyn Fn(&Path) -> Result<Vec<u8>>,
 ) -> Result<GltfData> {
     let name = path.display().to_string();
-    let doc =
-        ::gltf::Gltf::from_slice_without_validation(bytes).map_err(|e| parse_error(&name, e))?;
+    let doc = match ::gltf::Gltf::from_slice_without_validation(bytes) {
+        Ok(d) => d,
+        Err(e @ ::gltf::Error::Deserialize(_)) => {
+            relaxed(bytes).ok_or_else(|| parse_error(&name, e))?
+        }
+        Err(e) => return Err(parse_error(&name, e)),
+    };
     for ext in doc.extensions_required() {
         if !SUPPORTED_EXTENSIONS.contains(&ext) {
             bail!("{name}: needs the extension {ext}, which Tracery does not read");
@@ -228,6 +233,26 @@ pub fn load_from(
     loader.finish()
 }
 
+/// A glTF (JSON, not GLB) that the gltf crate refuses only for a field the specification makes
+/// optional and the crate does not: a scene without `nodes` (an empty scene). The field is
+/// added and the file read again; `None` when that is not the problem.
+fn relaxed(bytes: &[u8]) -> Option<::gltf::Gltf> {
+    let mut json: serde_json::Value = serde_json::from_slice(bytes).ok()?;
+    let mut changed = false;
+    for scene in json.get_mut("scenes")?.as_array_mut()? {
+        if let Some(obj) = scene.as_object_mut()
+            && !obj.contains_key("nodes")
+        {
+            obj.insert("nodes".into(), serde_json::Value::Array(Vec::new()));
+            changed = true;
+        }
+    }
+    if !changed {
+        return None;
+    }
+    ::gltf::Gltf::from_slice_without_validation(&serde_json::to_vec(&json).ok()?).ok()
+}
+
 /// Extensions a file may require that the loader reads or can safely do without.
 const SUPPORTED_EXTENSIONS: &[&str] = &[
     "KHR_lights_punctual",
@@ -240,7 +265,7 @@ const SUPPORTED_EXTENSIONS: &[&str] = &[
 
 /// Deepest node hierarchy followed (a deeper one is reported, not followed into a stack
 /// overflow).
-const MAX_NODE_DEPTH: usize = 1024;
+const MAX_NODE_DEPTH: usize = 256;
 
 /// The glTF crate's validation (every index in range, required fields present: after it,
 /// looking an index up cannot fail), less two rules the loader does not need: accessor `min`
@@ -273,7 +298,16 @@ fn validate(doc: &::gltf::Gltf) -> std::result::Result<(), ::gltf::Error> {
 fn parse_error(name: &str, e: ::gltf::Error) -> anyhow::Error {
     match e {
         ::gltf::Error::Deserialize(e) => {
-            anyhow!("{name}:{}:{}: invalid glTF JSON: {e}", e.line(), e.column())
+            // serde's message ends in " at line L column C": said once, up front.
+            let msg = e.to_string();
+            let msg = msg
+                .rsplit_once(" at line ")
+                .map_or(msg.as_str(), |(m, _)| m);
+            anyhow!(
+                "{name}:{}:{}: invalid glTF JSON: {msg}",
+                e.line(),
+                e.column()
+            )
         }
         ::gltf::Error::Validation(errors) => {
             let shown: Vec<String> = errors

@@ -124,12 +124,18 @@ fn finish_loading(
     }
 }
 
-/// The project's scene files (`assets/scenes/*.toml`), sorted, for the inspector's list.
+/// What the inspector's list offers: every file in `folder` (`assets/scenes`) the viewer can
+/// open (scene files, OBJ, PLY, glTF), sorted.
 pub fn scene_files(folder: &Path) -> Vec<PathBuf> {
+    const OPENS: [&str; 5] = ["toml", "obj", "ply", "gltf", "glb"];
     let mut files: Vec<PathBuf> = std::fs::read_dir(folder)
         .map(|d| {
             d.filter_map(|e| e.ok().map(|e| e.path()))
-                .filter(|p| p.extension().is_some_and(|x| x == "toml"))
+                .filter(|p| {
+                    p.extension()
+                        .and_then(|x| x.to_str())
+                        .is_some_and(|x| OPENS.contains(&x.to_ascii_lowercase().as_str()))
+                })
                 .collect()
         })
         .unwrap_or_default();
