@@ -1,5 +1,7 @@
 //! The `tracery` command line, run as a user would.
 
+mod common;
+
 use std::path::Path;
 use std::process::{Command, Output};
 
@@ -316,4 +318,64 @@ fn bench_leaves_out_non_finite_triangles_before_any_engine_sees_them() {
     for &engine in ["tracery-sah", "tracery-packet"].iter().chain(peers) {
         assert!(out.contains(engine), "{engine} missing: {out}");
     }
+}
+
+/// Every command that takes a mesh takes a glTF (the fetched textured box, a GLB with an
+/// embedded PNG): `render` writes its picture, `stats` and `check-mesh` count its 12
+/// triangles, `bench` traces it.
+#[test]
+fn every_mesh_command_takes_a_gltf() {
+    let Some(glb) = common::external("gltf/BoxTextured-glTF-Binary/BoxTextured.glb") else {
+        return;
+    };
+    let glb = glb.to_str().unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("box.png");
+    let o = tracery(&[
+        "render",
+        glb,
+        "--width",
+        "64",
+        "--height",
+        "48",
+        "--spp",
+        "2",
+        "-o",
+        out.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let img = image::open(&out).unwrap().to_rgb8();
+    // The texture's blue and green show: more than one hue on the box.
+    let blue = img
+        .pixels()
+        .filter(|p| p[2] > p[0] + 40 && p[2] > p[1])
+        .count();
+    let green = img
+        .pixels()
+        .filter(|p| p[1] > p[0] + 30 && p[1] > p[2])
+        .count();
+    assert!(blue > 20 && green > 20, "blue {blue}, green {green} pixels");
+    let o = tracery(&["stats", glb, "--json", "--split", "sah"]);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    assert!(
+        text(&o.stdout).contains("\"triangles\": 12"),
+        "{}",
+        text(&o.stdout)
+    );
+    let o = tracery(&["check-mesh", glb]);
+    assert!(
+        text(&o.stdout).contains("12 triangles"),
+        "{}",
+        text(&o.stdout)
+    );
+    let o = tracery(&[
+        "bench",
+        glb,
+        "--repeat",
+        "1",
+        "--no-peers",
+        "--threads",
+        "1",
+    ]);
+    assert!(o.status.success(), "{}", text(&o.stderr));
 }

@@ -657,7 +657,7 @@ fn glb_files_read_like_gltf_and_truncated_ones_are_errors() {
     );
     d["buffers"] = json!([{"byteLength": bin.len()}]);
     let mut text = serde_json::to_vec(&d).unwrap();
-    while text.len() % 4 != 0 {
+    while !text.len().is_multiple_of(4) {
         text.push(b' ');
     }
     let mut glb = Vec::new();

@@ -1,4 +1,5 @@
-//! Property-based bad input (issue 5): valid OBJ, PLY (ASCII and binary) and scene files are
+//! Property-based bad input (issue 5): valid OBJ, PLY (ASCII and binary), glTF (its JSON, its
+//! buffer file, and GLB) and scene files are
 //! mutated at random (bytes flipped, dropped, duplicated, tokens spliced in, the file cut
 //! short) and loaded. Each load must return a scene or an error naming the file, within a
 //! time bound, and never panic; a scene that loads must build a BVH and trace rays without
@@ -41,6 +42,40 @@ fn ply_binary() -> Vec<u8> {
             d.extend(i.to_le_bytes());
         }
     }
+    d
+}
+
+/// A glTF quad under two nodes, its buffer in `quad.bin` ([`gltf_bin`]).
+const GLTF: &str = r#"{"asset":{"version":"2.0"},"scene":0,"scenes":[{"nodes":[0]}],"nodes":[{"children":[1],"translation":[1,0,0]},{"mesh":0,"scale":[2,2,2]}],"meshes":[{"primitives":[{"attributes":{"POSITION":0,"NORMAL":1,"TEXCOORD_0":2},"indices":3,"material":0}]}],"materials":[{"pbrMetallicRoughness":{"baseColorFactor":[0.8,0.2,0.1,1.0],"metallicFactor":0.0},"alphaMode":"BLEND"}],"buffers":[{"byteLength":140,"uri":"quad.bin"}],"bufferViews":[{"buffer":0,"byteOffset":0,"byteLength":48},{"buffer":0,"byteOffset":48,"byteLength":48,"byteStride":12},{"buffer":0,"byteOffset":96,"byteLength":32},{"buffer":0,"byteOffset":128,"byteLength":12}],"accessors":[{"bufferView":0,"componentType":5126,"count":4,"type":"VEC3"},{"bufferView":1,"componentType":5126,"count":4,"type":"VEC3"},{"bufferView":2,"componentType":5126,"count":4,"type":"VEC2"},{"bufferView":3,"componentType":5123,"count":6,"type":"SCALAR"}]}"#;
+
+/// The quad's buffer: positions, normals, texture coordinates (f32) and six u16 indices.
+fn gltf_bin() -> Vec<u8> {
+    let f: [f32; 32] = [
+        0., 0., 0., 1., 0., 0., 1., 1., 0., 0., 1., 0., // positions
+        0., 0., 1., 0., 0., 1., 0., 0., 1., 0., 0., 1., // normals
+        0., 1., 1., 1., 1., 0., 0., 0., // texture coordinates
+    ];
+    let mut d: Vec<u8> = f.iter().flat_map(|x| x.to_le_bytes()).collect();
+    d.extend([0u16, 1, 2, 0, 2, 3].iter().flat_map(|i| i.to_le_bytes()));
+    d
+}
+
+/// The quad as one GLB: its JSON (without the buffer's URI) and its buffer as the BIN chunk.
+fn glb() -> Vec<u8> {
+    let mut json = GLTF.replace(r#","uri":"quad.bin""#, "").into_bytes();
+    while !json.len().is_multiple_of(4) {
+        json.push(b' ');
+    }
+    let bin = gltf_bin();
+    let mut d = b"glTF".to_vec();
+    d.extend(2u32.to_le_bytes());
+    d.extend(((12 + 8 + json.len() + 8 + bin.len()) as u32).to_le_bytes());
+    d.extend((json.len() as u32).to_le_bytes());
+    d.extend(b"JSON");
+    d.extend(json);
+    d.extend((bin.len() as u32).to_le_bytes());
+    d.extend(b"BIN\0");
+    d.extend(bin);
     d
 }
 
@@ -90,6 +125,13 @@ const TOKENS: &[&str] = &[
     "shape = \"sphere\"\nsubdivisions = 40\n",
     "samples = 100000000\n",
     "= [1.0, 2.0]",
+    "{",
+    "}",
+    ":",
+    "\"mode\":6,",
+    "\"children\":[0],",
+    "\"byteStride\":4,",
+    "\"sparse\":{\"count\":1},",
 ];
 
 #[derive(Clone, Debug)]
@@ -254,6 +296,32 @@ proptest! {
     }
 
     #[test]
+    fn mutated_gltf_files_load_or_fail_naming_the_file(edits in prop::collection::vec(edit(), 1..8)) {
+        let dir = tempfile::tempdir().unwrap();
+        std::fs::write(dir.path().join("quad.bin"), gltf_bin()).unwrap();
+        let p = dir.path().join("mutant.gltf");
+        std::fs::write(&p, apply(GLTF.as_bytes().to_vec(), &edits)).unwrap();
+        check(&p, &["mutant.gltf", "quad.bin"])?;
+    }
+
+    #[test]
+    fn mutated_gltf_buffers_load_or_fail_naming_the_file(edits in prop::collection::vec(edit(), 1..8)) {
+        let dir = tempfile::tempdir().unwrap();
+        std::fs::write(dir.path().join("quad.bin"), apply(gltf_bin(), &edits)).unwrap();
+        let p = dir.path().join("quad.gltf");
+        std::fs::write(&p, GLTF).unwrap();
+        check(&p, &["quad.gltf", "quad.bin"])?;
+    }
+
+    #[test]
+    fn mutated_glb_files_load_or_fail_naming_the_file(edits in prop::collection::vec(edit(), 1..8)) {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("mutant.glb");
+        std::fs::write(&p, apply(glb(), &edits)).unwrap();
+        check(&p, &["mutant.glb"])?;
+    }
+
+    #[test]
     fn mutated_scene_files_load_or_fail_naming_the_file(edits in prop::collection::vec(edit(), 1..8)) {
         let dir = tempfile::tempdir().unwrap();
         std::fs::write(dir.path().join("square.ply"), PLY_ASCII).unwrap();
@@ -272,7 +340,12 @@ fn the_unmutated_files_load() {
     std::fs::write(dir.path().join("square.ply"), PLY_ASCII).unwrap();
     std::fs::write(dir.path().join("bin.ply"), ply_binary()).unwrap();
     std::fs::write(dir.path().join("scene.toml"), SCENE).unwrap();
+    std::fs::write(dir.path().join("quad.bin"), gltf_bin()).unwrap();
+    std::fs::write(dir.path().join("quad.gltf"), GLTF).unwrap();
+    std::fs::write(dir.path().join("quad.glb"), glb()).unwrap();
     let count = |f: &str| Scene::load(&dir.path().join(f)).unwrap().triangle_count();
+    assert_eq!(count("quad.gltf"), 2);
+    assert_eq!(count("quad.glb"), 2);
     assert_eq!(count("cube.obj"), 12);
     assert_eq!(count("square.ply"), 2);
     assert_eq!(count("bin.ply"), 2);

@@ -107,7 +107,7 @@ fn sheared<const KX: usize, const KY: usize, const KZ: usize>(
             t_max,
         )
     };
-    if !(t_scaled.abs() < f32::INFINITY) {
+    if !t_scaled.is_finite() {
         return overflow();
     }
     if !(t > 0.0 && t < t_max) {
@@ -121,7 +121,7 @@ fn sheared<const KX: usize, const KY: usize, const KZ: usize>(
         [u, v, w],
         inv,
     );
-    if !(bound < f32::INFINITY) {
+    if !bound.is_finite() {
         return overflow();
     }
     if t <= bound {

@@ -635,7 +635,7 @@ impl Loader<'_> {
             None => (0..n as u32).collect(),
         };
         let triangles = triangles_of(mode, &indices);
-        if mode == Mode::Triangles && indices.len() % 3 != 0 {
+        if mode == Mode::Triangles && !indices.len().is_multiple_of(3) {
             self.warnings.push(format!(
                 "{at}: {} {} is not a multiple of 3; the last {} left out",
                 indices.len(),

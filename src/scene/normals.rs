@@ -7,6 +7,7 @@
 //!   that share it.
 //! - PLY without normals: smooth across an edge when the two faces meet at less than
 //!   [`DEFAULT_CREASE_DEG`] (sharper edges stay sharp).
+//! - glTF without `NORMAL`: flat, as the glTF specification asks.
 //! - Generated meshes: the sphere has its exact normals, cubes and quads are flat.
 //! - A scene file may override any mesh's rule with `crease_angle` (degrees; 0 is flat).
 //!

@@ -321,7 +321,7 @@ fn scene_section(
                         }
                     }
                 });
-            ui.small("Drop an OBJ, PLY or scene file on the window to open it.");
+            ui.small("Drop an OBJ, PLY, glTF or scene file on the window to open it.");
             if let Some(e) = &status.error {
                 ui.colored_label(egui::Color32::from_rgb(255, 110, 90), e);
             }
