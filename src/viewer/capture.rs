@@ -67,9 +67,39 @@ impl Plugin for CapturePlugin {
                     .before(super::display::ShowPicture),
             )
             .add_systems(Last, (measure, finish).chain());
+            // The render world says when no pipeline is left compiling (without one, there is
+            // nothing to wait for).
+            let render = app.get_sub_app_mut(bevy::render::RenderApp);
+            let ready = PipelinesReady(Arc::new(AtomicBool::new(render.is_none())));
+            if let Some(render) = render {
+                render.insert_resource(ready.clone()).add_systems(
+                    bevy::render::Render,
+                    note_pipelines.in_set(bevy::render::RenderSystems::Cleanup),
+                );
+            }
+            app.insert_resource(ready);
         }
     }
 }
+
+/// Whether the render world's pipeline cache had nothing left to compile at the end of its
+/// last frame. Pipelines compile on a background thread and draw nothing until they are done:
+/// a screenshot must wait for them, or the gizmos it asked for may be missing (under load,
+/// the line pipelines took longer than the frames the script waited, now and then).
+#[derive(Resource, Clone)]
+struct PipelinesReady(Arc<AtomicBool>);
+
+fn note_pipelines(
+    cache: Res<bevy::render::render_resource::PipelineCache>,
+    ready: Res<PipelinesReady>,
+) {
+    let idle = cache.waiting_pipelines().next().is_none();
+    ready.0.store(idle, Ordering::Relaxed);
+}
+
+/// Longest wait for pipelines before a screenshot (one that can never compile must not hang
+/// the script).
+const PIPELINE_WAIT: Duration = Duration::from_secs(30);
 
 /// Save the full-resolution traced image (to the path, or to `out/` under a generated name).
 #[derive(Message, Clone, Debug)]
@@ -165,8 +195,11 @@ struct Script {
     /// Start of the idle measurement: wall clock and process CPU seconds.
     idle_from: Option<(Instant, f64)>,
     screenshot_requested: bool,
-    /// Frames drawn since the gizmos asked for at start were ready.
+    /// Frames drawn since the gizmos asked for at start were ready (and every render pipeline
+    /// compiled).
     gizmo_frames: u32,
+    /// When the screenshot began waiting for render pipelines.
+    pipelines_from: Option<Instant>,
     /// The orbit report is printed.
     reported: bool,
     saved: Arc<AtomicBool>,
@@ -331,6 +364,7 @@ fn finish(
     mut keep_awake: ResMut<super::pacing::KeepAwake>,
     views: ReportViews,
     gizmos: GizmosShown,
+    pipelines: Res<PipelinesReady>,
     mut exit: MessageWriter<AppExit>,
 ) {
     if let Some(n) = script.exit_in.as_mut() {
@@ -379,11 +413,27 @@ fn finish(
         keep_awake.0 = true;
     }
     // The gizmos switched on are in the picture before it is saved: their BVH indexed, the
-    // debug ray traced, and eight frames drawn with them since.
+    // debug ray traced, their pipelines compiled, and eight frames drawn with them since.
     if script.script.screenshot.is_some() {
         if !gizmos.ready() {
             script.gizmo_frames = 0;
             return;
+        }
+        // Every pipeline compiled, so what the frame asks for is drawn.
+        let waited = script
+            .pipelines_from
+            .get_or_insert_with(Instant::now)
+            .elapsed();
+        if !pipelines.0.load(Ordering::Relaxed) {
+            if waited < PIPELINE_WAIT {
+                script.gizmo_frames = 0;
+                return;
+            }
+            if script.gizmo_frames == 0 {
+                warn!(
+                    "render pipelines still compiling after {PIPELINE_WAIT:?}; saving the screenshot anyway"
+                );
+            }
         }
         script.gizmo_frames += 1;
         if script.gizmo_frames < 8 {
