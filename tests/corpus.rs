@@ -5,8 +5,6 @@
 mod common;
 
 use std::path::{Path, PathBuf};
-use std::sync::mpsc;
-use std::time::Duration;
 
 use tracery::scene::Scene;
 
@@ -30,20 +28,9 @@ fn objs(dir: &Path, out: &mut Vec<PathBuf>) {
 fn load_all(files: &[PathBuf]) -> (usize, usize) {
     let (mut loaded, mut failed) = (0, 0);
     for f in files {
-        let (tx, rx) = mpsc::channel();
-        let path = f.clone();
-        std::thread::spawn(move || {
-            let r = std::panic::catch_unwind(|| Scene::load(&path).map(|s| s.triangle_count()));
-            let _ = tx.send(r);
-        });
-        let result = rx
-            .recv_timeout(Duration::from_secs(30))
-            .unwrap_or_else(|_| panic!("{}: no answer within 30 s", f.display()));
-        match result {
-            Err(_) => panic!("{}: panicked", f.display()),
-            Ok(Ok(_)) => loaded += 1,
-            Ok(Err(e)) => {
-                let msg = format!("{e:#}");
+        match common::load_bounded(f) {
+            Ok(_) => loaded += 1,
+            Err(msg) => {
                 let name = f.file_name().unwrap().to_string_lossy();
                 assert!(msg.contains(&*name), "{}: {msg}", f.display());
                 assert!(

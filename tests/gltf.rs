@@ -7,8 +7,6 @@
 mod common;
 
 use std::path::{Path, PathBuf};
-use std::sync::mpsc;
-use std::time::Duration;
 
 use base64::Engine as _;
 use glam::{Vec2, Vec3, Vec4};
@@ -764,25 +762,14 @@ fn every_assimp_gltf_loads_or_fails_with_a_message_and_counts_match_trimesh() {
             .unwrap()
             .to_string_lossy()
             .replace('\\', "/");
-        let (tx, rx) = mpsc::channel();
-        let path = f.clone();
-        std::thread::spawn(move || {
-            let r = std::panic::catch_unwind(|| Scene::load(&path).map(|s| s.triangle_count()));
-            let _ = tx.send(r);
-        });
-        let result = rx
-            .recv_timeout(Duration::from_secs(30))
-            .unwrap_or_else(|_| panic!("{rel}: no answer within 30 s"));
-        match result {
-            Err(_) => panic!("{rel}: panicked"),
-            Ok(Err(e)) => {
-                let msg = format!("{e:#}");
+        match common::load_bounded(f) {
+            Err(msg) => {
                 let name = f.file_name().unwrap().to_string_lossy();
                 assert!(msg.contains(&*name) && !msg.contains('\n'), "{rel}: {msg}");
                 eprintln!("refused: {msg}");
                 refused += 1;
             }
-            Ok(Ok(count)) => {
+            Ok(count) => {
                 loaded += 1;
                 let theirs = trimesh
                     .get(rel.as_str())

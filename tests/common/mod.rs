@@ -1,7 +1,9 @@
 //! Helpers shared by the integration tests.
 #![allow(dead_code)]
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
+use std::sync::mpsc;
+use std::time::Duration;
 
 use glam::Vec3;
 use rayon::prelude::*;
@@ -29,6 +31,26 @@ pub fn external(rel: &str) -> Option<PathBuf> {
         p.display()
     );
     None
+}
+
+/// Loads `path` as a scene on its own thread: its triangle count, or the error's text (with
+/// its causes). Panics, naming the file, when the loader panics or takes over 30 s.
+pub fn load_bounded(path: &Path) -> Result<usize, String> {
+    let (tx, rx) = mpsc::channel();
+    let p = path.to_path_buf();
+    std::thread::spawn(move || {
+        let r = std::panic::catch_unwind(|| {
+            tracery::scene::Scene::load(&p)
+                .map(|s| s.triangle_count())
+                .map_err(|e| format!("{e:#}"))
+        });
+        let _ = tx.send(r);
+    });
+    match rx.recv_timeout(Duration::from_secs(30)) {
+        Ok(Ok(r)) => r,
+        Ok(Err(_)) => panic!("{}: panicked", path.display()),
+        Err(_) => panic!("{}: no answer within 30 s", path.display()),
+    }
 }
 
 fn unit_vector(rng: &mut SplitMix64) -> Vec3 {
