@@ -792,3 +792,37 @@ fn every_assimp_gltf_loads_or_fails_with_a_message_and_counts_match_trimesh() {
     // The engine places 121,496 triangles through its node hierarchy.
     assert_eq!(Scene::load(&probe).unwrap().triangle_count(), 121_496);
 }
+
+/// A scene file's `crease_angle` smooths a glTF's primitives that have no normals (flat
+/// otherwise, as the specification asks): two triangles folded by 20 degrees along their
+/// shared edge share the normals of that edge's corners with the angle, not without it.
+#[test]
+fn crease_angle_smooths_a_gltf_without_normals() {
+    let dir = tempfile::tempdir().unwrap();
+    let z = (20f32).to_radians().tan();
+    let mut bin = f32_bytes(&[0., 0., 0., 1., 0., 0., 1., 1., 0., 0., 1., z]);
+    bin.extend([0u16, 1, 2, 0, 2, 3].iter().flat_map(|i| i.to_le_bytes()));
+    let d = json!({
+        "asset": {"version": "2.0"},
+        "scenes": [{"nodes": [0]}],
+        "nodes": [{"mesh": 0}],
+        "meshes": [{"primitives": [{"attributes": {"POSITION": 0}, "indices": 1}]}],
+        "buffers": [{"byteLength": bin.len(), "uri": data_uri(&bin)}],
+        "bufferViews": [{"buffer": 0, "byteLength": 48}, {"buffer": 0, "byteOffset": 48, "byteLength": 12}],
+        "accessors": [{"bufferView": 0, "componentType": 5126, "count": 4, "type": "VEC3"},
+                      {"bufferView": 1, "componentType": 5123, "count": 6, "type": "SCALAR"}]
+    });
+    write(dir.path(), "fold.gltf", &d);
+    let scene = |extra: &str| {
+        let p = dir.path().join("s.toml");
+        std::fs::write(&p, format!("[[meshes]]\npath = \"fold.gltf\"\n{extra}")).unwrap();
+        Scene::load(&p).unwrap()
+    };
+    // Corner 0 of both triangles is vertex 0, on the shared edge.
+    let flat = scene("");
+    assert!(!close(flat.mesh.normals[0][0], flat.mesh.normals[1][0]));
+    let smooth = scene("crease_angle = 60.0\n");
+    assert!(close(smooth.mesh.normals[0][0], smooth.mesh.normals[1][0]));
+    let sharp = scene("crease_angle = 10.0\n");
+    assert!(!close(sharp.mesh.normals[0][0], sharp.mesh.normals[1][0]));
+}

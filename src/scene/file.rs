@@ -421,7 +421,7 @@ fn load_mesh_file(
         )),
         Some("gltf" | "glb") => {
             let dir = file.parent().unwrap_or(Path::new("")).to_path_buf();
-            let d = super::gltf::load_from(file, &bytes, &|p: &Path| read(&dir.join(p)))?;
+            let d = super::gltf::load_from(file, &bytes, &|p: &Path| read(&dir.join(p)), rule)?;
             Ok((d.mesh, d.materials, d.warnings))
         }
         _ => bail!("unknown mesh type (expected .obj, .ply, .gltf or .glb)"),

@@ -31,7 +31,9 @@ use anyhow::{Result, anyhow, bail};
 use base64::Engine as _;
 use glam::{DMat3, DMat4, DVec3, Vec2, Vec3};
 
-use super::{Camera, Environment, Integrator, Light, Material, Mesh, Scene, Texture, Wrap};
+use super::{
+    Camera, Environment, Integrator, Light, Material, Mesh, NormalRule, Scene, Texture, Wrap,
+};
 
 /// What a glTF load produced besides the scene (used by scene files, which give their own
 /// camera and lights).
@@ -92,7 +94,12 @@ pub enum LightKind {
 pub fn load(path: &Path) -> Result<Scene> {
     let bytes = super::read_file(path)?;
     let dir = path.parent().unwrap_or(Path::new(".")).to_path_buf();
-    let d = load_from(path, &bytes, &|p: &Path| super::read_file(&dir.join(p)))?;
+    let d = load_from(
+        path,
+        &bytes,
+        &|p: &Path| super::read_file(&dir.join(p)),
+        None,
+    )?;
     Ok(scene_of(super::name_of(path), d))
 }
 
@@ -161,11 +168,13 @@ pub fn scene_of(name: String, d: GltfData) -> Scene {
 }
 
 /// Loads glTF bytes named `path` (for messages), reading external buffers and images through
-/// `read` (paths relative to the file's folder).
+/// `read` (paths relative to the file's folder). Primitives without normals are flat, or
+/// follow `rule` when one is given (a scene file's `crease_angle`).
 pub fn load_from(
     path: &Path,
     bytes: &[u8],
     read: &dyn Fn(&Path) -> Result<Vec<u8>>,
+    rule: Option<NormalRule>,
 ) -> Result<GltfData> {
     let name = path.display().to_string();
     let doc = match ::gltf::Gltf::from_slice_without_validation(bytes) {
@@ -192,6 +201,7 @@ pub fn load_from(
         doc: &doc,
         buffers: &buffers,
         read,
+        rule,
         warnings: &mut warnings,
         positions: Vec::new(),
         normals: Vec::new(),
@@ -380,6 +390,8 @@ fn uri_bytes(uri: &str, read: &dyn Fn(&Path) -> Result<Vec<u8>>) -> Result<Vec<u
 struct Primitive {
     positions: Vec<Vec3>,
     normals: Option<Vec<Vec3>>,
+    /// Per-corner normals computed by the loader's rule where the file gives none.
+    corner_normals: Option<Vec<[Vec3; 3]>>,
     uvs: Option<Vec<Vec2>>,
     triangles: Vec<[u32; 3]>,
     material: u32,
@@ -390,6 +402,8 @@ struct Loader<'a> {
     doc: &'a ::gltf::Gltf,
     buffers: &'a [Buffer],
     read: &'a dyn Fn(&Path) -> Result<Vec<u8>>,
+    /// Normals for primitives without them (`None`: flat).
+    rule: Option<NormalRule>,
     warnings: &'a mut Vec<String>,
     /// World positions, three per triangle.
     positions: Vec<DVec3>,
@@ -514,15 +528,16 @@ impl Loader<'_> {
         // the front face stays the front face.
         let flip = linear.determinant() < 0.0;
         let order: [usize; 3] = if flip { [0, 2, 1] } else { [0, 1, 2] };
-        for t in &p.triangles {
+        for (ti, t) in p.triangles.iter().enumerate() {
             let c = order.map(|k| t[k] as usize);
             self.positions
                 .extend(c.map(|i| world.transform_point3(p.positions[i].as_dvec3())));
-            self.normals.push(
-                p.normals
-                    .as_ref()
-                    .map(|n| c.map(|i| (normal_m * n[i].as_dvec3()).normalize_or_zero().as_vec3())),
-            );
+            let turn = |n: Vec3| (normal_m * n.as_dvec3()).normalize_or_zero().as_vec3();
+            self.normals.push(match (&p.normals, &p.corner_normals) {
+                (Some(n), _) => Some(c.map(|i| turn(n[i]))),
+                (None, Some(cn)) => Some(order.map(|k| turn(cn[ti][k]))),
+                (None, None) => None,
+            });
             self.uvs.push(match &p.uvs {
                 Some(uv) => c.map(|i| uv[i]),
                 None => [Vec2::ZERO; 3],
@@ -664,10 +679,20 @@ impl Loader<'_> {
         if uvs.is_some() {
             self.any_uvs = true;
         }
+        let corner_normals = match (&normals, self.rule) {
+            (None, Some(rule)) => Some(super::normals::corner_normals(
+                &positions,
+                &triangles,
+                rule,
+                &[],
+            )),
+            _ => None,
+        };
         let material = self.material(prim.material())?;
         Ok(Some(Primitive {
             positions,
             normals,
+            corner_normals,
             uvs,
             triangles,
             material,
