@@ -826,3 +826,15 @@ fn crease_angle_smooths_a_gltf_without_normals() {
     let sharp = scene("crease_angle = 10.0\n");
     assert!(!close(sharp.mesh.normals[0][0], sharp.mesh.normals[1][0]));
 }
+
+/// An attribute naming an accessor that does not exist is an error, not a panic (the gltf
+/// crate's own POSITION check indexed the accessor list unchecked; the mutation test found it:
+/// one byte dropped from the key `"accessors"`).
+#[test]
+fn an_attribute_past_the_accessor_list_is_an_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut d = doc(json!([{"mesh": 0}]), json!({}));
+    d["accessors"] = json!([]);
+    let e = error_of(&write(dir.path(), "noaccessors.gltf", &d));
+    assert!(e.contains("meshes[0].primitives[0].attributes"), "{e}");
+}

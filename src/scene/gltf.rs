@@ -198,7 +198,7 @@ pub fn load_from(
 
     let mut loader = Loader {
         name: &name,
-        doc: &doc,
+        nodes: doc.nodes().collect(),
         buffers: &buffers,
         read,
         rule,
@@ -284,6 +284,25 @@ const MAX_NODE_DEPTH: usize = 256;
 fn validate(doc: &::gltf::Gltf) -> std::result::Result<(), ::gltf::Error> {
     use ::gltf::json::validation::{Error, Validate};
     let root = doc.as_json();
+    // The crate's check of POSITION's min and max indexes the accessor list without a bounds
+    // check (a panic on a POSITION index past the list): those indices are checked first.
+    let accessors = root.accessors.len();
+    for (m, mesh) in root.meshes.iter().enumerate() {
+        for (p, prim) in mesh.primitives.iter().enumerate() {
+            if prim.attributes.values().any(|a| a.value() >= accessors) {
+                let path = ::gltf::json::Path::new()
+                    .field("meshes")
+                    .index(m)
+                    .field("primitives")
+                    .index(p)
+                    .field("attributes");
+                return Err(::gltf::Error::Validation(vec![(
+                    path,
+                    Error::IndexOutOfBounds,
+                )]));
+            }
+        }
+    }
     let mut errors = Vec::new();
     root.validate(root, ::gltf::json::Path::new, &mut |path, err| {
         let p = path();
@@ -399,7 +418,8 @@ struct Primitive {
 
 struct Loader<'a> {
     name: &'a str,
-    doc: &'a ::gltf::Gltf,
+    /// The nodes by index (the crate's iterator would be walked from the start per lookup).
+    nodes: Vec<::gltf::Node<'a>>,
     buffers: &'a [Buffer],
     read: &'a dyn Fn(&Path) -> Result<Vec<u8>>,
     /// Normals for primitives without them (`None`: flat).
@@ -445,8 +465,7 @@ impl Loader<'_> {
                 self.name
             );
         }
-        let doc = self.doc;
-        let Some(node) = doc.nodes().nth(index) else {
+        let Some(node) = self.nodes.get(index).cloned() else {
             bail!("{}: nodes[{index}] does not exist", self.name);
         };
         let local = DMat4::from_cols_array_2d(&node.transform().matrix().map(|c| c.map(f64::from)));
