@@ -838,3 +838,25 @@ fn an_attribute_past_the_accessor_list_is_an_error() {
     let e = error_of(&write(dir.path(), "noaccessors.gltf", &d));
     assert!(e.contains("meshes[0].primitives[0].attributes"), "{e}");
 }
+
+/// Thirty levels of nodes, each listing the next twice, would place 2^30 copies of the mesh:
+/// the loader stops with a message instead of hanging.
+#[test]
+fn a_node_graph_that_doubles_at_every_level_is_refused_not_followed() {
+    let dir = tempfile::tempdir().unwrap();
+    let nodes: Vec<Value> = (0..30)
+        .map(|i| {
+            if i < 29 {
+                json!({"children": [i + 1, i + 1]})
+            } else {
+                json!({"mesh": 0})
+            }
+        })
+        .collect();
+    let d = doc(Value::Array(nodes), json!({"scenes": [{"nodes": [0]}]}));
+    let p = write(dir.path(), "bomb.gltf", &d);
+    let start = std::time::Instant::now();
+    let e = error_of(&p);
+    assert!(e.contains("more than"), "{e}");
+    eprintln!("refused in {:?}", start.elapsed());
+}

@@ -215,6 +215,7 @@ pub fn load_from(
         lights: Vec::new(),
         left_out: HashMap::new(),
         any_uvs: false,
+        visits: 0,
     };
 
     let roots: Vec<usize> = match doc.default_scene().or_else(|| doc.scenes().next()) {
@@ -272,6 +273,13 @@ const SUPPORTED_EXTENSIONS: &[&str] = &[
     "KHR_materials_unlit",
     "KHR_texture_transform",
 ];
+
+/// Most node placements (a node under several parents is placed once per path to it: a file
+/// can make that grow exponentially with depth, so it is bounded, not followed into a hang).
+const MAX_NODE_VISITS: usize = 1_000_000;
+
+/// Most triangles placed (a mesh under many nodes multiplies them).
+const MAX_TRIANGLES: usize = 50_000_000;
 
 /// Deepest node hierarchy followed (a deeper one is reported, not followed into a stack
 /// overflow).
@@ -443,6 +451,8 @@ struct Loader<'a> {
     /// Primitives left out, by reason.
     left_out: HashMap<String, usize>,
     any_uvs: bool,
+    /// Nodes placed so far (see [`MAX_NODE_VISITS`]).
+    visits: usize,
 }
 
 impl Loader<'_> {
@@ -462,6 +472,13 @@ impl Loader<'_> {
         if depth > MAX_NODE_DEPTH {
             bail!(
                 "{}: nodes[{index}]: the node hierarchy is deeper than {MAX_NODE_DEPTH} levels",
+                self.name
+            );
+        }
+        self.visits += 1;
+        if self.visits > MAX_NODE_VISITS {
+            bail!(
+                "{}: the node hierarchy places more than {MAX_NODE_VISITS} nodes (nodes under several parents?)",
                 self.name
             );
         }
@@ -541,6 +558,12 @@ impl Loader<'_> {
         let Some(p) = data else {
             return Ok(());
         };
+        if self.material_ids.len() + p.triangles.len() > MAX_TRIANGLES {
+            bail!(
+                "{}: meshes[{mesh}] placed again would make more than {MAX_TRIANGLES} triangles",
+                self.name
+            );
+        }
         let linear = DMat3::from_mat4(*world);
         let normal_m = linear.inverse().transpose();
         // A mirroring transform turns the winding around: corners are swapped back so that
