@@ -112,7 +112,7 @@ fn write(dir: &Path, name: &str, json: &Value) -> PathBuf {
 fn error_of(path: &Path) -> String {
     let e = format!("{:#}", Scene::load(path).expect_err("the load must fail"));
     let name = path.file_name().unwrap().to_string_lossy();
-    assert!(e.contains(&*name), "names the file: {e}");
+    assert_eq!(e.matches(&*name).count(), 1, "names the file, once: {e}");
     assert!(!e.contains('\n'), "one line: {e}");
     e
 }

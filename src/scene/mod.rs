@@ -466,7 +466,15 @@ impl Scene {
                 path.display()
             ),
         }
-        .with_context(|| format!("cannot load scene {}", path.display()))
+        .map_err(|e| {
+            // The loaders' messages name the file already: it is said once.
+            let file = path.display().to_string();
+            if format!("{e:#}").contains(&file) {
+                e.context("cannot load scene")
+            } else {
+                e.context(format!("cannot load scene {file}"))
+            }
+        })
     }
 
     /// A scene for a bare mesh: the canonical camera, a point light above and behind the
