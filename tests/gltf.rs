@@ -860,3 +860,47 @@ fn a_node_graph_that_doubles_at_every_level_is_refused_not_followed() {
     assert!(e.contains("more than"), "{e}");
     eprintln!("refused in {:?}", start.elapsed());
 }
+
+/// `KHR_texture_transform`: an offset of half the image reads the texel half an image along;
+/// a quarter turn takes `u` to `-v` (the direction that points the extension sample's arrows
+/// at their green markers: README picture); scale multiplies before the offset.
+#[test]
+fn texture_transforms_offset_rotate_and_scale_lookups() {
+    use tracery::scene::gltf::uv_transform;
+    let t = uv_transform([0.5, 0.0], 0.0, [1.0, 1.0]);
+    assert!(close(
+        t.transform_point2(Vec2::new(0.25, 0.25)).extend(0.0),
+        Vec3::new(0.75, 0.25, 0.0)
+    ));
+    let r = uv_transform([0.0, 0.0], std::f32::consts::FRAC_PI_2, [1.0, 1.0]);
+    assert!(close(
+        r.transform_point2(Vec2::X).extend(0.0),
+        Vec3::new(0.0, -1.0, 0.0)
+    ));
+    let s = uv_transform([0.1, 0.2], 0.0, [2.0, 3.0]);
+    assert!(close(
+        s.transform_point2(Vec2::ONE).extend(0.0),
+        Vec3::new(2.1, 3.2, 0.0)
+    ));
+
+    let dir = tempfile::tempdir().unwrap();
+    let png = png_2x2();
+    let d = doc(
+        json!([{"mesh": 0}]),
+        json!({
+            "meshes": [{"primitives": [{"attributes": {"POSITION": 0, "TEXCOORD_0": 2}, "indices": 3, "material": 0}]}],
+            "materials": [{"pbrMetallicRoughness": {"baseColorTexture": {"index": 0,
+                "extensions": {"KHR_texture_transform": {"offset": [0.5, 0.0]}}}}}],
+            "textures": [{"source": 0}],
+            "images": [{"uri": format!("data:image/png;base64,{}", base64::engine::general_purpose::STANDARD.encode(&png))}],
+            "extensionsUsed": ["KHR_texture_transform"]
+        }),
+    );
+    let s = Scene::load(&write(dir.path(), "shifted.gltf", &d)).unwrap();
+    let tex = s.materials[0].diffuse_map.as_ref().unwrap();
+    // (0.25, 0.25) is read at (0.75, 0.25): the green texel.
+    assert_eq!(
+        tex.sample(Vec2::new(0.25, 0.25)),
+        Vec4::new(0.0, 1.0, 0.0, 1.0)
+    );
+}

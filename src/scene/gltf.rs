@@ -15,7 +15,8 @@
 //!   With no light, the default lighting of a bare mesh.
 //!
 //! Ignored: skins, morph targets, animations, orthographic cameras, texture coordinate sets
-//! other than 0, `KHR_texture_transform`, and the material extensions not named above.
+//! other than 0, and the material extensions not named above. `KHR_texture_transform` is
+//! applied to the texture's lookups.
 //!
 //! Bad input never panics: every accessor is checked against its buffer view and buffer before
 //! it is read, and errors name the file and the JSON path (`meshes[0].primitives[1]: index 74
@@ -879,13 +880,22 @@ impl Loader<'_> {
             ::gltf::texture::WrappingMode::Repeat => Wrap::Repeat,
         };
         let (wu, wv) = (wrap(sampler.wrap_s()), wrap(sampler.wrap_t()));
-        if decoded.wrap_u == wu && decoded.wrap_v == wv {
+        let transform = info.texture_transform().map(|t| {
+            if t.tex_coord().is_some_and(|c| c != 0) {
+                self.warnings.push(format!(
+                    "{label}: {what}'s KHR_texture_transform asks for another texture coordinate set; TEXCOORD_0 is read"
+                ));
+            }
+            uv_transform(t.offset(), t.rotation(), t.scale())
+        });
+        if decoded.wrap_u == wu && decoded.wrap_v == wv && decoded.transform == transform {
             return Some(decoded);
         }
-        // The same image with another sampler: a copy with its own wrap modes.
+        // The same image with another sampler or transform: a copy with its own.
         let mut t = (*decoded).clone();
         t.wrap_u = wu;
         t.wrap_v = wv;
+        t.transform = transform;
         Some(Arc::new(t))
     }
 
@@ -966,6 +976,18 @@ impl Loader<'_> {
             warnings: std::mem::take(self.warnings),
         })
     }
+}
+
+/// `KHR_texture_transform` as an affine map of texture coordinates: `T(offset) R(rotation)
+/// S(scale)`. The rotation turns the image counter-clockwise as seen (its matrix has columns
+/// `(cos, -sin)` and `(sin, cos)` in `(u, v)`, `v` pointing down the image): the extension's
+/// sample (`TextureTransformTest`) points its arrow at the green marker this way, and at the
+/// red one ("applied in the opposite direction") with the other sign.
+pub fn uv_transform(offset: [f32; 2], rotation: f32, scale: [f32; 2]) -> glam::Affine2 {
+    let (s, c) = rotation.sin_cos();
+    let rotate = glam::Mat2::from_cols(Vec2::new(c, -s), Vec2::new(s, c));
+    let m = rotate * glam::Mat2::from_diagonal(Vec2::from(scale));
+    glam::Affine2::from_mat2_translation(m, Vec2::from(offset))
 }
 
 /// Triangles of a primitive's index list by its mode (strips alternate their winding so every

@@ -10,7 +10,7 @@ use std::path::Path;
 use std::sync::OnceLock;
 
 use anyhow::{Context, Result};
-use glam::{Vec2, Vec4};
+use glam::{Affine2, Vec2, Vec4};
 
 /// What a texture coordinate outside `[0, 1]` reads (glTF's sampler wrap modes).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -54,6 +54,8 @@ pub struct Texture {
     pub wrap_u: Wrap,
     /// Wrap mode along `v` (glTF `wrapT`).
     pub wrap_v: Wrap,
+    /// Applied to texture coordinates before the lookup (glTF `KHR_texture_transform`).
+    pub transform: Option<Affine2>,
 }
 
 impl std::fmt::Debug for Texture {
@@ -104,6 +106,7 @@ impl Texture {
             srgb,
             wrap_u: Wrap::Repeat,
             wrap_v: Wrap::Repeat,
+            transform: None,
         }
     }
 
@@ -144,8 +147,9 @@ impl Texture {
 
     /// The linear RGBA value at texture coordinate `uv` (`(0, 0)` the top-left corner of the
     /// image, `(1, 1)` the bottom-right), bilinearly filtered between the four nearest texel
-    /// centres. A non-finite coordinate reads texel (0, 0).
+    /// centres, after [`Texture::transform`]. A non-finite coordinate reads texel (0, 0).
     pub fn sample(&self, uv: Vec2) -> Vec4 {
+        let uv = self.transform.map_or(uv, |t| t.transform_point2(uv));
         let uv = if uv.is_finite() { uv } else { Vec2::ZERO };
         // Texel centres sit at half-integers.
         let x = uv.x as f64 * self.width as f64 - 0.5;
