@@ -226,7 +226,16 @@ fn materials_map_base_colour_metal_emission_alpha_and_transmission() {
     assert!(close(chrome.mirror, Vec3::new(0.9, 0.8, 0.7)));
     assert!(close(m("lamp").emission, Vec3::new(4.0, 2.0, 0.0)));
     assert_eq!(m("tinted").opacity, 0.25);
-    assert_eq!(m("cutout").opacity, 0.0, "alpha 0.3 under the cutoff 0.5");
+    assert_eq!(
+        m("cutout").opacity_at(1.0),
+        0.0,
+        "alpha 0.3 under the cutoff 0.5"
+    );
+    assert_eq!(
+        m("tinted").opacity_at(0.5),
+        0.125,
+        "BLEND: times the texture's alpha"
+    );
     let glass = m("glass");
     assert_eq!((glass.opacity, glass.ior), (0.0, 1.33));
 }
@@ -902,5 +911,150 @@ fn texture_transforms_offset_rotate_and_scale_lookups() {
     assert_eq!(
         tex.sample(Vec2::new(0.25, 0.25)),
         Vec4::new(0.0, 1.0, 0.0, 1.0)
+    );
+}
+
+/// A glTF `MASK` cut-out (a quad whose texture's left half has alpha 0) over a floor, lit from
+/// the side: the camera sees the floor through the hole, the shadow falls only where the
+/// texture is opaque (shadow rays read the alpha too), and light through the hole is not
+/// tinted. With the texture's alpha ignored, the floor beside the quad lies in the hole's
+/// shadow: the same measure tells them apart.
+#[test]
+fn a_masked_cut_out_lets_light_and_sight_through_its_transparent_texels() {
+    use std::sync::Arc;
+    use tracery::camera::CameraRays;
+    use tracery::scene::{AlphaMode, Camera, Environment, Material, Mesh};
+    // Texel 0 (u < 0.5): red, alpha 0; texel 1: red, opaque.
+    let mut tex = Texture::from_rgba8(
+        "cut".into(),
+        2,
+        1,
+        vec![[255, 0, 0, 0], [255, 0, 0, 255]],
+        true,
+    );
+    tex.wrap_u = Wrap::ClampToEdge;
+    let cut = Material {
+        name: "cut".into(),
+        diffuse: Vec3::ONE,
+        diffuse_map: Some(Arc::new(tex)),
+        alpha_mode: AlphaMode::Mask(0.5),
+        ..Material::default()
+    };
+    let floor = Material {
+        name: "floor".into(),
+        diffuse: Vec3::splat(0.8),
+        ..Material::default()
+    };
+    // Quads facing +y: the floor at y = 0, the cut-out at y = 1 (u = (x + 1) / 2).
+    let quad = |h: f32, y: f32| {
+        let [a, b, c, d] = [
+            Vec3::new(-h, y, -h),
+            Vec3::new(h, y, -h),
+            Vec3::new(h, y, h),
+            Vec3::new(-h, y, h),
+        ];
+        vec![[a, c, b], [a, d, c]]
+    };
+    let mut mesh = Mesh::from_triangles(quad(4.0, 0.0), 0);
+    let mut top = Mesh::from_triangles(quad(1.0, 1.0), 0);
+    top.uvs = top
+        .triangles
+        .iter()
+        .map(|t| t.map(|p| Vec2::new((p.x + 1.0) / 2.0, (p.z + 1.0) / 2.0)))
+        .collect();
+    mesh.append(top, 1);
+    let mut scene = Scene {
+        name: "cut-out".into(),
+        mesh,
+        materials: vec![floor, cut],
+        lights: vec![Light::Point {
+            position: Vec3::new(2.0, 3.0, 0.0),
+            color: Vec3::ONE,
+            intensity: 10.0,
+        }],
+        camera: Camera {
+            position: Vec3::new(0.0, 6.0, 0.0),
+            look_at: Vec3::ZERO,
+            up: Vec3::Z,
+            vfov_deg: 60.0,
+            lens_radius: 0.0,
+            focus_distance: 6.0,
+        },
+        environment: Environment::None,
+        integrator: tracery::scene::Integrator::Direct,
+        warnings: Vec::new(),
+    };
+    let (w, h) = (80u32, 80u32);
+    // Mean colour of the pixels whose camera ray meets the floor at x in `lo..hi`, |z| < 0.7,
+    // crossing y = 1 outside the quad or through its hole as `through` says.
+    let measure = |scene: &Scene| {
+        let bvh = Bvh::build(&scene.mesh.triangles, &BuildOptions::sah());
+        let settings = RenderSettings {
+            width: w,
+            height: h,
+            spp: 4,
+            ..RenderSettings::default()
+        };
+        let px = render(scene, &bvh, &settings, &|_| {}).unwrap().film.mean();
+        let cam = CameraRays::new(&scene.camera, w, h);
+        let group = |lo: f32, hi: f32| {
+            let (mut sum, mut n) = (Vec3::ZERO, 0);
+            for y in 0..h {
+                for x in 0..w {
+                    let r = cam.pinhole(x as f32 + 0.5, y as f32 + 0.5);
+                    let t = -r.origin.y / r.dir.y;
+                    let p = r.origin + r.dir * t;
+                    if p.x > lo && p.x < hi && p.z.abs() < 0.7 {
+                        sum += px[(y * w + x) as usize];
+                        n += 1;
+                    }
+                }
+            }
+            assert!(n > 10, "{n} pixels in {lo}..{hi}");
+            sum / n as f32
+        };
+        // Floor beside the quad where the hole's shadow would fall; floor seen through the
+        // hole, in the opaque half's shadow; the opaque half itself (seen at floor x 0.3..0.9
+        // = quad x 0.25..0.75); floor lit by nothing in the way.
+        (
+            group(-2.3, -1.5),
+            group(-0.8, -0.2),
+            group(0.3, 0.9),
+            group(2.5, 3.3),
+        )
+    };
+    let (beside, through, opaque, _) = measure(&scene);
+    // The same floor with the quad fully transparent (nothing in the way).
+    scene.materials[1].alpha_mode = AlphaMode::Blend;
+    scene.materials[1].opacity = 0.0;
+    let (beside_free, through_free, _, lit) = measure(&scene);
+    let l = |c: Vec3| c.x + c.y + c.z;
+    assert!(l(lit) > 0.0 && l(beside_free) > 0.0);
+    assert!(
+        (l(beside) / l(beside_free) - 1.0).abs() < 0.02,
+        "beside the quad, lit as with nothing there: {beside} vs {beside_free}"
+    );
+    assert!(
+        l(through) < 0.1 * l(through_free),
+        "through the hole, in the opaque half's shadow: {through} vs {through_free}"
+    );
+    assert!(
+        opaque.x > 5.0 * opaque.y && opaque.x > 0.0,
+        "the opaque half is red: {opaque}"
+    );
+    // Grey, not red: the light reaching the floor beside the quad passed no tint.
+    assert!(
+        (beside.x - beside.y).abs() < 0.02 * beside.x,
+        "untinted: {beside}"
+    );
+
+    // The texture's alpha ignored: the quad is opaque red everywhere, and the floor beside it
+    // lies in its shadow.
+    scene.materials[1].alpha_mode = AlphaMode::Opaque;
+    scene.materials[1].opacity = 1.0;
+    let (beside_opaque, _, _, _) = measure(&scene);
+    assert!(
+        l(beside_opaque) < 0.1 * l(beside),
+        "{beside_opaque} vs {beside}"
     );
 }

@@ -194,7 +194,7 @@ impl Tracer<'_> {
             }
         }
         let alpha = if self.plan.transmission {
-            m.opacity
+            s.opacity
         } else {
             1.0
         };

@@ -221,7 +221,7 @@ impl Tracer<'_> {
         let s = self.surface(ray, hit.prim, hit.u, hit.v);
         let m = s.material;
         let alpha = if self.plan.transmission {
-            m.opacity
+            s.opacity
         } else {
             1.0
         };
@@ -257,7 +257,7 @@ impl Tracer<'_> {
                 counts.transmission += 1;
                 let (dir, side) = transmit(ray.dir, &s);
                 let through = Ray::new(offset_ray_origin(s.p, s.p_err, side), dir);
-                let tint = (1.0 - alpha) * s.diffuse.min(Vec3::ONE);
+                let tint = m.transmission(alpha, s.diffuse);
                 // Shadow rays pass straight through transparent surfaces: light a bounce
                 // finds beyond one is weighted as if the bounce had found it directly.
                 let arrival = match arrival {
@@ -417,7 +417,7 @@ impl Tracer<'_> {
                 if weight > 0.0 {
                     let pass = self.shadow(origin, q - origin, 1.0 - 1e-4, counts);
                     let mat = self.scene.material_of(prim);
-                    let le = super::shade::textured(self.scene, mat, prim, b1, b2).1;
+                    let le = super::shade::textured(self.scene, mat, prim, b1, b2).emission;
                     sum += brdf(s, wi, wo) * cos * le * pass * weight / p_light;
                 }
             }

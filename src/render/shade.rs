@@ -48,6 +48,8 @@ pub(super) struct Surface<'a> {
     pub(super) diffuse: Vec3,
     /// The material's emitted radiance here (its texture applied).
     pub(super) emission: Vec3,
+    /// The material's opacity here (its texture's alpha applied, for `BLEND` and `MASK`).
+    pub(super) opacity: f32,
 }
 
 impl<'a> Tracer<'a> {
@@ -150,7 +152,11 @@ impl<'a> Tracer<'a> {
             n = -n;
         }
         let material = scene.material_of(prim);
-        let (diffuse, emission) = textured(scene, material, prim, u, v);
+        let Look {
+            diffuse,
+            emission,
+            opacity,
+        } = textured(scene, material, prim, u, v);
         Surface {
             p,
             p_err,
@@ -160,6 +166,7 @@ impl<'a> Tracer<'a> {
             material,
             diffuse,
             emission,
+            opacity,
         }
     }
 
@@ -183,7 +190,7 @@ impl<'a> Tracer<'a> {
         let s = self.surface(ray, hit.prim, hit.u, hit.v);
         let m = s.material;
         let alpha = if self.plan.transmission {
-            m.opacity
+            s.opacity
         } else {
             1.0
         };
@@ -202,7 +209,7 @@ impl<'a> Tracer<'a> {
             counts.transmission += 1;
             let (dir, side) = transmit(ray.dir, &s);
             let through = Ray::new(offset_ray_origin(s.p, s.p_err, side), dir);
-            let tint = (1.0 - alpha) * s.diffuse.min(Vec3::ONE);
+            let tint = m.transmission(alpha, s.diffuse);
             l += tint * self.trace(&through, depth + 1, rng, counts);
         }
         if self.plan.absorption && !s.entering && m.is_transparent() {
@@ -318,6 +325,17 @@ impl<'a> Tracer<'a> {
             if !m.is_transparent() {
                 return Vec3::ZERO;
             }
+            // A texture's alpha is read where the shadow ray crosses the triangle.
+            let opacity = if m.alpha_from_map() {
+                let tri = &scene.mesh.triangles[prim as usize];
+                let (u, v) = barycentric(tri, origin + to * t);
+                textured(scene, m, prim, u, v).opacity
+            } else {
+                m.opacity_at(1.0)
+            };
+            if opacity >= 1.0 {
+                return Vec3::ZERO;
+            }
             if self.plan.absorption && m.absorption.max_element() > 0.0 {
                 let id = scene.mesh.material_ids[prim as usize];
                 let entering = face_normal(&scene.mesh.triangles[prim as usize]).dot(to) < 0.0;
@@ -330,7 +348,7 @@ impl<'a> Tracer<'a> {
                     None => inside.push((id, dt, db)),
                 }
             }
-            (1.0 - m.opacity) * m.diffuse.min(Vec3::ONE)
+            m.transmission(opacity, m.diffuse)
         });
         for (id, sum, balance) in inside {
             let d = (sum + balance.max(0) as f32 * t_max) * len;
@@ -373,21 +391,47 @@ pub(super) fn rect_sample(
     Some(RectSample { q, wi, d2, cos_l })
 }
 
-/// The diffuse colour and emission of `m` at barycentric `(u, v)` of triangle `prim`: the
-/// material's factors times its textures, read at the triangle's texture coordinates.
-pub(super) fn textured(scene: &Scene, m: &Material, prim: u32, u: f32, v: f32) -> (Vec3, Vec3) {
+/// What a material looks like at one point of a surface.
+pub(super) struct Look {
+    pub(super) diffuse: Vec3,
+    pub(super) emission: Vec3,
+    pub(super) opacity: f32,
+}
+
+/// The diffuse colour, emission and opacity of `m` at barycentric `(u, v)` of triangle
+/// `prim`: the material's factors times its textures, read at the triangle's texture
+/// coordinates (the diffuse texture's alpha for the opacity, as its alpha mode says).
+pub(super) fn textured(scene: &Scene, m: &Material, prim: u32, u: f32, v: f32) -> Look {
     if !m.is_textured() {
-        return (m.diffuse, m.emission);
+        return Look {
+            diffuse: m.diffuse,
+            emission: m.emission,
+            opacity: m.opacity_at(1.0),
+        };
     }
     let uv = scene.mesh.uv_at(prim, u, v);
-    let read = |map: &Option<std::sync::Arc<crate::scene::Texture>>, factor: Vec3| match map {
-        Some(t) => factor * t.sample(uv).truncate(),
-        None => factor,
-    };
-    (
-        read(&m.diffuse_map, m.diffuse),
-        read(&m.emission_map, m.emission),
-    )
+    let base = m.diffuse_map.as_ref().map(|t| t.sample(uv));
+    Look {
+        diffuse: base.map_or(m.diffuse, |b| m.diffuse * b.truncate()),
+        emission: m
+            .emission_map
+            .as_ref()
+            .map_or(m.emission, |t| m.emission * t.sample(uv).truncate()),
+        opacity: m.opacity_at(base.map_or(1.0, |b| b.w)),
+    }
+}
+
+/// Barycentric `(u, v)` (the weights of the second and third vertex) of a point `p` lying on
+/// triangle `t` (Ericson, Real-Time Collision Detection, 3.4).
+pub(super) fn barycentric(t: &[Vec3; 3], p: Vec3) -> (f32, f32) {
+    let (e1, e2, d) = (t[1] - t[0], t[2] - t[0], p - t[0]);
+    let (d11, d12, d22) = (e1.dot(e1), e1.dot(e2), e2.dot(e2));
+    let (d1, d2) = (d.dot(e1), d.dot(e2));
+    let den = d11 * d22 - d12 * d12;
+    if den == 0.0 || !den.is_finite() {
+        return (0.0, 0.0);
+    }
+    ((d22 * d1 - d12 * d2) / den, (d11 * d2 - d12 * d1) / den)
 }
 
 /// Blinn-Phong, energy-normalized: `Kd / pi + Ks (Ns + 8) / (8 pi) cos^Ns(n, h)`, with the

@@ -457,6 +457,7 @@ fn material_from_def(name: &str, m: &MaterialDef) -> Material {
         illum: d.illum,
         diffuse_map: None,
         emission_map: None,
+        alpha_mode: super::AlphaMode::Opaque,
     }
 }
 

@@ -1019,7 +1019,8 @@ fn triangles_of(mode: Mode, idx: &[u32]) -> Vec<[u32; 3]> {
 ///   dielectric, the base colour for a metal) and exponent `2 / a^2 - 2`, `a = roughness^2`;
 /// - mirror instead, with that colour, when metallic >= 0.5 and roughness <= 0.2;
 /// - emission: emissive factor times `KHR_materials_emissive_strength`;
-/// - opacity: base alpha for `BLEND`, 0 or 1 against the cutoff for `MASK`, 1 for `OPAQUE`;
+/// - opacity: base alpha (times the base colour texture's) for `BLEND`, 0 or 1 against the
+///   cutoff for `MASK`, 1 for `OPAQUE`; light through `BLEND` and `MASK` is not tinted;
 ///   `KHR_materials_transmission` makes it glass: opacity `1 - transmission`, index of
 ///   refraction from `KHR_materials_ior` (1.5 by default).
 pub fn convert_material(m: &::gltf::Material) -> Material {
@@ -1034,16 +1035,16 @@ pub fn convert_material(m: &::gltf::Material) -> Material {
     let mirror_like = metallic >= 0.5 && roughness <= 0.2;
     let strength = m.emissive_strength().unwrap_or(1.0).max(0.0);
     let emission = Vec3::from(m.emissive_factor()).max(Vec3::ZERO) * strength;
-    let mut opacity = match m.alpha_mode() {
-        ::gltf::material::AlphaMode::Opaque => 1.0,
-        ::gltf::material::AlphaMode::Mask => {
-            if alpha >= m.alpha_cutoff().unwrap_or(0.5) {
-                1.0
-            } else {
-                0.0
-            }
-        }
-        ::gltf::material::AlphaMode::Blend => alpha.clamp(0.0, 1.0),
+    // BLEND and MASK: the base alpha here, times the base colour texture's where shaded
+    // (`Material::opacity_at`).
+    let alpha = alpha.clamp(0.0, 1.0);
+    let (mut opacity, alpha_mode) = match m.alpha_mode() {
+        ::gltf::material::AlphaMode::Opaque => (1.0, super::AlphaMode::Opaque),
+        ::gltf::material::AlphaMode::Mask => (
+            alpha,
+            super::AlphaMode::Mask(m.alpha_cutoff().unwrap_or(0.5)),
+        ),
+        ::gltf::material::AlphaMode::Blend => (alpha, super::AlphaMode::Blend),
     };
     let mut ior = 1.0;
     if let Some(t) = m.transmission() {
@@ -1067,6 +1068,7 @@ pub fn convert_material(m: &::gltf::Material) -> Material {
         illum: 2,
         diffuse_map: None,
         emission_map: None,
+        alpha_mode,
     }
 }
 

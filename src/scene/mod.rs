@@ -51,6 +51,22 @@ pub struct Material {
     pub diffuse_map: Option<Arc<Texture>>,
     /// Image multiplying `emission` (glTF emissive texture).
     pub emission_map: Option<Arc<Texture>>,
+    /// How `diffuse_map`'s alpha channel changes `opacity` (glTF `alphaMode`).
+    pub alpha_mode: AlphaMode,
+}
+
+/// How a material's opacity depends on the alpha channel of its diffuse texture (glTF
+/// `alphaMode`; without a texture, `opacity` alone counts).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub enum AlphaMode {
+    /// The texture's alpha is not read.
+    #[default]
+    Opaque,
+    /// Opacity is `opacity` times the texture's alpha.
+    Blend,
+    /// Fully opaque where `opacity` times the texture's alpha reaches the cutoff, fully
+    /// transparent elsewhere (cut-out leaves, fences).
+    Mask(f32),
 }
 
 impl Default for Material {
@@ -68,14 +84,46 @@ impl Default for Material {
             illum: 2,
             diffuse_map: None,
             emission_map: None,
+            alpha_mode: AlphaMode::Opaque,
         }
     }
 }
 
 impl Material {
-    /// True when some light passes through the surface.
+    /// True when some light passes through the surface (somewhere, for a texture's alpha).
     pub fn is_transparent(&self) -> bool {
-        self.opacity < 1.0
+        self.opacity < 1.0 || self.alpha_from_map()
+    }
+
+    /// True when the diffuse texture's alpha channel decides the opacity.
+    pub fn alpha_from_map(&self) -> bool {
+        self.alpha_mode != AlphaMode::Opaque && self.diffuse_map.is_some()
+    }
+
+    /// The opacity where the diffuse texture's alpha is `a` (1 without a texture).
+    pub fn opacity_at(&self, a: f32) -> f32 {
+        match self.alpha_mode {
+            AlphaMode::Opaque => self.opacity,
+            AlphaMode::Blend => self.opacity * a,
+            AlphaMode::Mask(cutoff) => {
+                if self.opacity * a >= cutoff {
+                    1.0
+                } else {
+                    0.0
+                }
+            }
+        }
+    }
+
+    /// The colour of light passing through the surface where its opacity is `opacity` and its
+    /// diffuse colour `diffuse`: glass and MTL transparency tint by the diffuse colour, glTF
+    /// `BLEND` and `MASK` (coverage, not a medium) do not.
+    pub fn transmission(&self, opacity: f32, diffuse: Vec3) -> Vec3 {
+        let tint = match self.alpha_mode {
+            AlphaMode::Opaque => diffuse.min(Vec3::ONE),
+            _ => Vec3::ONE,
+        };
+        (1.0 - opacity) * tint
     }
 
     /// True when the surface reflects like a mirror.

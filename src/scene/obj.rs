@@ -357,6 +357,7 @@ fn convert_material(m: &tobj::Material) -> Material {
         illum,
         diffuse_map: None,
         emission_map: None,
+        alpha_mode: super::AlphaMode::Opaque,
     }
 }
 
