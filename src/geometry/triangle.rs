@@ -142,43 +142,31 @@ trait BoundFloat:
     fn from_f32(x: f32) -> Self;
 }
 
-impl BoundFloat for f32 {
-    #[inline(always)]
-    fn abs(self) -> Self {
-        f32::abs(self)
-    }
-    #[inline(always)]
-    fn max(self, other: Self) -> Self {
-        f32::max(self, other)
-    }
-    #[inline(always)]
-    fn gamma(n: u32) -> Self {
-        super::gamma(n)
-    }
-    #[inline(always)]
-    fn from_f32(x: f32) -> Self {
-        x
-    }
+/// The two implementations differ only in type (and `gamma`, an f32 bound either way).
+macro_rules! bound_float {
+    ($t:ty) => {
+        impl BoundFloat for $t {
+            #[inline(always)]
+            fn abs(self) -> Self {
+                <$t>::abs(self)
+            }
+            #[inline(always)]
+            fn max(self, other: Self) -> Self {
+                <$t>::max(self, other)
+            }
+            #[inline(always)]
+            fn gamma(n: u32) -> Self {
+                super::gamma(n) as $t
+            }
+            #[inline(always)]
+            fn from_f32(x: f32) -> Self {
+                x as $t
+            }
+        }
+    };
 }
-
-impl BoundFloat for f64 {
-    #[inline(always)]
-    fn abs(self) -> Self {
-        f64::abs(self)
-    }
-    #[inline(always)]
-    fn max(self, other: Self) -> Self {
-        f64::max(self, other)
-    }
-    #[inline(always)]
-    fn gamma(n: u32) -> Self {
-        super::gamma(n) as f64
-    }
-    #[inline(always)]
-    fn from_f32(x: f32) -> Self {
-        x as f64
-    }
-}
+bound_float!(f32);
+bound_float!(f64);
 
 /// Bound on the rounding error of the test's distance `t` (Pharr, Jakob and Humphreys, pbrt
 /// 3rd ed., 3.9.6): a hit closer than this may lie at `t <= 0`, so it is not taken. Without

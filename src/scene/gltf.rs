@@ -32,9 +32,7 @@ use anyhow::{Result, anyhow, bail};
 use base64::Engine as _;
 use glam::{DMat3, DMat4, DVec3, Vec2, Vec3};
 
-use super::{
-    Camera, Environment, Integrator, Light, Material, Mesh, NormalRule, Scene, Texture, Wrap,
-};
+use super::{Camera, Environment, Light, Material, Mesh, NormalRule, Scene, Texture, Wrap};
 
 /// What a glTF load produced besides the scene (used by scene files, which give their own
 /// camera and lights).
@@ -94,13 +92,7 @@ pub enum LightKind {
 /// defaults of a bare mesh otherwise.
 pub fn load(path: &Path) -> Result<Scene> {
     let bytes = super::read_file(path)?;
-    let dir = path.parent().unwrap_or(Path::new(".")).to_path_buf();
-    let d = load_from(
-        path,
-        &bytes,
-        &|p: &Path| super::read_file(&dir.join(p)),
-        None,
-    )?;
+    let d = load_from(path, &bytes, &super::beside(path), None)?;
     Ok(scene_of(super::name_of(path), d))
 }
 
@@ -164,7 +156,6 @@ pub fn scene_of(name: String, d: GltfData) -> Scene {
             rotation_deg: 0.0,
         };
     }
-    scene.integrator = Integrator::Direct;
     scene
 }
 
@@ -446,7 +437,7 @@ struct Loader<'a> {
     /// glTF material index (`None`: the default material) to index in `materials`.
     material_index: HashMap<Option<usize>, u32>,
     /// Decoded images by (image, sRGB), each decoded once.
-    textures: HashMap<(usize, bool), Option<Arc<Texture>>>,
+    textures: HashMap<usize, Option<Arc<Texture>>>,
     camera: Option<GltfCamera>,
     lights: Vec<GltfLight>,
     /// Primitives left out, by reason.
@@ -629,19 +620,8 @@ impl Loader<'_> {
         let normals = match prim.get(&::gltf::Semantic::Normals) {
             Some(acc) => {
                 self.check_accessor(&at, "NORMAL", &acc, &[DataType::F32], Dimensions::Vec3)?;
-                let normals: Vec<Vec3> = reader
-                    .read_normals()
-                    .map(|r| r.map(Vec3::from).collect())
-                    .unwrap_or_default();
-                if normals.len() == n {
-                    Some(normals)
-                } else {
-                    self.warnings.push(format!(
-                        "{at}: NORMAL has {} entries for {n} vertices; flat normals used",
-                        normals.len()
-                    ));
-                    None
-                }
+                let normals = reader.read_normals().map(|r| r.map(Vec3::from).collect());
+                self.per_vertex(&at, "NORMAL", normals, n, "flat normals used")
             }
             None => None,
         };
@@ -654,19 +634,10 @@ impl Loader<'_> {
                     &[DataType::F32, DataType::U8, DataType::U16],
                     Dimensions::Vec2,
                 )?;
-                let uvs: Vec<Vec2> = reader
+                let uvs = reader
                     .read_tex_coords(0)
-                    .map(|r| r.into_f32().map(Vec2::from).collect())
-                    .unwrap_or_default();
-                if uvs.len() == n {
-                    Some(uvs)
-                } else {
-                    self.warnings.push(format!(
-                        "{at}: TEXCOORD_0 has {} entries for {n} vertices; ignored",
-                        uvs.len()
-                    ));
-                    None
-                }
+                    .map(|r| r.into_f32().map(Vec2::from).collect());
+                self.per_vertex(&at, "TEXCOORD_0", uvs, n, "ignored")
             }
             None => None,
         };
@@ -740,6 +711,27 @@ impl Loader<'_> {
             triangles,
             material,
         }))
+    }
+
+    /// A vertex attribute's values when there is one per vertex; otherwise `None`, with a
+    /// warning saying what is done instead.
+    fn per_vertex<T>(
+        &mut self,
+        at: &str,
+        what: &str,
+        values: Option<Vec<T>>,
+        n: usize,
+        instead: &str,
+    ) -> Option<Vec<T>> {
+        let values = values.unwrap_or_default();
+        if values.len() == n {
+            return Some(values);
+        }
+        self.warnings.push(format!(
+            "{at}: {what} has {} entries for {n} vertices; {instead}",
+            values.len()
+        ));
+        None
     }
 
     /// Checks that an accessor can be read as `dims` of one of `types`, and that every byte it
@@ -850,7 +842,7 @@ impl Loader<'_> {
         }
         let tex = info.texture();
         let image = tex.source();
-        let key = (image.index(), true);
+        let key = image.index();
         let decoded = match self.textures.get(&key) {
             Some(t) => t.clone(),
             None => {

@@ -615,6 +615,13 @@ pub(crate) fn read_file(path: &Path) -> Result<Vec<u8>> {
     std::fs::read(path).with_context(|| format!("{}: cannot read file", path.display()))
 }
 
+/// Reads files named relative to `path`'s folder (an OBJ's MTL and images, a glTF's buffers
+/// and images), naming each in its error.
+pub(crate) fn beside(path: &Path) -> impl Fn(&Path) -> Result<Vec<u8>> {
+    let dir = path.parent().unwrap_or(Path::new(".")).to_path_buf();
+    move |p: &Path| read_file(&dir.join(p))
+}
+
 /// Splits the byte offset `pos` of `text` into a 1-based line number.
 pub(crate) fn line_of(text: &str, pos: usize) -> usize {
     text[..pos.min(text.len())].matches('\n').count() + 1

@@ -68,8 +68,7 @@ fn check_mtl(text: &[u8]) -> Result<(), (usize, String)> {
 /// Loads an OBJ file; MTL files are looked up next to it.
 pub fn load(path: &Path) -> Result<ObjData> {
     let bytes = read_file(path)?;
-    let dir = path.parent().unwrap_or(Path::new(".")).to_path_buf();
-    load_from(path, &bytes, &|mtl: &Path| read_file(&dir.join(mtl)), None)
+    load_from(path, &bytes, &super::beside(path), None)
 }
 
 /// The smoothing group of every face with three or more corners, in file order: `s off` and
