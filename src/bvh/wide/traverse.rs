@@ -211,12 +211,15 @@ pub(crate) fn each_hit<L: Lanes, const SAFE: bool>(
         return true;
     }
     let nr = L::node_ray(&NodeRay::new(ray));
+    // Boxes are culled with the same slack as the closest-hit search: a hit on a box's face
+    // just before `t_max` may have a computed entry distance just past it.
+    let cull = t_max * CULL_SLACK;
     let mut stack = Stack::new();
     let mut current = 0u32;
     let mut near = [0.0f32; WIDTH];
     loop {
         let node = &w.nodes[current as usize];
-        let mut mask = L::node::<SAFE>(node, &nr, t_max, &mut near);
+        let mut mask = L::node::<SAFE>(node, &nr, cull, &mut near);
         // Leaves are tested as soon as they are found (a shadow ray may stop there); the first
         // inner child is visited next, the others wait on the stack.
         let mut next = None;
