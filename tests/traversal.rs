@@ -159,8 +159,13 @@ fn vertex_tiles(tris: &[[Vec3; 3]]) -> Vec<Vec<Ray>> {
         .collect()
 }
 
-#[test]
-fn packets_give_every_ray_its_single_ray_hit() {
+/// A mesh's name, its triangles and tiles of rays.
+type PacketCase = (&'static str, Vec<[Vec3; 3]>, Vec<Vec<Ray>>);
+
+/// The meshes the packet tests run on, and for each the tiles of rays: camera tiles with and
+/// without a lens, tiles that cannot go together (mixed octants, a partial tile), and tiles
+/// aimed at vertices.
+fn packet_cases() -> Vec<PacketCase> {
     let mut meshes = vec![
         (
             "cornell box",
@@ -176,36 +181,108 @@ fn packets_give_every_ray_its_single_ray_hit() {
             tracery::scene::Scene::load(&p).unwrap().mesh.triangles,
         ));
     }
-    for (name, tris) in meshes {
-        for (bvh_name, bvh) in common::all_bvhs(&tris) {
+    meshes
+        .into_iter()
+        .map(|(name, tris)| {
+            let mut rays: Vec<Vec<Ray>> = Vec::new();
             for lens in [0.0, 0.05] {
-                let mut rays: Vec<Vec<Ray>> = camera_tiles(&tris, 96, lens);
-                // Tiles that cannot go together: mixed octants, and a partial tile.
-                rays.push(common::random_rays(&tris, 64, 3));
-                rays.push(common::random_rays(&tris, 13, 4));
-                rays.extend(vertex_tiles(&tris));
-                for tile in &rays {
-                    for t_max in [f32::INFINITY, 2.0] {
-                        let mut out = vec![None; tile.len()];
-                        bvh.intersect_packet(tile, t_max, &mut out);
-                        for (r, got) in tile.iter().zip(&out) {
-                            let want = bvh.intersect(r, t_max);
-                            let same = match (got, &want) {
-                                (None, None) => true,
-                                (Some(a), Some(b)) => {
-                                    a.prim == b.prim
-                                        && a.t.to_bits() == b.t.to_bits()
-                                        && a.u.to_bits() == b.u.to_bits()
-                                }
-                                _ => false,
-                            };
-                            assert!(same, "{name}, {bvh_name}, lens {lens}: {got:?} vs {want:?}");
+                rays.extend(camera_tiles(&tris, 96, lens));
+            }
+            rays.push(common::random_rays(&tris, 64, 3));
+            rays.push(common::random_rays(&tris, 13, 4));
+            rays.extend(vertex_tiles(&tris));
+            (name, tris, rays)
+        })
+        .collect()
+}
+
+#[test]
+fn packets_give_every_ray_its_single_ray_hit() {
+    for (name, tris, rays) in packet_cases() {
+        for (bvh_name, bvh) in common::all_bvhs(&tris) {
+            for tile in &rays {
+                for t_max in [f32::INFINITY, 2.0] {
+                    let mut out = vec![None; tile.len()];
+                    bvh.intersect_packet(tile, t_max, &mut out);
+                    for (r, got) in tile.iter().zip(&out) {
+                        let want = bvh.intersect(r, t_max);
+                        let same = match (got, &want) {
+                            (None, None) => true,
+                            (Some(a), Some(b)) => {
+                                a.prim == b.prim
+                                    && a.t.to_bits() == b.t.to_bits()
+                                    && a.u.to_bits() == b.u.to_bits()
+                            }
+                            _ => false,
+                        };
+                        assert!(same, "{name}, {bvh_name}: {r:?}: {got:?} vs {want:?}");
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// Packets of shadow rays (any hit) answer every ray as [`Bvh::occluded`] does, at an infinite
+/// and a short `t_max`, and at a `t_max` equal to one ray's own closest hit (which must not
+/// count: hits are at `t < t_max`).
+#[test]
+fn occlusion_packets_give_every_ray_its_single_ray_answer() {
+    let (mut blocked, mut open) = (0usize, 0usize);
+    for (name, tris, rays) in packet_cases() {
+        for (bvh_name, bvh) in common::all_bvhs(&tris) {
+            for tile in &rays {
+                let first_hit = tile
+                    .iter()
+                    .find_map(|r| bvh.intersect(r, f32::INFINITY))
+                    .map_or(1.0, |h| h.t);
+                for t_max in [f32::INFINITY, 2.0, first_hit] {
+                    let mut out = vec![false; tile.len()];
+                    bvh.occluded_packet(tile, t_max, &mut out);
+                    for (r, &got) in tile.iter().zip(&out) {
+                        let want = bvh.occluded(r, t_max);
+                        assert_eq!(got, want, "{name}, {bvh_name}, t_max {t_max}: {r:?}");
+                        if got {
+                            blocked += 1;
+                        } else {
+                            open += 1;
                         }
                     }
                 }
             }
         }
     }
+    assert!(
+        blocked > 10_000 && open > 10_000,
+        "{blocked} blocked, {open} open"
+    );
+}
+
+/// A shadow ray whose blocker sits just before `t_max` is blocked, and one whose blocker sits
+/// at `t_max` is not, for rays aimed at vertices (their hits lie on box faces, where a box's
+/// computed entry distance may round past the hit: box culling needs the same slack as the
+/// closest-hit search, and lacked it).
+#[test]
+fn a_blocker_just_before_t_max_blocks() {
+    let tris = shapes::icosphere(4);
+    let mut checked = 0;
+    for (bvh_name, bvh) in common::all_bvhs(&tris) {
+        for tile in vertex_tiles(&tris) {
+            for r in &tile {
+                let Some(h) = bvh.intersect(r, f32::INFINITY) else {
+                    continue;
+                };
+                let after = f32::from_bits(h.t.to_bits() + 1);
+                assert!(bvh.occluded(r, after), "{bvh_name}: {r:?} hit at {}", h.t);
+                assert!(!bvh.occluded(r, h.t), "{bvh_name}: {r:?} hit at {}", h.t);
+                let mut out = [false];
+                bvh.occluded_packet(std::slice::from_ref(r), after, &mut out);
+                assert!(out[0], "{bvh_name}: packet, {r:?} hit at {}", h.t);
+                checked += 1;
+            }
+        }
+    }
+    assert!(checked > 1000, "{checked} rays checked");
 }
 
 /// A ray with a NaN, infinite or zero direction, or a NaN origin, has nowhere to go: every
@@ -244,6 +321,9 @@ fn invalid_rays_get_no_hit_and_visit_no_node() {
         })];
         bvh.intersect_packet(&[ray], f32::INFINITY, &mut out);
         assert!(out[0].is_none(), "{ray:?}");
+        let mut blocked = [true];
+        bvh.occluded_packet(&[ray], f32::INFINITY, &mut blocked);
+        assert!(!blocked[0], "{ray:?}");
     }
     // The same ray made valid hits: the checks above are not vacuous.
     assert!(

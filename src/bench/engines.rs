@@ -44,7 +44,8 @@ impl Engine for Bvh {
     }
 }
 
-/// Our BVH tracing camera-ray tiles of 8 x 8 as packets ([`Bvh::intersect_packet`]).
+/// Our BVH tracing camera-ray tiles of 8 x 8 as packets ([`Bvh::intersect_packet`],
+/// [`Bvh::occluded_packet`]).
 pub(super) struct Packets(pub Bvh);
 
 impl Engine for Packets {
@@ -56,6 +57,12 @@ impl Engine for Packets {
     }
     fn tile(&self) -> Option<u32> {
         Some(8)
+    }
+    fn occluded_tile(&self, rays: &[Ray]) -> usize {
+        let mut blocked = [false; crate::bvh::wide::packet::PACKET];
+        let blocked = &mut blocked[..rays.len()];
+        self.0.occluded_packet(rays, f32::INFINITY, blocked);
+        blocked.iter().filter(|&&b| b).count()
     }
     fn closest_tile(&self, rays: &[Ray], out: &mut [HitRecord]) {
         let mut hits = [None; crate::bvh::wide::packet::PACKET];

@@ -215,7 +215,8 @@ impl Bvh {
             .zip(out.chunks_mut(super::wide::packet::PACKET))
         {
             let best = &mut best[..rays.len()];
-            if rays.iter().all(Ray::is_valid) && self.wide.closest_packet(rays, t_max, best) {
+            if rays.iter().all(Ray::is_valid) && self.wide.trace_packet::<false>(rays, t_max, best)
+            {
                 for (o, b) in out.iter_mut().zip(best.iter()) {
                     *o = (b.prim != u32::MAX && b.t < t_max).then_some(Hit {
                         t: b.t,
@@ -227,6 +228,34 @@ impl Bvh {
             } else {
                 for (o, r) in out.iter_mut().zip(rays) {
                     *o = self.intersect(r, t_max);
+                }
+            }
+        }
+    }
+
+    /// [`Bvh::occluded`] for many rays at once, `out[i]` for `rays[i]`: coherent rays go in
+    /// packets of up to [`wide::packet::PACKET`] that walk the tree together, each ray leaving
+    /// at its first hit; rays a packet cannot take are traced one by one. Every ray gets
+    /// exactly the answer [`Bvh::occluded`] gives it.
+    pub fn occluded_packet(&self, rays: &[Ray], t_max: f32, out: &mut [bool]) {
+        assert_eq!(rays.len(), out.len(), "one result per ray");
+        if self.tris.is_empty() || t_max.is_nan() || t_max <= 0.0 {
+            out.fill(false);
+            return;
+        }
+        let mut best = [super::wide::traverse::Best::none(t_max); super::wide::packet::PACKET];
+        for (rays, out) in rays
+            .chunks(super::wide::packet::PACKET)
+            .zip(out.chunks_mut(super::wide::packet::PACKET))
+        {
+            let best = &mut best[..rays.len()];
+            if rays.iter().all(Ray::is_valid) && self.wide.trace_packet::<true>(rays, t_max, best) {
+                for (o, b) in out.iter_mut().zip(best.iter()) {
+                    *o = b.t < t_max;
+                }
+            } else {
+                for (o, r) in out.iter_mut().zip(rays) {
+                    *o = self.occluded(r, t_max);
                 }
             }
         }

@@ -26,7 +26,7 @@
 use glam::Vec3;
 use rayon::prelude::*;
 
-use super::{RayCounts, Tracer};
+use super::{BAND, RayCounts, TILE_WIDTH, Tracer};
 use crate::bvh::wide::packet::PACKET;
 use crate::camera::CameraRays;
 use crate::film::encode_pixel;
@@ -353,9 +353,9 @@ impl RenderCache {
     /// Fills every pixel with the sample of its centre ray in the view `cam` (framed for this
     /// cache's size) and the colour of the still picture `rgba` of that view (RGBA8, this
     /// cache's size, tone mapped with its exposure): when the camera starts moving, the
-    /// moving picture starts from the still one. Only the camera rays are traced, in rows on
-    /// the rayon pool; `stop` is asked between rows, and a stopped seed leaves the cache as it
-    /// was. Returns false if it stopped.
+    /// moving picture starts from the still one. Only the camera rays are traced, in bands of
+    /// rows on the rayon pool; `stop` is asked between bands, and a stopped seed leaves the
+    /// cache as it was. Returns false if it stopped.
     pub fn seed(
         &mut self,
         tracer: &Tracer,
@@ -370,11 +370,12 @@ impl RenderCache {
         self.spare_points.resize(n, NO_POINT);
         self.spare_normals.resize(n, NO_NORMAL);
         let stopped = std::sync::atomic::AtomicBool::new(false);
+        let band = (w * BAND as usize).max(1);
         self.spare_points
-            .par_chunks_mut(w)
-            .zip(self.spare_normals.par_chunks_mut(w))
+            .par_chunks_mut(band)
+            .zip(self.spare_normals.par_chunks_mut(band))
             .enumerate()
-            .for_each(|(y, (points, normals))| {
+            .for_each(|(b, (points, normals))| {
                 if stopped.load(std::sync::atomic::Ordering::Relaxed) {
                     return;
                 }
@@ -382,25 +383,26 @@ impl RenderCache {
                     stopped.store(true, std::sync::atomic::Ordering::Relaxed);
                     return;
                 }
-                for (x0, (points, normals)) in points
-                    .chunks_mut(PACKET)
-                    .zip(normals.chunks_mut(PACKET))
-                    .enumerate()
-                {
-                    let rays: Vec<Ray> = (0..points.len())
-                        .map(|k| cam.pinhole((x0 * PACKET + k) as f32 + 0.5, y as f32 + 0.5))
+                // Camera rays by tiles of TILE_WIDTH x BAND pixels, one packet each.
+                let height = points.len() / w;
+                for x0 in (0..w).step_by(TILE_WIDTH as usize) {
+                    let tw = (TILE_WIDTH as usize).min(w - x0);
+                    let pixel = |k: usize| k / tw * w + x0 + k % tw;
+                    let rays: Vec<Ray> = (0..tw * height)
+                        .map(|k| {
+                            let y = b * BAND as usize + k / tw;
+                            cam.pinhole((x0 + k % tw) as f32 + 0.5, y as f32 + 0.5)
+                        })
                         .collect();
                     let mut hits = [None; PACKET];
                     tracer
                         .bvh
                         .intersect_packet(&rays, f32::INFINITY, &mut hits[..rays.len()]);
-                    for (((p, nrm), ray), hit) in
-                        points.iter_mut().zip(normals).zip(&rays).zip(hits)
-                    {
-                        *p = hit
+                    for (k, (ray, hit)) in rays.iter().zip(hits).enumerate() {
+                        points[pixel(k)] = hit
                             .map_or(ray.origin + ray.dir * FAR, |h| ray.at(h.t))
                             .into();
-                        *nrm = hit.map_or(NO_NORMAL, |h| {
+                        normals[pixel(k)] = hit.map_or(NO_NORMAL, |h| {
                             pack_normal(face_normal(&tracer.scene.mesh.triangles[h.prim as usize]))
                         });
                     }

@@ -163,11 +163,12 @@ pub fn render_with_plan(
     };
     let (rays, rejected) = film
         .sum
-        .par_chunks_mut(w as usize)
+        .par_chunks_mut((w * BAND).max(1) as usize)
         .enumerate()
-        .map(|(y, row)| {
-            let r = trace_row(&tracer, &cam, &samples, y as u32, row);
-            progress(rows_done.fetch_add(1, Ordering::Relaxed) + 1);
+        .map(|(band, rows)| {
+            let r = trace_rows(&tracer, &cam, &samples, band as u32 * BAND, rows);
+            let n = rows.len() / w.max(1) as usize;
+            progress(rows_done.fetch_add(n, Ordering::Relaxed) + n);
             r
         })
         .reduce(|| (RayCounts::default(), 0), |a, b| (a.0 + b.0, a.1 + b.1));
@@ -190,40 +191,58 @@ pub struct SampleRange {
     pub count: u32,
 }
 
-/// Adds the samples `samples` of every pixel of row `y` into `row` (one radiance sum per
-/// pixel); returns the rays traced and the number of non-finite samples left out.
+/// Rows traced together: camera rays go in tiles of [`TILE_WIDTH`] x `BAND` pixels.
+pub const BAND: u32 = 8;
+/// Columns of a camera-ray tile (a tile is one packet: `TILE_WIDTH * BAND` =
+/// [`crate::bvh::wide::packet::PACKET`] rays).
+pub const TILE_WIDTH: u32 = 8;
+
+/// Adds the samples `samples` of every pixel of the rows from `y0` held in `rows` (whole rows
+/// of `cam.width` pixels, at most [`BAND`] of them; one radiance sum per pixel); returns the
+/// rays traced and the number of non-finite samples left out.
 ///
-/// Camera rays go in packets of [`crate::bvh::wide::packet::PACKET`] neighbouring pixels of
-/// the row ([`Bvh::intersect_packet`]), one sample index at a time; each pixel still adds its
-/// samples in order and gets the hits single rays would, so the image is the same bit for bit.
-pub fn trace_row(
+/// Camera rays go in packets of a [`TILE_WIDTH`] x [`BAND`] tile of pixels
+/// ([`Bvh::intersect_packet`]), one sample index at a time: a square tile keeps the packet's
+/// rays close in both directions, so the walk visits fewer boxes than for a row of 64 (1.6x
+/// the rays per second on the dragon). Each pixel still adds its samples in order and gets
+/// the hits single rays would, so the image is the same bit for bit.
+pub fn trace_rows(
     tracer: &Tracer,
     cam: &CameraRays,
     samples: &SampleRange,
-    y: u32,
-    row: &mut [Vec3],
+    y0: u32,
+    rows: &mut [Vec3],
 ) -> (RayCounts, u64) {
     use crate::bvh::wide::packet::PACKET;
+    let w = cam.width as usize;
     let mut rays = RayCounts::default();
     let mut rejected = 0u64;
+    if w == 0 {
+        return (rays, rejected);
+    }
+    debug_assert!(rows.len().is_multiple_of(w) && rows.len() / w <= BAND as usize);
+    let height = rows.len() / w;
     let thin_lens = tracer.plan.thin_lens && cam.lens_radius > 0.0;
     let mut camera_rays = [crate::geometry::Ray::new(Vec3::ZERO, Vec3::Z); PACKET];
-    let mut samplers = [PixelSampler::new(samples.sampler, samples.seed, 0, 0); PACKET];
+    let first = PixelSampler::new(samples.sampler, samples.seed, 0, 0);
+    let mut firsts = [first; PACKET];
+    let mut samplers = [first; PACKET];
     let mut hits = [None; PACKET];
-    for (chunk, sums) in row.chunks_mut(PACKET).enumerate() {
-        let x0 = chunk * PACKET;
-        let n = sums.len();
-        let firsts: Vec<PixelSampler> = (0..n)
-            .map(|k| {
-                let pixel = y as u64 * cam.width as u64 + (x0 + k) as u64;
-                PixelSampler::new(samples.sampler, samples.seed, pixel, 0)
-            })
-            .collect();
+    // The pixel of a tile's `k`-th ray: (x0 + k % tw, row k / tw of the band).
+    for x0 in (0..w).step_by(TILE_WIDTH as usize) {
+        let tw = (TILE_WIDTH as usize).min(w - x0);
+        let n = tw * height;
+        for (k, f) in firsts[..n].iter_mut().enumerate() {
+            let (x, y) = (x0 + k % tw, y0 as usize + k / tw);
+            let pixel = y as u64 * w as u64 + x as u64;
+            *f = PixelSampler::new(samples.sampler, samples.seed, pixel, 0);
+        }
         for s in samples.first..samples.first.saturating_add(samples.count) {
             for k in 0..n {
                 let sampler = firsts[k].with_index(s);
                 let jitter = sampler.get_2d(dim::PIXEL);
-                let (px, py) = ((x0 + k) as f32 + jitter.x, y as f32 + jitter.y);
+                let (x, y) = (x0 + k % tw, y0 as usize + k / tw);
+                let (px, py) = (x as f32 + jitter.x, y as f32 + jitter.y);
                 camera_rays[k] = if thin_lens {
                     cam.thin_lens(px, py, concentric_disk(sampler.get_2d(dim::LENS)))
                 } else {
@@ -235,7 +254,7 @@ pub fn trace_row(
                 .bvh
                 .intersect_packet(&camera_rays[..n], f32::INFINITY, &mut hits[..n]);
             rays.camera += n as u64;
-            for (k, px_sum) in sums.iter_mut().enumerate() {
+            for k in 0..n {
                 let l = tracer.radiance_from_hit(
                     &camera_rays[k],
                     hits[k],
@@ -243,7 +262,7 @@ pub fn trace_row(
                     &mut rays,
                 );
                 if l.is_finite() {
-                    *px_sum += l;
+                    rows[k / tw * w + x0 + k % tw] += l;
                 } else {
                     rejected += 1;
                 }

@@ -10,7 +10,7 @@ use std::time::{Duration, Instant};
 use glam::Vec3;
 use rayon::prelude::*;
 
-use super::{RayCounts, SampleRange, Tracer, trace_row};
+use super::{BAND, RayCounts, SampleRange, Tracer, trace_rows};
 use crate::camera::CameraRays;
 use crate::film::{Film, encode_rgba8};
 use crate::sampling::SamplerKind;
@@ -97,14 +97,15 @@ impl Progressive {
 
     /// Traces rows of the current pass (and the passes after it) with `row` until `budget`
     /// is spent or `max_passes` passes are complete; always traces at least one batch when a
-    /// pass is left to do, so progress never stalls. `row(y, pass, sums)` adds sample `pass`
-    /// of every pixel of row `y` to `sums` and returns the rays it traced and the number of
-    /// non-finite samples it left out. Rows are traced in parallel on the rayon pool.
+    /// pass is left to do, so progress never stalls. `rows(y0, pass, sums)` adds sample `pass`
+    /// of every pixel of the rows from `y0` to `sums` (whole rows, at most [`BAND`] of them)
+    /// and returns the rays it traced and the number of non-finite samples it left out. Bands
+    /// of rows are traced in parallel on the rayon pool.
     pub fn step(
         &mut self,
         budget: Duration,
         max_passes: u32,
-        row: impl Fn(u32, u32, &mut [Vec3]) -> (RayCounts, u64) + Sync,
+        rows: impl Fn(u32, u32, &mut [Vec3]) -> (RayCounts, u64) + Sync,
     ) -> StepReport {
         let start = Instant::now();
         let mut report = StepReport::default();
@@ -118,20 +119,23 @@ impl Progressive {
             if report.rows > 0 && left <= 0.0 {
                 break;
             }
-            // Rows that fit in what is left of the budget, in whole rounds of the pool.
-            let fit = match self.row_seconds {
-                Some(s) if s > 0.0 => ((left.max(0.0) / s) as u32 / threads).max(1) * threads,
-                _ => threads,
-            };
+            // Bands of rows that fit in what is left of the budget, in whole rounds of the
+            // pool (`next_row` stays a multiple of the band until the pass's last band).
+            let band_seconds = self.row_seconds.map(|s| s * BAND as f64);
+            let fit = BAND
+                * match band_seconds {
+                    Some(s) if s > 0.0 => ((left.max(0.0) / s) as u32 / threads).max(1) * threads,
+                    _ => threads,
+                };
             let first = self.next_row;
             let count = fit.min(self.height - first);
             let pass = self.passes;
             let t0 = Instant::now();
             let span = &mut self.sum[first as usize * w..(first + count) as usize * w];
             let (rays, rejected) = span
-                .par_chunks_mut(w)
+                .par_chunks_mut(w * BAND as usize)
                 .enumerate()
-                .map(|(i, sums)| row(first + i as u32, pass, sums))
+                .map(|(i, sums)| rows(first + i as u32 * BAND, pass, sums))
                 .reduce(|| (RayCounts::default(), 0), |a, b| (a.0 + b.0, a.1 + b.1));
             let per_row = t0.elapsed().as_secs_f64() / count as f64;
             self.row_seconds = Some(match self.row_seconds {
@@ -174,7 +178,7 @@ impl Progressive {
                 first: pass,
                 count: 1,
             };
-            trace_row(tracer, cam, &samples, y, sums)
+            trace_rows(tracer, cam, &samples, y, sums)
         })
     }
 

@@ -501,11 +501,14 @@ pub(super) fn step_mode(
         ),
         RenderMode::TraversalCost | RenderMode::Overlap => {
             // One pass: the counts are exact, more samples would not change them.
-            film.step(budget, max_passes.min(1), |y, _, sums| {
-                if settings.mode == RenderMode::Overlap {
-                    overlap_row(bvh, cam, settings.level, y, sums);
-                } else {
-                    cost_row(bvh, cam, y, sums);
+            film.step(budget, max_passes.min(1), |y0, _, sums| {
+                for (i, row) in sums.chunks_mut(cam.width.max(1) as usize).enumerate() {
+                    let y = y0 + i as u32;
+                    if settings.mode == RenderMode::Overlap {
+                        overlap_row(bvh, cam, settings.level, y, row);
+                    } else {
+                        cost_row(bvh, cam, y, row);
+                    }
                 }
                 let rays = RayCounts {
                     camera: sums.len() as u64,

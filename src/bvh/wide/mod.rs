@@ -278,21 +278,24 @@ impl WideBvh {
 }
 
 impl WideBvh {
-    /// Closest hits of up to [`packet::PACKET`] valid rays traced together (see [`packet`]),
-    /// into `best`; `false` (nothing written) when they cannot be.
+    /// Closest hits (with `ANY`, first hits: see [`packet::trace_packet`]) of up to
+    /// [`packet::PACKET`] valid rays traced together (see [`packet`]), into `best`; `false`
+    /// (nothing written) when they cannot be.
     #[inline]
-    pub(crate) fn closest_packet(
+    pub(crate) fn trace_packet<const ANY: bool>(
         &self,
         rays: &[Ray],
         t_max: f32,
         best: &mut [traverse::Best],
     ) -> bool {
         match self.dispatch {
-            Dispatch::Scalar => packet::closest_packet::<kernel::Scalar>(self, rays, t_max, best),
+            Dispatch::Scalar => {
+                packet::trace_packet::<kernel::Scalar, ANY>(self, rays, t_max, best)
+            }
             #[cfg(target_arch = "x86_64")]
-            Dispatch::Sse2 => packet::closest_packet::<kernel::Sse2>(self, rays, t_max, best),
+            Dispatch::Sse2 => packet::trace_packet::<kernel::Sse2, ANY>(self, rays, t_max, best),
             #[cfg(target_arch = "x86_64")]
-            Dispatch::Avx2(cpu) => kernel::closest_packet_avx2(cpu, self, rays, t_max, best),
+            Dispatch::Avx2(cpu) => kernel::trace_packet_avx2::<ANY>(cpu, self, rays, t_max, best),
         }
     }
 }

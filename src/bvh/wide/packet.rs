@@ -1,5 +1,5 @@
 //! Coherent rays in packets: the closest hits of up to [`PACKET`] rays (a tile of camera
-//! rays) found in one walk of the tree.
+//! rays) found in one walk of the tree, or whether anything lies on each (any hit).
 //!
 //! The walk tests each node's eight child boxes once for the whole packet, with interval
 //! arithmetic over the packet's origins and reciprocal directions: a child is entered when
@@ -232,9 +232,11 @@ fn largest(limit: &[f32; PACKET]) -> f32 {
 
 /// Closest hits of `rays` (at most [`PACKET`], all valid) at `0 < t < t_max`, into `best`
 /// (one per ray), or `false` when the packet cannot be traced together (see the module docs)
-/// and nothing was written.
+/// and nothing was written. With `ANY`, a ray stops at its first hit before `t_max` (shadow
+/// rays): `best[i].t < t_max` exactly when something lies on ray `i`, the hit itself being
+/// any one of them.
 #[inline(always)]
-pub(crate) fn closest_packet<L: Lanes>(
+pub(crate) fn trace_packet<L: Lanes, const ANY: bool>(
     w: &WideBvh,
     rays: &[Ray],
     t_max: f32,
@@ -262,7 +264,7 @@ pub(crate) fn closest_packet<L: Lanes>(
             leaf_rays::<L>(w, first, count, &r, &tris, all, &mut bests);
         }
     } else {
-        walk::<L>(w, rays, &r, &mut tris, t_max, &mut bests);
+        walk::<L, ANY>(w, rays, &r, &mut tris, t_max, &mut bests);
     }
     for (i, b) in best.iter_mut().enumerate() {
         *b = Best {
@@ -275,9 +277,10 @@ pub(crate) fn closest_packet<L: Lanes>(
     true
 }
 
-/// The packet's walk of the tree (see the module docs).
+/// The packet's walk of the tree (see the module docs); with `ANY`, rays leave at their
+/// first hit before `t_max` and the walk ends when every ray has.
 #[inline(always)]
-fn walk<L: Lanes>(
+fn walk<L: Lanes, const ANY: bool>(
     w: &WideBvh,
     rays: &[Ray],
     r: &Rays,
@@ -299,6 +302,9 @@ fn walk<L: Lanes>(
         SmallStack::<(u32, f32, u32), { (WIDTH - 1) * crate::bvh::MAX_DEPTH + 1 }>::new();
     stack.push((Child::inner(0).0, 0.0, 0));
     let mut near = [0.0f32; WIDTH];
+    // Rays that found a hit (any-hit only): their limit is -1, so they enter no more boxes.
+    let all = u64::MAX >> (PACKET - r.n);
+    let mut done = 0u64;
     while let Some((word, dist, at)) = stack.pop() {
         let (parent, lane) = (at / WIDTH as u32, at % WIDTH as u32);
         if dist > farthest {
@@ -318,7 +324,15 @@ fn walk<L: Lanes>(
             while m != 0 {
                 let i = m.trailing_zeros() as usize;
                 m &= m - 1;
-                limit[i] = bests.t[i] * CULL_SLACK;
+                if ANY && bests.t[i] < t_max {
+                    limit[i] = -1.0;
+                    done |= 1 << i;
+                } else {
+                    limit[i] = bests.t[i] * CULL_SLACK;
+                }
+            }
+            if ANY && done == all {
+                return;
             }
             farthest = largest(&limit);
             continue;

@@ -249,7 +249,7 @@ pub(crate) struct BlockHits {
 
 pub(crate) use scalar::Scalar;
 #[cfg(target_arch = "x86_64")]
-pub(crate) use x86::{Avx2Cpu, Sse2, closest_avx2, closest_packet_avx2, each_hit_avx2};
+pub(crate) use x86::{Avx2Cpu, Sse2, closest_avx2, each_hit_avx2, trace_packet_avx2};
 
 /// The constants of the distance error bound of [`crate::geometry::intersect_triangle`].
 pub(crate) const G2: f32 = gamma(2);

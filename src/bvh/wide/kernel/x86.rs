@@ -738,13 +738,19 @@ fn each_hit_avx2_inner<const SAFE: bool, F: FnMut(u32, f32) -> bool>(
 }
 
 #[target_feature(enable = "avx2,fma,popcnt,bmi1,lzcnt")]
-fn closest_packet_avx2_inner(w: &WideBvh, rays: &[Ray], t_max: f32, best: &mut [Best]) -> bool {
-    crate::bvh::wide::packet::closest_packet::<Avx2>(w, rays, t_max, best)
+fn trace_packet_avx2_inner<const ANY: bool>(
+    w: &WideBvh,
+    rays: &[Ray],
+    t_max: f32,
+    best: &mut [Best],
+) -> bool {
+    crate::bvh::wide::packet::trace_packet::<Avx2, ANY>(w, rays, t_max, best)
 }
 
-/// A packet's closest hits with the AVX2 kernel (see [`crate::bvh::wide::packet`]).
+/// A packet's closest hits (or, with `ANY`, first hits) with the AVX2 kernel (see
+/// [`crate::bvh::wide::packet`]).
 #[inline]
-pub(crate) fn closest_packet_avx2(
+pub(crate) fn trace_packet_avx2<const ANY: bool>(
     _cpu: Avx2Cpu,
     w: &WideBvh,
     rays: &[Ray],
@@ -752,7 +758,7 @@ pub(crate) fn closest_packet_avx2(
     best: &mut [Best],
 ) -> bool {
     // SAFETY: an `Avx2Cpu` exists only when the CPU has every feature enabled here.
-    unsafe { closest_packet_avx2_inner(w, rays, t_max, best) }
+    unsafe { trace_packet_avx2_inner::<ANY>(w, rays, t_max, best) }
 }
 
 /// Closest hit with the AVX2 kernel (the whole traversal compiled for AVX2).
