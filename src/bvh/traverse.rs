@@ -215,8 +215,7 @@ impl Bvh {
             .zip(out.chunks_mut(super::wide::packet::PACKET))
         {
             let best = &mut best[..rays.len()];
-            if rays.iter().all(Ray::is_valid) && self.wide.trace_packet::<false>(rays, t_max, best)
-            {
+            if self.wide.trace_packet::<false>(rays, t_max, best) {
                 for (o, b) in out.iter_mut().zip(best.iter()) {
                     *o = (b.prim != u32::MAX && b.t < t_max).then_some(Hit {
                         t: b.t,
@@ -249,7 +248,7 @@ impl Bvh {
             .zip(out.chunks_mut(super::wide::packet::PACKET))
         {
             let best = &mut best[..rays.len()];
-            if rays.iter().all(Ray::is_valid) && self.wide.trace_packet::<true>(rays, t_max, best) {
+            if self.wide.trace_packet::<true>(rays, t_max, best) {
                 for (o, b) in out.iter_mut().zip(best.iter()) {
                     *o = b.t < t_max;
                 }

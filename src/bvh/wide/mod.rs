@@ -279,8 +279,8 @@ impl WideBvh {
 
 impl WideBvh {
     /// Closest hits (with `ANY`, first hits: see [`packet::trace_packet`]) of up to
-    /// [`packet::PACKET`] valid rays traced together (see [`packet`]), into `best`; `false`
-    /// (nothing written) when they cannot be.
+    /// [`packet::PACKET`] rays traced together (see [`packet`]), into `best`; `false`
+    /// (nothing written) when they cannot be (invalid rays among them included).
     #[inline]
     pub(crate) fn trace_packet<const ANY: bool>(
         &self,

@@ -102,8 +102,8 @@ pub(crate) fn perm_of(id: u8) -> [usize; 3] {
 }
 
 impl Rays {
-    /// The packet, or `None` when its rays do not share an octant or some reciprocal is
-    /// infinite.
+    /// The packet, or `None` when its rays do not share an octant, some reciprocal is
+    /// infinite, or some ray is not valid (a non-finite origin or direction).
     #[inline(always)]
     fn new(rays: &[Ray]) -> Option<Rays> {
         use glam::Vec3A;
@@ -128,7 +128,8 @@ impl Rays {
         let mut same = true;
         for (i, ray) in rays.iter().enumerate() {
             let (o, d) = (Vec3A::from(ray.origin), Vec3A::from(ray.dir));
-            same &= d.is_negative_bitmask() == octant;
+            // A zero direction has an infinite reciprocal, caught below.
+            same &= (d.is_negative_bitmask() == octant) & o.is_finite() & d.is_finite();
             let inv = Vec3A::ONE / d;
             (o_lo, o_hi) = (o_lo.min(o), o_hi.max(o));
             (i_lo, i_hi) = (i_lo.min(inv), i_hi.max(inv));
@@ -230,7 +231,7 @@ fn largest(limit: &[f32; PACKET]) -> f32 {
     m.iter().fold(0.0f32, |a, &b| if b > a { b } else { a })
 }
 
-/// Closest hits of `rays` (at most [`PACKET`], all valid) at `0 < t < t_max`, into `best`
+/// Closest hits of `rays` (at most [`PACKET`]) at `0 < t < t_max`, into `best`
 /// (one per ray), or `false` when the packet cannot be traced together (see the module docs)
 /// and nothing was written. With `ANY`, a ray stops at its first hit before `t_max` (shadow
 /// rays): `best[i].t < t_max` exactly when something lies on ray `i`, the hit itself being
@@ -350,7 +351,44 @@ fn walk<L: Lanes, const ANY: bool>(
     }
 }
 
-/// The rays in `active` (bit per ray) against a leaf's blocks, eight rays at a time.
+/// Up to eight of a packet's rays that share one axis permutation, to be tested together.
+pub(crate) struct Group {
+    /// The rays' indices in the packet (the first `n` are used).
+    pub idx: [usize; 8],
+    pub n: usize,
+    /// Their permutation number (see [`perm_id`]).
+    pub perm: u8,
+}
+
+impl Group {
+    /// Takes from `todo` the first ray and up to seven more with its permutation.
+    #[inline(always)]
+    fn take(todo: &mut u64, tris: &Tris) -> Group {
+        let first = todo.trailing_zeros() as usize;
+        let perm = tris.perm[first];
+        let mut g = Group {
+            idx: [first; 8],
+            n: 0,
+            perm,
+        };
+        let mut m = *todo;
+        while m != 0 && g.n < 8 {
+            let i = m.trailing_zeros() as usize;
+            m &= m - 1;
+            if tris.perm[i] == perm {
+                g.idx[g.n] = i;
+                g.n += 1;
+                *todo &= !(1u64 << i);
+            }
+        }
+        g
+    }
+}
+
+/// The rays in `active` (bit per ray) against a leaf's blocks: in groups of up to eight rays
+/// that share an axis permutation, gathered from wherever they sit in the tile (a leaf is
+/// entered by a few rays scattered over the tile's rows), each group tested together when the
+/// kernel can and it is large enough, else ray by ray.
 #[inline(always)]
 fn leaf_rays<L: Lanes>(
     w: &WideBvh,
@@ -361,39 +399,38 @@ fn leaf_rays<L: Lanes>(
     active: u64,
     bests: &mut Bests,
 ) {
-    for c in 0..r.n.div_ceil(8) {
-        let lanes = (active >> (8 * c)) as u32 & 0xff;
-        if lanes == 0 {
-            continue;
-        }
-        for b in first..first + count {
-            L::block_rays(&w.blocks[b as usize], r, tris, c, lanes, bests);
+    let blocks = &w.blocks[first as usize..(first + count) as usize];
+    let mut todo = active;
+    while todo != 0 {
+        let g = Group::take(&mut todo, tris);
+        if g.n >= L::RAYS_TOGETHER {
+            L::group_blocks(blocks, r, tris, &g, bests);
+        } else {
+            for &i in &g.idx[..g.n] {
+                ray_blocks::<L>(blocks, r, tris, i, bests);
+            }
         }
     }
 }
 
-/// [`super::kernel::Lanes::block_rays`] ray by ray: each ray of chunk `c` in `lanes` against
-/// block `b` with the single-ray block test.
+/// Ray `i` of the packet against `blocks` with the single-ray block test.
 #[inline(always)]
-pub(crate) fn block_rays_one_by_one<L: Lanes>(
-    b: &TriBlock,
+pub(crate) fn ray_blocks<L: Lanes>(
+    blocks: &[TriBlock],
     r: &Rays,
     tris: &Tris,
-    c: usize,
-    mut lanes: u32,
+    i: usize,
     bests: &mut Bests,
 ) {
     let mut out = BlockHits::default();
-    while lanes != 0 {
-        let i = 8 * c + lanes.trailing_zeros() as usize;
-        lanes &= lanes - 1;
-        let ray = PreparedRay::from_parts(
-            glam::Vec3A::new(r.origin[0][i], r.origin[1][i], r.origin[2][i]),
-            perm_of(tris.perm[i]),
-            [tris.shear[0][i], tris.shear[1][i], tris.shear[2][i]],
-        );
-        let tr = TriRay::new(&ray);
-        let lr = L::tri_ray(&tr);
+    let ray = PreparedRay::from_parts(
+        glam::Vec3A::new(r.origin[0][i], r.origin[1][i], r.origin[2][i]),
+        perm_of(tris.perm[i]),
+        [tris.shear[0][i], tris.shear[1][i], tris.shear[2][i]],
+    );
+    let tr = TriRay::new(&ray);
+    let lr = L::tri_ray(&tr);
+    for b in blocks {
         let limit = f32::from_bits(bests.t[i].to_bits() + (bests.t[i] < f32::INFINITY) as u32);
         let (mut hits, mut exact) = L::block(b, &lr, limit, &mut out);
         while hits != 0 {

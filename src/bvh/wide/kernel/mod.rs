@@ -25,7 +25,7 @@ pub(crate) mod stack;
 #[cfg(target_arch = "x86_64")]
 mod x86;
 
-use super::packet::{Bests, PACKET, Rays, Tris, block_rays_one_by_one, rays_entering_scalar};
+use super::packet::{Bests, Group, PACKET, Rays, Tris, rays_entering_scalar};
 use super::{BLOCK, TriBlock, WIDTH, WideNode};
 use crate::geometry::{PreparedRay, gamma};
 use stack::Stack;
@@ -225,11 +225,17 @@ pub(crate) trait Lanes: Sized {
         rays_entering_scalar(n, lane, r, limit)
     }
 
-    /// Rays `8 c..8 c + 8` of a packet (those whose bit is set in `lanes`) against the four
-    /// triangles of `b`, keeping each ray's closest hit. By default one ray at a time.
+    /// The fewest rays of a [`Group`] that [`Lanes::group_blocks`] tests together; smaller
+    /// groups go ray by ray. By default no group is (kernels without a group test).
+    const RAYS_TOGETHER: usize = usize::MAX;
+
+    /// A group of a packet's rays (sharing one axis permutation) against `blocks`, each
+    /// triangle against every ray of the group at once, keeping each ray's closest hit.
     #[inline(always)]
-    fn block_rays(b: &TriBlock, r: &Rays, tris: &Tris, c: usize, lanes: u32, bests: &mut Bests) {
-        block_rays_one_by_one::<Self>(b, r, tris, c, lanes, bests)
+    fn group_blocks(blocks: &[TriBlock], r: &Rays, tris: &Tris, g: &Group, bests: &mut Bests) {
+        for &i in &g.idx[..g.n] {
+            super::packet::ray_blocks::<Self>(blocks, r, tris, i, bests);
+        }
     }
 
     /// The watertight test on the four lanes of `b` for `0 < t < limit`: returns the lanes hit

@@ -20,7 +20,7 @@ use std::arch::x86_64::*;
 
 use super::stack::Stack;
 use super::{BlockHits, G2, G3, G5, Lanes, NodeRay, TriRay};
-use crate::bvh::wide::packet::{Bests, PACKET, Rays, Tris, block_rays_one_by_one, perm_of};
+use crate::bvh::wide::packet::{Bests, Group, PACKET, Rays, Tris, perm_of};
 use crate::bvh::wide::traverse::{self, Best};
 use crate::bvh::wide::{BLOCK, TriBlock, WIDTH, WideBvh, WideNode};
 use crate::geometry::{PreparedRay, Ray};
@@ -467,77 +467,73 @@ impl Lanes for Avx2 {
         mask
     }
 
-    /// Eight rays at once per triangle when they share one axis permutation (camera rays of
-    /// a tile almost always do), else ray by ray.
+    const RAYS_TOGETHER: usize = RAYS_TOGETHER;
+
+    /// Each triangle against the group's rays at once, one ray per lane (gathered from their
+    /// places in the packet).
     #[inline(always)]
-    fn block_rays(b: &TriBlock, r: &Rays, tris: &Tris, c: usize, lanes: u32, bests: &mut Bests) {
-        let base = 8 * c;
-        let p0 = tris.perm[base + lanes.trailing_zeros() as usize];
-        let mut m = lanes;
-        let mut same = true;
-        while m != 0 {
-            same &= tris.perm[base + m.trailing_zeros() as usize] == p0;
-            m &= m - 1;
-        }
-        if !same || lanes.count_ones() < RAYS_TOGETHER {
-            return block_rays_one_by_one::<Self>(b, r, tris, c, lanes, bests);
-        }
-        let k = perm_of(p0);
+    fn group_blocks(blocks: &[TriBlock], r: &Rays, tris: &Tris, g: &Group, bests: &mut Bests) {
+        let k = perm_of(g.perm);
+        // Lanes past the group's end repeat its first ray and are masked off.
+        let gather = |a: &[f32; PACKET]| -> __m256 {
+            let v: [f32; 8] = std::array::from_fn(|j| a[g.idx[j]]);
+            // SAFETY: only reached inside the AVX2 entry points; `v` holds eight floats.
+            unsafe { _mm256_loadu_ps(v.as_ptr()) }
+        };
         let o = [
-            ld8(&r.origin[k[0]], base),
-            ld8(&r.origin[k[1]], base),
-            ld8(&r.origin[k[2]], base),
+            gather(&r.origin[k[0]]),
+            gather(&r.origin[k[1]]),
+            gather(&r.origin[k[2]]),
         ];
         let shear = [
-            ld8(&tris.shear[0], base),
-            ld8(&tris.shear[1], base),
-            ld8(&tris.shear[2], base),
+            gather(&tris.shear[0]),
+            gather(&tris.shear[1]),
+            gather(&tris.shear[2]),
         ];
+        let lanes = (1u32 << g.n) - 1;
         let mut out = [[0.0f32; 8]; 3];
-        for tri in 0..BLOCK {
-            if b.prim[tri] == u32::MAX {
-                continue;
-            }
-            // Each ray's limit: the next float above its best distance (ties still count).
-            // SAFETY: only reached inside the AVX2 entry points.
-            let limit = unsafe {
-                let best = ld8(&bests.t, base);
-                let finite = _mm256_castps_si256(_mm256_cmp_ps::<_CMP_LT_OQ>(
-                    best,
-                    _mm256_set1_ps(f32::INFINITY),
-                ));
-                _mm256_castsi256_ps(_mm256_sub_epi32(_mm256_castps_si256(best), finite))
-            };
-            let (mut hits, mut exact) =
-                triangle_rays8(b, tri, k, &o, &shear, limit, lanes, &mut out);
-            while hits != 0 {
-                let j = hits.trailing_zeros() as usize;
-                hits &= hits - 1;
-                bests.offer(base + j, out[0][j], b.prim[tri], out[1][j], out[2][j]);
-            }
-            while exact != 0 {
-                let j = exact.trailing_zeros() as usize;
-                exact &= exact - 1;
-                let i = base + j;
-                let ray = PreparedRay::from_parts(
-                    glam::Vec3A::new(r.origin[0][i], r.origin[1][i], r.origin[2][i]),
-                    k,
-                    [tris.shear[0][i], tris.shear[1][i], tris.shear[2][i]],
-                );
-                let limit =
-                    f32::from_bits(bests.t[i].to_bits() + (bests.t[i] < f32::INFINITY) as u32);
-                if let Some(h) = crate::geometry::intersect_triangle(&ray, &b.triangle(tri), limit)
-                {
-                    bests.offer(i, h.t, b.prim[tri], h.u, h.v);
+        for b in blocks {
+            for tri in 0..BLOCK {
+                if b.prim[tri] == u32::MAX {
+                    continue;
+                }
+                // Each ray's limit: the next float above its best distance (ties still count).
+                let limit: [f32; 8] = std::array::from_fn(|j| {
+                    let t = bests.t[g.idx[j]];
+                    f32::from_bits(t.to_bits() + (t < f32::INFINITY) as u32)
+                });
+                // SAFETY: only reached inside the AVX2 entry points; `limit` holds eight floats.
+                let limit8 = unsafe { _mm256_loadu_ps(limit.as_ptr()) };
+                let (mut hits, mut exact) =
+                    triangle_rays8(b, tri, k, &o, &shear, limit8, lanes, &mut out);
+                while hits != 0 {
+                    let j = hits.trailing_zeros() as usize;
+                    hits &= hits - 1;
+                    bests.offer(g.idx[j], out[0][j], b.prim[tri], out[1][j], out[2][j]);
+                }
+                while exact != 0 {
+                    let j = exact.trailing_zeros() as usize;
+                    exact &= exact - 1;
+                    let i = g.idx[j];
+                    let ray = PreparedRay::from_parts(
+                        glam::Vec3A::new(r.origin[0][i], r.origin[1][i], r.origin[2][i]),
+                        k,
+                        [tris.shear[0][i], tris.shear[1][i], tris.shear[2][i]],
+                    );
+                    if let Some(h) =
+                        crate::geometry::intersect_triangle(&ray, &b.triangle(tri), limit[j])
+                    {
+                        bests.offer(i, h.t, b.prim[tri], h.u, h.v);
+                    }
                 }
             }
         }
     }
 }
 
-/// The fewest active rays of an eight-ray chunk tested together per triangle; fewer go one by
-/// one (four triangles at a time each).
-const RAYS_TOGETHER: u32 = 4;
+/// The fewest rays of a group tested together per triangle; smaller groups go one by one
+/// (four triangles at a time each).
+const RAYS_TOGETHER: usize = 3;
 
 /// Eight consecutive lanes of a packet array from `base`.
 #[inline(always)]
