@@ -204,8 +204,10 @@ pub const TILE_WIDTH: u32 = 8;
 /// Camera rays go in packets of a [`TILE_WIDTH`] x [`BAND`] tile of pixels
 /// ([`Bvh::intersect_packet`]), one sample index at a time: a square tile keeps the packet's
 /// rays close in both directions, so the walk visits fewer boxes than for a row of 64 (1.6x
-/// the rays per second on the dragon). Each pixel still adds its samples in order and gets
-/// the hits single rays would, so the image is the same bit for bit.
+/// the rays per second on the dragon). The tiles are traced in parallel on the rayon pool, so
+/// a batch of rows ends with every thread busy to within one tile (the viewer traces in short
+/// batches). Each pixel still adds its samples in order and gets the hits single rays would,
+/// so the image is the same bit for bit.
 pub fn trace_rows(
     tracer: &Tracer,
     cam: &CameraRays,
@@ -215,57 +217,104 @@ pub fn trace_rows(
 ) -> (RayCounts, u64) {
     use crate::bvh::wide::packet::PACKET;
     let w = cam.width as usize;
-    let mut rays = RayCounts::default();
-    let mut rejected = 0u64;
     if w == 0 {
-        return (rays, rejected);
+        return (RayCounts::default(), 0);
     }
     debug_assert!(rows.len().is_multiple_of(w) && rows.len() / w <= BAND as usize);
     let height = rows.len() / w;
+    let tile = TILE_WIDTH as usize;
+    // The pixel of a tile's `k`-th ray: (x0 + k % tw, row k / tw of the band).
+    let at = |x0: usize, tw: usize, k: usize| k / tw * w + x0 + k % tw;
+    let before = &*rows;
+    let tiles: Vec<([Vec3; PACKET], RayCounts, u64)> = (0..w.div_ceil(tile))
+        .into_par_iter()
+        .map(|c| {
+            let (x0, tw) = (c * tile, tile.min(w - c * tile));
+            // The tile's sums so far, added to in order as in the film itself.
+            let mut sums = [Vec3::ZERO; PACKET];
+            for (k, s) in sums[..tw * height].iter_mut().enumerate() {
+                *s = before[at(x0, tw, k)];
+            }
+            let (rays, rejected) = trace_tile(
+                tracer,
+                cam,
+                samples,
+                (x0, y0 as usize),
+                (tw, height),
+                &mut sums,
+            );
+            (sums, rays, rejected)
+        })
+        .collect();
+    let mut rays = RayCounts::default();
+    let mut rejected = 0u64;
+    for (c, (sums, r, n)) in tiles.into_iter().enumerate() {
+        let (x0, tw) = (c * tile, tile.min(w - c * tile));
+        for (k, s) in sums[..tw * height].iter().enumerate() {
+            rows[at(x0, tw, k)] = *s;
+        }
+        rays = rays + r;
+        rejected += n;
+    }
+    (rays, rejected)
+}
+
+/// The samples of the `size.0 x size.1` tile of pixels from `corner` (at most one packet), added
+/// to `sums` (row by row of the tile); returns the rays traced and the non-finite samples left
+/// out.
+fn trace_tile(
+    tracer: &Tracer,
+    cam: &CameraRays,
+    samples: &SampleRange,
+    corner: (usize, usize),
+    size: (usize, usize),
+    sums: &mut [Vec3; crate::bvh::wide::packet::PACKET],
+) -> (RayCounts, u64) {
+    use crate::bvh::wide::packet::PACKET;
+    let ((x0, y0), (tw, height)) = (corner, size);
+    let w = cam.width as u64;
+    let n = tw * height;
+    let mut rays = RayCounts::default();
+    let mut rejected = 0u64;
     let thin_lens = tracer.plan.thin_lens && cam.lens_radius > 0.0;
     let mut camera_rays = [crate::geometry::Ray::new(Vec3::ZERO, Vec3::Z); PACKET];
     let first = PixelSampler::new(samples.sampler, samples.seed, 0, 0);
     let mut firsts = [first; PACKET];
     let mut samplers = [first; PACKET];
     let mut hits = [None; PACKET];
-    // The pixel of a tile's `k`-th ray: (x0 + k % tw, row k / tw of the band).
-    for x0 in (0..w).step_by(TILE_WIDTH as usize) {
-        let tw = (TILE_WIDTH as usize).min(w - x0);
-        let n = tw * height;
-        for (k, f) in firsts[..n].iter_mut().enumerate() {
-            let (x, y) = (x0 + k % tw, y0 as usize + k / tw);
-            let pixel = y as u64 * w as u64 + x as u64;
-            *f = PixelSampler::new(samples.sampler, samples.seed, pixel, 0);
+    let pixel_of = |k: usize| (x0 + k % tw, y0 + k / tw);
+    for (k, f) in firsts[..n].iter_mut().enumerate() {
+        let (x, y) = pixel_of(k);
+        *f = PixelSampler::new(samples.sampler, samples.seed, y as u64 * w + x as u64, 0);
+    }
+    for s in samples.first..samples.first.saturating_add(samples.count) {
+        for k in 0..n {
+            let sampler = firsts[k].with_index(s);
+            let jitter = sampler.get_2d(dim::PIXEL);
+            let (x, y) = pixel_of(k);
+            let (px, py) = (x as f32 + jitter.x, y as f32 + jitter.y);
+            camera_rays[k] = if thin_lens {
+                cam.thin_lens(px, py, concentric_disk(sampler.get_2d(dim::LENS)))
+            } else {
+                cam.pinhole(px, py)
+            };
+            samplers[k] = sampler;
         }
-        for s in samples.first..samples.first.saturating_add(samples.count) {
-            for k in 0..n {
-                let sampler = firsts[k].with_index(s);
-                let jitter = sampler.get_2d(dim::PIXEL);
-                let (x, y) = (x0 + k % tw, y0 as usize + k / tw);
-                let (px, py) = (x as f32 + jitter.x, y as f32 + jitter.y);
-                camera_rays[k] = if thin_lens {
-                    cam.thin_lens(px, py, concentric_disk(sampler.get_2d(dim::LENS)))
-                } else {
-                    cam.pinhole(px, py)
-                };
-                samplers[k] = sampler;
-            }
-            tracer
-                .bvh
-                .intersect_packet(&camera_rays[..n], f32::INFINITY, &mut hits[..n]);
-            rays.camera += n as u64;
-            for k in 0..n {
-                let l = tracer.radiance_from_hit(
-                    &camera_rays[k],
-                    hits[k],
-                    &mut PathSampler::new(samplers[k]),
-                    &mut rays,
-                );
-                if l.is_finite() {
-                    rows[k / tw * w + x0 + k % tw] += l;
-                } else {
-                    rejected += 1;
-                }
+        tracer
+            .bvh
+            .intersect_packet(&camera_rays[..n], f32::INFINITY, &mut hits[..n]);
+        rays.camera += n as u64;
+        for k in 0..n {
+            let l = tracer.radiance_from_hit(
+                &camera_rays[k],
+                hits[k],
+                &mut PathSampler::new(samplers[k]),
+                &mut rays,
+            );
+            if l.is_finite() {
+                sums[k] += l;
+            } else {
+                rejected += 1;
             }
         }
     }
