@@ -177,3 +177,19 @@ pub fn srgb8(x: f32) -> u8 {
     };
     (s * 255.0 + 0.5) as u8
 }
+
+/// The sRGB transfer function's inverse (IEC 61966-2-1): an encoded value in `[0, 1]` to
+/// linear.
+pub fn srgb_to_linear(c: f32) -> f32 {
+    if c <= 0.04045 {
+        c / 12.92
+    } else {
+        ((c + 0.055) / 1.055).powf(2.4)
+    }
+}
+
+/// [`srgb_to_linear`] of every sRGB-encoded byte, by byte.
+pub fn srgb8_table() -> &'static [f32; 256] {
+    static TABLE: std::sync::OnceLock<[f32; 256]> = std::sync::OnceLock::new();
+    TABLE.get_or_init(|| std::array::from_fn(|i| srgb_to_linear(i as f32 / 255.0)))
+}

@@ -6,6 +6,7 @@ use std::path::Path;
 use anyhow::{Context, Result, bail};
 use glam::{Quat, Vec3};
 
+use crate::film::srgb_to_linear;
 use crate::scene::Environment;
 
 /// An environment ready to sample: images loaded and converted to linear RGB.
@@ -174,15 +175,6 @@ impl LinearImage {
     /// The texel at column `x`, row `y`.
     pub fn texel(&self, x: u32, y: u32) -> Vec3 {
         self.texels[(y * self.width + x) as usize]
-    }
-}
-
-/// The sRGB transfer function, decoded.
-pub fn srgb_to_linear(c: f32) -> f32 {
-    if c <= 0.04045 {
-        c / 12.92
-    } else {
-        ((c + 0.055) / 1.055).powf(2.4)
     }
 }
 

@@ -7,7 +7,6 @@
 //! filter blends light, not encoded values; the alpha channel is always linear.
 
 use std::path::Path;
-use std::sync::OnceLock;
 
 use anyhow::{Context, Result};
 use glam::{Affine2, Vec2, Vec4};
@@ -68,21 +67,6 @@ impl std::fmt::Debug for Texture {
     }
 }
 
-/// sRGB-encoded byte to linear value (IEC 61966-2-1).
-fn srgb_table() -> &'static [f32; 256] {
-    static TABLE: OnceLock<[f32; 256]> = OnceLock::new();
-    TABLE.get_or_init(|| std::array::from_fn(|i| srgb_to_linear(i as f32 / 255.0)))
-}
-
-/// The sRGB transfer function's inverse: an encoded value in `[0, 1]` to linear.
-pub fn srgb_to_linear(c: f32) -> f32 {
-    if c <= 0.04045 {
-        c / 12.92
-    } else {
-        ((c + 0.055) / 1.055).powf(2.4)
-    }
-}
-
 impl Texture {
     /// A texture from RGBA8 texels, row by row from the top (`v = 0` is the first row, as in
     /// glTF and in OBJ files read with their `v` flipped).
@@ -138,7 +122,7 @@ impl Texture {
         let [r, g, b, a] = self.texels[y * self.width as usize + x];
         let alpha = a as f32 / 255.0;
         if self.srgb {
-            let t = srgb_table();
+            let t = crate::film::srgb8_table();
             Vec4::new(t[r as usize], t[g as usize], t[b as usize], alpha)
         } else {
             Vec4::new(r as f32, g as f32, b as f32, a as f32) / 255.0
