@@ -310,6 +310,66 @@ fn the_first_camera_and_punctual_lights_are_used() {
     assert_eq!(plain.lights.len(), 1, "the default light of a bare mesh");
 }
 
+/// A spot light keeps its cone and its node's -z as its axis (angles in radians; the
+/// specification's defaults 0 and pi/4 when left out), and a cone outside
+/// `0 <= inner < outer <= pi/2` is clamped into it with a warning naming the light.
+#[test]
+fn spot_lights_keep_their_cones() {
+    let dir = tempfile::tempdir().unwrap();
+    // Rotated -90 degrees about x: the node's -z points down (-y).
+    let down = [-0.70710677, 0.0, 0.0, 0.70710677];
+    let nodes = json!([
+        {"mesh": 0},
+        {"extensions": {"KHR_lights_punctual": {"light": 0}}, "rotation": down, "translation": [0.0, 2.0, 0.0]},
+        {"extensions": {"KHR_lights_punctual": {"light": 1}}},
+        {"extensions": {"KHR_lights_punctual": {"light": 2}}}
+    ]);
+    let d = doc(
+        nodes,
+        json!({
+            "extensionsUsed": ["KHR_lights_punctual"],
+            "extensions": {"KHR_lights_punctual": {"lights": [
+                {"type": "spot", "intensity": 7.0, "spot": {"innerConeAngle": 0.2, "outerConeAngle": 0.5}},
+                {"type": "spot", "spot": {}},
+                {"type": "spot", "spot": {"innerConeAngle": 0.9, "outerConeAngle": 0.4}}
+            ]}}
+        }),
+    );
+    let s = Scene::load(&write(dir.path(), "spots.gltf", &d)).unwrap();
+    let cone = |l: &Light| match *l {
+        Light::Spot {
+            direction,
+            cos_inner,
+            cos_outer,
+            intensity,
+            ..
+        } => (direction, cos_inner.acos(), cos_outer.acos(), intensity),
+        ref l => panic!("a spot light: {l:?}"),
+    };
+    let (axis, inner, outer, intensity) = cone(&s.lights[0]);
+    assert!(close(axis, -Vec3::Y), "{axis}");
+    assert!(
+        (inner - 0.2).abs() < 1e-4 && (outer - 0.5).abs() < 1e-4,
+        "{inner} {outer}"
+    );
+    assert_eq!(intensity, 7.0);
+    let (axis, inner, outer, _) = cone(&s.lights[1]);
+    assert!(close(axis, -Vec3::Z), "{axis}");
+    assert!(inner.abs() < 1e-3 && (outer - std::f32::consts::FRAC_PI_4).abs() < 1e-4);
+    let (_, inner, outer, _) = cone(&s.lights[2]);
+    assert!(
+        inner < outer && (outer - 0.4).abs() < 1e-4,
+        "{inner} {outer}"
+    );
+    assert!(
+        s.warnings
+            .iter()
+            .any(|w| w.contains("lights[2]") && w.contains("spot cone")),
+        "{:?}",
+        s.warnings
+    );
+}
+
 // ---------------------------------------------------------------------------------------
 // Textures
 // ---------------------------------------------------------------------------------------

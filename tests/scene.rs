@@ -432,3 +432,67 @@ fn a_scene_file_without_an_environment_gets_the_procedural_sky() {
     );
     assert_eq!(Scene::load(&p).unwrap().environment, Environment::None);
 }
+
+/// Spot lights in scene files: read with their cone (angles in degrees from the axis, the
+/// direction normalized), and a cone that is not `0 <= inner < outer <= 90` or a zero
+/// direction refused with the file and the light's line.
+#[test]
+fn scene_file_spot_lights() {
+    use tracery::scene::Light;
+    let good = r#"
+[[meshes]]
+shape = "quad"
+
+[[lights]]
+kind = "spot"
+position = [0.0, 2.0, 0.0]
+direction = [0.0, -3.0, 0.0]
+inner_angle = 20.0
+outer_angle = 30.0
+intensity = 5.0
+"#;
+    let read = |p: &std::path::Path| -> anyhow::Result<Vec<u8>> {
+        anyhow::bail!("{}: no files here", p.display())
+    };
+    let s =
+        tracery::scene::file::parse(std::path::Path::new("spot.toml"), good, &read, false).unwrap();
+    let Light::Spot {
+        direction,
+        cos_inner,
+        cos_outer,
+        intensity,
+        ..
+    } = s.lights[0]
+    else {
+        panic!("not a spot: {:?}", s.lights[0]);
+    };
+    assert!((direction - Vec3::NEG_Y).length() < 1e-6);
+    assert!((cos_inner - 20f32.to_radians().cos()).abs() < 1e-6);
+    assert!((cos_outer - 30f32.to_radians().cos()).abs() < 1e-6);
+    assert_eq!(intensity, 5.0);
+    for (bad, wants) in [
+        (
+            "inner_angle = 30.0\nouter_angle = 20.0",
+            "0 <= inner < outer <= 90",
+        ),
+        ("outer_angle = 120.0", "0 <= inner < outer <= 90"),
+        ("inner_angle = -5.0", "0 <= inner < outer <= 90"),
+    ] {
+        let text = good.replace("inner_angle = 20.0\nouter_angle = 30.0", bad);
+        let e = tracery::scene::file::parse(std::path::Path::new("spot.toml"), &text, &read, false)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.starts_with("spot.toml:5:") && e.contains(wants),
+            "{bad}: {e}"
+        );
+    }
+    let text = good.replace("[0.0, -3.0, 0.0]", "[0.0, 0.0, 0.0]");
+    let e = tracery::scene::file::parse(std::path::Path::new("spot.toml"), &text, &read, false)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.starts_with("spot.toml:5:") && e.contains("no length"),
+        "{e}"
+    );
+}

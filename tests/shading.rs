@@ -376,3 +376,50 @@ fn capping_light_samples_traces_one_shadow_ray_per_area_light_and_keeps_the_mean
     let (a, b) = (mean(&full.film), mean(&one.film));
     assert!(a > 0.0 && (a - b).abs() <= 0.03 * a, "{a} vs {b}");
 }
+
+/// A spot light straight down over the floor: inside its inner cone it lights the floor as a
+/// point light of the same intensity does (the cosine law), beyond its outer cone not at all
+/// (and traces no shadow ray there), and between them by the glTF fall-off, which shrinks
+/// outwards. Fails with the cone ignored (spots drawn as point lights, as before).
+#[test]
+fn spot_light_lights_its_cone_only() {
+    let (inner, outer) = (20.0f32, 35.0f32);
+    let spot = Light::Spot {
+        position: Vec3::new(0.0, H, 0.0),
+        direction: -Vec3::Y,
+        color: Vec3::ONE,
+        intensity: I,
+        cos_inner: inner.to_radians().cos(),
+        cos_outer: outer.to_radians().cos(),
+    };
+    let s = scene(vec![(floor(), white())], vec![spot], Environment::None);
+    // The floor point seen at angle `deg` from the spot's axis.
+    let at = |deg: f32| H * deg.to_radians().tan();
+    for deg in [0.0, 10.0, 19.0] {
+        let (l, counts) = radiance(&s, &look_down_at(at(deg), 1.0));
+        assert!(close(l, cosine_law(at(deg)), 1e-4), "{deg} deg: {l}");
+        assert_eq!(counts.shadow, 1);
+    }
+    let mut last = cosine_law(at(inner)).x;
+    for deg in [22.0, 27.5, 33.0] {
+        let (l, _) = radiance(&s, &look_down_at(at(deg), 1.0));
+        let point = cosine_law(at(deg)).x;
+        // The share of a point light's light, against the fall-off's own formula.
+        let t = ((deg.to_radians().cos() - outer.to_radians().cos())
+            / (inner.to_radians().cos() - outer.to_radians().cos()))
+        .clamp(0.0, 1.0);
+        assert!(
+            (l.x / point - t * t).abs() < 1e-3,
+            "{deg} deg: {} vs {}",
+            l.x / point,
+            t * t
+        );
+        assert!(l.x > 0.0 && l.x < last, "{deg} deg: {l}");
+        last = l.x;
+    }
+    for deg in [36.0, 50.0, 80.0] {
+        let (l, counts) = radiance(&s, &look_down_at(at(deg), 1.0));
+        assert_eq!(l, Vec3::ZERO, "{deg} deg");
+        assert_eq!(counts.shadow, 0, "no shadow ray outside the cone");
+    }
+}

@@ -160,7 +160,7 @@ impl Tracer<'_> {
             let origin = offset_ray_origin(s.p, s.p_err, s.ng);
             for (li, light) in self.scene.lights.iter().enumerate() {
                 let (to_point, t_max) = match *light {
-                    Light::Point { position, .. } => (position, 1.0),
+                    Light::Point { position, .. } | Light::Spot { position, .. } => (position, 1.0),
                     Light::Rect { .. } => (light.center(), 1.0 - 1e-4),
                 };
                 let transmittance = if s.ng.dot(to_point - s.p) <= 0.0 {

@@ -363,6 +363,7 @@ impl Tracer<'_> {
                     color,
                     intensity,
                 } => self.point_light(s, origin, wo, position, color * intensity, counts),
+                Light::Spot { .. } => self.spot_light(s, origin, wo, light, counts),
                 Light::Rect {
                     corner,
                     edge_u,

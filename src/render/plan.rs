@@ -174,6 +174,10 @@ impl fmt::Display for Explain<'_> {
         )?;
         for (i, l) in scene.lights.iter().enumerate() {
             match l {
+                Light::Spot { .. } => writeln!(
+                    f,
+                    "  light {i}              spot: 1 shadow ray (none outside its cone)"
+                )?,
                 Light::Point { .. } => writeln!(f, "  light {i}              point: 1 shadow ray")?,
                 Light::Rect { samples, .. } => {
                     let shown = if p.integrator == Integrator::Path

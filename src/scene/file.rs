@@ -31,6 +31,14 @@
 //! edge_v = [0.0, 0.0, 0.5]
 //! intensity = 15.0
 //!
+//! [[lights]]
+//! kind = "spot"              # or "point" (position, color, intensity only)
+//! position = [0.0, 1.9, 0.0]
+//! direction = [0.0, -1.0, 0.0]
+//! inner_angle = 20.0         # degrees from the axis at full intensity (default 0)
+//! outer_angle = 35.0         # degrees from the axis where the light ends (default 45, at most 90)
+//! intensity = 2.0
+//!
 //! [environment]
 //! kind = "sky"               # none, color, sky (the default), cubemap, equirect
 //!
@@ -61,7 +69,7 @@ struct SceneDef {
     #[serde(default)]
     meshes: Vec<Spanned<MeshDef>>,
     #[serde(default)]
-    lights: Vec<LightDef>,
+    lights: Vec<Spanned<LightDef>>,
     environment: Option<Spanned<EnvDef>>,
     render: Option<RenderDef>,
 }
@@ -134,6 +142,14 @@ enum LightDef {
         position: [f64; 3],
         color: Option<[f32; 3]>,
         intensity: Option<f32>,
+    },
+    Spot {
+        position: [f64; 3],
+        direction: [f32; 3],
+        color: Option<[f32; 3]>,
+        intensity: Option<f32>,
+        inner_angle: Option<f32>,
+        outer_angle: Option<f32>,
     },
     Rect {
         corner: [f64; 3],
@@ -306,8 +322,8 @@ pub fn parse(path: &Path, text: &str, read: ReadFn, check_files: bool) -> Result
     let lights = def
         .lights
         .iter()
-        .map(|l| light_from_def(l, origin))
-        .collect();
+        .map(|l| light_from_def(l.get_ref(), origin).map_err(|e| at(l.span().start, e)))
+        .collect::<Result<Vec<_>>>()?;
 
     let bounds = mesh.bounds();
     let camera = match &def.camera {
@@ -461,10 +477,11 @@ fn material_from_def(name: &str, m: &MaterialDef) -> Material {
     }
 }
 
-/// The light of `l`, moved into the frame whose world position is `origin`.
-fn light_from_def(l: &LightDef, origin: DVec3) -> Light {
+/// The light of `l`, moved into the frame whose world position is `origin`, or what is wrong
+/// with it.
+fn light_from_def(l: &LightDef, origin: DVec3) -> Result<Light, String> {
     let local = |p: &[f64; 3]| (DVec3::from(*p) - origin).as_vec3();
-    match l {
+    Ok(match l {
         LightDef::Point {
             position,
             color,
@@ -489,5 +506,33 @@ fn light_from_def(l: &LightDef, origin: DVec3) -> Light {
             intensity: intensity.unwrap_or(1.0),
             samples: samples.unwrap_or(4).max(1),
         },
-    }
+        LightDef::Spot {
+            position,
+            direction,
+            color,
+            intensity,
+            inner_angle,
+            outer_angle,
+        } => {
+            let (inner, outer) = (inner_angle.unwrap_or(0.0), outer_angle.unwrap_or(45.0));
+            if !(0.0 <= inner && inner < outer && outer <= 90.0) {
+                return Err(format!(
+                    "spot light: inner_angle {inner} and outer_angle {outer} must satisfy \
+                     0 <= inner < outer <= 90 (degrees)"
+                ));
+            }
+            let d = Vec3::from(*direction);
+            let Some(direction) = d.try_normalize() else {
+                return Err(format!("spot light: direction {d} has no length"));
+            };
+            Light::Spot {
+                position: local(position),
+                direction,
+                color: color.map(Vec3::from).unwrap_or(Vec3::ONE),
+                intensity: intensity.unwrap_or(1.0),
+                cos_inner: inner.to_radians().cos(),
+                cos_outer: outer.to_radians().cos(),
+            }
+        }
+    })
 }

@@ -75,6 +75,8 @@ pub struct GltfLight {
     pub color: Vec3,
     /// Candela for point and spot lights, lux for directional ones.
     pub intensity: f32,
+    /// A spot light's cone: the angles (radians) from its axis of full and of no light.
+    pub cone: Option<(f32, f32)>,
 }
 
 /// The kinds of `KHR_lights_punctual`.
@@ -82,7 +84,7 @@ pub struct GltfLight {
 pub enum LightKind {
     /// Light in every direction from a point.
     Point,
-    /// A point light limited to a cone (drawn as a point light: the renderer has no cones).
+    /// A point light limited to a cone.
     Spot,
     /// Parallel light from infinitely far away.
     Directional,
@@ -132,15 +134,23 @@ pub fn scene_of(name: String, d: GltfData) -> Scene {
         scene.lights = d
             .lights
             .iter()
-            .map(|l| match l.kind {
-                LightKind::Point | LightKind::Spot => Light::Point {
+            .map(|l| match (l.kind, l.cone) {
+                (LightKind::Spot, Some((inner, outer))) => Light::Spot {
+                    position: local(l.position),
+                    direction: l.direction.as_vec3(),
+                    color: l.color,
+                    intensity: l.intensity,
+                    cos_inner: inner.cos(),
+                    cos_outer: outer.cos(),
+                },
+                (LightKind::Point | LightKind::Spot, _) => Light::Point {
                     position: local(l.position),
                     color: l.color,
                     intensity: l.intensity,
                 },
                 // Far away along the light's direction, bright enough to give the scene the
                 // light's illuminance: a point light at distance D of intensity E D^2.
-                LightKind::Directional => {
+                (LightKind::Directional, _) => {
                     let d = 1000.0 * radius;
                     Light::Point {
                         position: centre - l.direction.as_vec3() * d,
@@ -512,10 +522,30 @@ impl Loader<'_> {
         }
         if let Some(light) = node.light() {
             use ::gltf::khr_lights_punctual::Kind;
-            let kind = match light.kind() {
-                Kind::Point => LightKind::Point,
-                Kind::Spot { .. } => LightKind::Spot,
-                Kind::Directional => LightKind::Directional,
+            let (kind, cone) = match light.kind() {
+                Kind::Point => (LightKind::Point, None),
+                Kind::Spot {
+                    inner_cone_angle,
+                    outer_cone_angle,
+                } => {
+                    // The specification asks for 0 <= inner < outer <= pi / 2; a cone outside
+                    // that is clamped into it, with a warning.
+                    let or = |a: f32, default: f32| if a.is_finite() { a } else { default };
+                    let outer = or(outer_cone_angle, std::f32::consts::FRAC_PI_4)
+                        .clamp(1e-4, std::f32::consts::FRAC_PI_2);
+                    let inner = or(inner_cone_angle, 0.0).clamp(0.0, outer * 0.9999);
+                    if !(outer == outer_cone_angle && inner == inner_cone_angle) {
+                        self.warnings.push(format!(
+                            "{}: lights[{}]: spot cone angles {inner_cone_angle} and \
+                             {outer_cone_angle} are outside 0 <= inner < outer <= pi/2; \
+                             used {inner} and {outer}",
+                            self.name,
+                            light.index()
+                        ));
+                    }
+                    (LightKind::Spot, Some((inner, outer)))
+                }
+                Kind::Directional => (LightKind::Directional, None),
             };
             let intensity = light.intensity();
             if intensity.is_finite() && intensity >= 0.0 {
@@ -525,6 +555,7 @@ impl Loader<'_> {
                     direction: world.transform_vector3(-DVec3::Z).normalize_or(-DVec3::Z),
                     color: Vec3::from(light.color()),
                     intensity,
+                    cone,
                 });
             }
         }
