@@ -1118,3 +1118,67 @@ fn a_masked_cut_out_lets_light_and_sight_through_its_transparent_texels() {
         "{beside_opaque} vs {beside}"
     );
 }
+
+/// Light through a textured, partly transparent surface is tinted by the texture's colour
+/// where the shadow ray crosses it, as the camera sees it: a half-transparent quad whose
+/// white material carries a red texture casts a red shadow, not a grey one (fails with the
+/// shadow tinted by the material's untextured colour, as before).
+#[test]
+fn light_through_a_textured_transparent_surface_takes_the_texture_colour() {
+    use std::sync::Arc;
+    use tracery::render::{EnvironmentMap, RayCounts, RenderPlan, Tracer};
+    use tracery::sampling::{PathSampler, PixelSampler, SamplerKind};
+    use tracery::scene::{Camera, Environment, Material, Mesh};
+    let tex = Texture::from_rgba8("red".into(), 1, 1, vec![[255, 0, 0, 255]], true);
+    let tinted = Material {
+        name: "tinted".into(),
+        diffuse: Vec3::ONE,
+        diffuse_map: Some(Arc::new(tex)),
+        opacity: 0.5,
+        ..Material::default()
+    };
+    let floor = Material {
+        name: "floor".into(),
+        diffuse: Vec3::splat(0.8),
+        ..Material::default()
+    };
+    let quad = |h: f32, y: f32| {
+        let [a, b, c, d] = [
+            Vec3::new(-h, y, -h),
+            Vec3::new(h, y, -h),
+            Vec3::new(h, y, h),
+            Vec3::new(-h, y, h),
+        ];
+        vec![[a, c, b], [a, d, c]]
+    };
+    let mut mesh = Mesh::from_triangles(quad(4.0, 0.0), 0);
+    let mut top = Mesh::from_triangles(quad(1.0, 1.0), 0);
+    top.uvs = vec![[Vec2::splat(0.5); 3]; top.triangles.len()];
+    mesh.append(top, 1);
+    let scene = Scene {
+        name: "tinted shadow".into(),
+        mesh,
+        materials: vec![floor, tinted],
+        lights: vec![Light::Point {
+            position: Vec3::new(0.0, 3.0, 0.0),
+            color: Vec3::ONE,
+            intensity: 10.0,
+        }],
+        camera: Camera::canonical(&tracery::geometry::Aabb::new(Vec3::splat(-1.0), Vec3::ONE)),
+        environment: Environment::None,
+        integrator: tracery::scene::Integrator::Direct,
+        warnings: Vec::new(),
+    };
+    let bvh = Bvh::build(&scene.mesh.triangles, &BuildOptions::sah());
+    let settings = RenderSettings::default();
+    let plan = RenderPlan::new(&scene, &settings);
+    assert!(plan.transparent_shadows);
+    let env = EnvironmentMap::None;
+    let tracer = Tracer::new(&scene, &bvh, plan, settings.max_depth, &env);
+    // The floor under the quad, seen from below the quad (between it and the floor).
+    let ray = tracery::geometry::Ray::new(Vec3::new(0.1, 0.5, 0.2), -Vec3::Y);
+    let mut rng = PathSampler::new(PixelSampler::new(SamplerKind::Sobol, 1, 0, 0));
+    let l = tracer.radiance(&ray, &mut rng, &mut RayCounts::default());
+    assert!(l.x > 0.0, "lit through the quad: {l}");
+    assert!(l.y < 0.01 * l.x && l.z < 0.01 * l.x, "red: {l}");
+}

@@ -360,13 +360,15 @@ impl<'a> Tracer<'a> {
             if !m.is_transparent() {
                 return Vec3::ZERO;
             }
-            // A texture's alpha is read where the shadow ray crosses the triangle.
-            let opacity = if m.alpha_from_map() {
+            // A texture's alpha and colour are read where the shadow ray crosses the
+            // triangle, as the camera would see them there.
+            let (opacity, diffuse) = if m.alpha_from_map() || m.diffuse_map.is_some() {
                 let tri = &scene.mesh.triangles[prim as usize];
                 let (u, v) = barycentric(tri, origin + to * t);
-                textured(scene, m, prim, u, v).opacity
+                let look = textured(scene, m, prim, u, v);
+                (look.opacity, look.diffuse)
             } else {
-                m.opacity_at(1.0)
+                (m.opacity_at(1.0), m.diffuse)
             };
             if opacity >= 1.0 {
                 return Vec3::ZERO;
@@ -383,7 +385,7 @@ impl<'a> Tracer<'a> {
                     None => inside.push((id, dt, db)),
                 }
             }
-            m.transmission(opacity, m.diffuse)
+            m.transmission(opacity, diffuse)
         });
         for (id, sum, balance) in inside {
             let d = (sum + balance.max(0) as f32 * t_max) * len;
