@@ -974,6 +974,51 @@ fn texture_transforms_offset_rotate_and_scale_lookups() {
     );
 }
 
+/// A 2 x 2 quad of material `top` at height 1 (facing +y, texture coordinates `uv` of each
+/// vertex) over an 8 x 8 grey floor, lit by a point light at `light`, seen from 6 above.
+fn quad_over_floor(top: tracery::scene::Material, uv: impl Fn(Vec3) -> Vec2, light: Vec3) -> Scene {
+    use tracery::scene::{Camera, Environment, Material, Mesh};
+    let floor = Material {
+        name: "floor".into(),
+        diffuse: Vec3::splat(0.8),
+        ..Material::default()
+    };
+    let quad = |h: f32, y: f32| {
+        let [a, b, c, d] = [
+            Vec3::new(-h, y, -h),
+            Vec3::new(h, y, -h),
+            Vec3::new(h, y, h),
+            Vec3::new(-h, y, h),
+        ];
+        vec![[a, c, b], [a, d, c]]
+    };
+    let mut mesh = Mesh::from_triangles(quad(4.0, 0.0), 0);
+    let mut top_quad = Mesh::from_triangles(quad(1.0, 1.0), 0);
+    top_quad.uvs = top_quad.triangles.iter().map(|t| t.map(&uv)).collect();
+    mesh.append(top_quad, 1);
+    Scene {
+        name: "quad over floor".into(),
+        mesh,
+        materials: vec![floor, top],
+        lights: vec![Light::Point {
+            position: light,
+            color: Vec3::ONE,
+            intensity: 10.0,
+        }],
+        camera: Camera {
+            position: Vec3::new(0.0, 6.0, 0.0),
+            look_at: Vec3::ZERO,
+            up: Vec3::Z,
+            vfov_deg: 60.0,
+            lens_radius: 0.0,
+            focus_distance: 6.0,
+        },
+        environment: Environment::None,
+        integrator: tracery::scene::Integrator::Direct,
+        warnings: Vec::new(),
+    }
+}
+
 /// A glTF `MASK` cut-out (a quad whose texture's left half has alpha 0) over a floor, lit from
 /// the side: the camera sees the floor through the hole, the shadow falls only where the
 /// texture is opaque (shadow rays read the alpha too), and light through the hole is not
@@ -983,7 +1028,7 @@ fn texture_transforms_offset_rotate_and_scale_lookups() {
 fn a_masked_cut_out_lets_light_and_sight_through_its_transparent_texels() {
     use std::sync::Arc;
     use tracery::camera::CameraRays;
-    use tracery::scene::{AlphaMode, Camera, Environment, Material, Mesh};
+    use tracery::scene::{AlphaMode, Material};
     // Texel 0 (u < 0.5): red, alpha 0; texel 1: red, opaque.
     let mut tex = Texture::from_rgba8(
         "cut".into(),
@@ -1000,50 +1045,12 @@ fn a_masked_cut_out_lets_light_and_sight_through_its_transparent_texels() {
         alpha_mode: AlphaMode::Mask(0.5),
         ..Material::default()
     };
-    let floor = Material {
-        name: "floor".into(),
-        diffuse: Vec3::splat(0.8),
-        ..Material::default()
-    };
-    // Quads facing +y: the floor at y = 0, the cut-out at y = 1 (u = (x + 1) / 2).
-    let quad = |h: f32, y: f32| {
-        let [a, b, c, d] = [
-            Vec3::new(-h, y, -h),
-            Vec3::new(h, y, -h),
-            Vec3::new(h, y, h),
-            Vec3::new(-h, y, h),
-        ];
-        vec![[a, c, b], [a, d, c]]
-    };
-    let mut mesh = Mesh::from_triangles(quad(4.0, 0.0), 0);
-    let mut top = Mesh::from_triangles(quad(1.0, 1.0), 0);
-    top.uvs = top
-        .triangles
-        .iter()
-        .map(|t| t.map(|p| Vec2::new((p.x + 1.0) / 2.0, (p.z + 1.0) / 2.0)))
-        .collect();
-    mesh.append(top, 1);
-    let mut scene = Scene {
-        name: "cut-out".into(),
-        mesh,
-        materials: vec![floor, cut],
-        lights: vec![Light::Point {
-            position: Vec3::new(2.0, 3.0, 0.0),
-            color: Vec3::ONE,
-            intensity: 10.0,
-        }],
-        camera: Camera {
-            position: Vec3::new(0.0, 6.0, 0.0),
-            look_at: Vec3::ZERO,
-            up: Vec3::Z,
-            vfov_deg: 60.0,
-            lens_radius: 0.0,
-            focus_distance: 6.0,
-        },
-        environment: Environment::None,
-        integrator: tracery::scene::Integrator::Direct,
-        warnings: Vec::new(),
-    };
+    // The cut-out at y = 1 over the floor (u = (x + 1) / 2).
+    let mut scene = quad_over_floor(
+        cut,
+        |p| Vec2::new((p.x + 1.0) / 2.0, (p.z + 1.0) / 2.0),
+        Vec3::new(2.0, 3.0, 0.0),
+    );
     let (w, h) = (80u32, 80u32);
     // Mean colour of the pixels whose camera ray meets the floor at x in `lo..hi`, |z| < 0.7,
     // crossing y = 1 outside the quad or through its hole as `through` says.
@@ -1128,7 +1135,7 @@ fn light_through_a_textured_transparent_surface_takes_the_texture_colour() {
     use std::sync::Arc;
     use tracery::render::{EnvironmentMap, RayCounts, RenderPlan, Tracer};
     use tracery::sampling::{PathSampler, PixelSampler, SamplerKind};
-    use tracery::scene::{Camera, Environment, Material, Mesh};
+    use tracery::scene::Material;
     let tex = Texture::from_rgba8("red".into(), 1, 1, vec![[255, 0, 0, 255]], true);
     let tinted = Material {
         name: "tinted".into(),
@@ -1137,38 +1144,7 @@ fn light_through_a_textured_transparent_surface_takes_the_texture_colour() {
         opacity: 0.5,
         ..Material::default()
     };
-    let floor = Material {
-        name: "floor".into(),
-        diffuse: Vec3::splat(0.8),
-        ..Material::default()
-    };
-    let quad = |h: f32, y: f32| {
-        let [a, b, c, d] = [
-            Vec3::new(-h, y, -h),
-            Vec3::new(h, y, -h),
-            Vec3::new(h, y, h),
-            Vec3::new(-h, y, h),
-        ];
-        vec![[a, c, b], [a, d, c]]
-    };
-    let mut mesh = Mesh::from_triangles(quad(4.0, 0.0), 0);
-    let mut top = Mesh::from_triangles(quad(1.0, 1.0), 0);
-    top.uvs = vec![[Vec2::splat(0.5); 3]; top.triangles.len()];
-    mesh.append(top, 1);
-    let scene = Scene {
-        name: "tinted shadow".into(),
-        mesh,
-        materials: vec![floor, tinted],
-        lights: vec![Light::Point {
-            position: Vec3::new(0.0, 3.0, 0.0),
-            color: Vec3::ONE,
-            intensity: 10.0,
-        }],
-        camera: Camera::canonical(&tracery::geometry::Aabb::new(Vec3::splat(-1.0), Vec3::ONE)),
-        environment: Environment::None,
-        integrator: tracery::scene::Integrator::Direct,
-        warnings: Vec::new(),
-    };
+    let scene = quad_over_floor(tinted, |_| Vec2::splat(0.5), Vec3::new(0.0, 3.0, 0.0));
     let bvh = Bvh::build(&scene.mesh.triangles, &BuildOptions::sah());
     let settings = RenderSettings::default();
     let plan = RenderPlan::new(&scene, &settings);

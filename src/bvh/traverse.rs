@@ -204,32 +204,20 @@ impl Bvh {
     /// direction octants, invalid) are traced one by one. Every ray gets exactly the hit
     /// [`Bvh::intersect`] gives it.
     pub fn intersect_packet(&self, rays: &[Ray], t_max: f32, out: &mut [Option<Hit>]) {
-        assert_eq!(rays.len(), out.len(), "one result per ray");
-        if self.tris.is_empty() || t_max.is_nan() || t_max <= 0.0 {
-            out.fill(None);
-            return;
-        }
-        let mut best = [super::wide::traverse::Best::none(t_max); super::wide::packet::PACKET];
-        for (rays, out) in rays
-            .chunks(super::wide::packet::PACKET)
-            .zip(out.chunks_mut(super::wide::packet::PACKET))
-        {
-            let best = &mut best[..rays.len()];
-            if self.wide.trace_packet::<false>(rays, t_max, best) {
-                for (o, b) in out.iter_mut().zip(best.iter()) {
-                    *o = (b.prim != u32::MAX && b.t < t_max).then_some(Hit {
-                        t: b.t,
-                        prim: b.prim,
-                        u: b.u,
-                        v: b.v,
-                    });
-                }
-            } else {
-                for (o, r) in out.iter_mut().zip(rays) {
-                    *o = self.intersect(r, t_max);
-                }
-            }
-        }
+        self.packets::<false, _>(
+            rays,
+            t_max,
+            out,
+            |b| {
+                (b.prim != u32::MAX && b.t < t_max).then_some(Hit {
+                    t: b.t,
+                    prim: b.prim,
+                    u: b.u,
+                    v: b.v,
+                })
+            },
+            |r| self.intersect(r, t_max),
+        );
     }
 
     /// [`Bvh::occluded`] for many rays at once, `out[i]` for `rays[i]`: coherent rays go in
@@ -237,24 +225,42 @@ impl Bvh {
     /// at its first hit; rays a packet cannot take are traced one by one. Every ray gets
     /// exactly the answer [`Bvh::occluded`] gives it.
     pub fn occluded_packet(&self, rays: &[Ray], t_max: f32, out: &mut [bool]) {
+        self.packets::<true, _>(
+            rays,
+            t_max,
+            out,
+            |b| b.t < t_max,
+            |r| self.occluded(r, t_max),
+        );
+    }
+
+    /// The packet queries: `rays` in packets of up to [`wide::packet::PACKET`] (first hits
+    /// with `ANY`), each ray's answer made from its best hit by `answer`; a packet that cannot
+    /// go together is answered ray by ray by `alone`, and so is everything when nothing can be
+    /// hit (`alone` then answers "nothing" at once).
+    fn packets<const ANY: bool, T>(
+        &self,
+        rays: &[Ray],
+        t_max: f32,
+        out: &mut [T],
+        answer: impl Fn(&super::wide::traverse::Best) -> T,
+        alone: impl Fn(&Ray) -> T,
+    ) {
         assert_eq!(rays.len(), out.len(), "one result per ray");
-        if self.tris.is_empty() || t_max.is_nan() || t_max <= 0.0 {
-            out.fill(false);
-            return;
-        }
+        let nothing = self.tris.is_empty() || t_max.is_nan() || t_max <= 0.0;
         let mut best = [super::wide::traverse::Best::none(t_max); super::wide::packet::PACKET];
         for (rays, out) in rays
             .chunks(super::wide::packet::PACKET)
             .zip(out.chunks_mut(super::wide::packet::PACKET))
         {
             let best = &mut best[..rays.len()];
-            if self.wide.trace_packet::<true>(rays, t_max, best) {
+            if !nothing && self.wide.trace_packet::<ANY>(rays, t_max, best) {
                 for (o, b) in out.iter_mut().zip(best.iter()) {
-                    *o = b.t < t_max;
+                    *o = answer(b);
                 }
             } else {
                 for (o, r) in out.iter_mut().zip(rays) {
-                    *o = self.occluded(r, t_max);
+                    *o = alone(r);
                 }
             }
         }
