@@ -200,7 +200,7 @@ impl Bvh {
 
     /// [`Bvh::intersect`] for many rays at once, `out[i]` for `rays[i]`: coherent rays (the
     /// camera rays of a tile of pixels) are traced in packets of up to
-    /// [`wide::packet::PACKET`] that walk the tree together; rays a packet cannot take (other
+    /// [`super::wide::packet::PACKET`] that walk the tree together; rays a packet cannot take (other
     /// direction octants, invalid) are traced one by one. Every ray gets exactly the hit
     /// [`Bvh::intersect`] gives it.
     pub fn intersect_packet(&self, rays: &[Ray], t_max: f32, out: &mut [Option<Hit>]) {
@@ -221,7 +221,7 @@ impl Bvh {
     }
 
     /// [`Bvh::occluded`] for many rays at once, `out[i]` for `rays[i]`: coherent rays go in
-    /// packets of up to [`wide::packet::PACKET`] that walk the tree together, each ray leaving
+    /// packets of up to [`super::wide::packet::PACKET`] that walk the tree together, each ray leaving
     /// at its first hit; rays a packet cannot take are traced one by one. Every ray gets
     /// exactly the answer [`Bvh::occluded`] gives it.
     pub fn occluded_packet(&self, rays: &[Ray], t_max: f32, out: &mut [bool]) {
@@ -234,7 +234,7 @@ impl Bvh {
         );
     }
 
-    /// The packet queries: `rays` in packets of up to [`wide::packet::PACKET`] (first hits
+    /// The packet queries: `rays` in packets of up to [`super::wide::packet::PACKET`] (first hits
     /// with `ANY`), each ray's answer made from its best hit by `answer`; a packet that cannot
     /// go together is answered ray by ray by `alone`, and so is everything when nothing can be
     /// hit (`alone` then answers "nothing" at once).
