@@ -358,12 +358,11 @@ impl Tracer<'_> {
         let mut sum = Vec3::ZERO;
         for (i, light) in self.scene.lights.iter().enumerate() {
             sum += match *light {
-                Light::Point {
-                    position,
-                    color,
-                    intensity,
-                } => self.point_light(s, origin, wo, position, color * intensity, counts),
-                Light::Spot { .. } => self.spot_light(s, origin, wo, light, counts),
+                Light::Point { .. } | Light::Spot { .. } => light
+                    .point_towards(s.p)
+                    .map_or(Vec3::ZERO, |(position, i)| {
+                        self.point_light(s, origin, wo, position, i, counts)
+                    }),
                 Light::Rect {
                     corner,
                     edge_u,

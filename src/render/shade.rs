@@ -10,7 +10,7 @@ use super::{RayCounts, RenderPlan};
 use crate::bvh::{Bvh, Hit};
 use crate::geometry::{Ray, interpolation_error, offset_ray_origin};
 use crate::sampling::PathSampler;
-use crate::scene::{Integrator, Light, Material, Scene, face_normal, spot_falloff};
+use crate::scene::{Integrator, Light, Material, Scene, face_normal};
 
 /// What a ray that cannot be traced (zero, NaN or infinite direction or origin) returns:
 /// black, never NaN.
@@ -229,12 +229,11 @@ impl<'a> Tracer<'a> {
         let mut sum = Vec3::ZERO;
         for light in &self.scene.lights {
             sum += match *light {
-                Light::Point {
-                    position,
-                    color,
-                    intensity,
-                } => self.point_light(s, origin, wo, position, color * intensity, counts),
-                Light::Spot { .. } => self.spot_light(s, origin, wo, light, counts),
+                Light::Point { .. } | Light::Spot { .. } => light
+                    .point_towards(s.p)
+                    .map_or(Vec3::ZERO, |(position, i)| {
+                        self.point_light(s, origin, wo, position, i, counts)
+                    }),
                 Light::Rect {
                     corner,
                     edge_u,
@@ -286,40 +285,6 @@ impl<'a> Tracer<'a> {
         }
         let pass = self.shadow(origin, position - origin, 1.0, counts);
         brdf(s, wi, wo) * s.n.dot(wi) * intensity * pass / d2
-    }
-
-    /// [`Tracer::point_light`] for a spot light (`light` must be a [`Light::Spot`]): its
-    /// intensity towards `s` scaled by the cone's fall-off; no shadow ray outside the cone.
-    pub(super) fn spot_light(
-        &self,
-        s: &Surface,
-        origin: Vec3,
-        wo: Vec3,
-        light: &Light,
-        counts: &mut RayCounts,
-    ) -> Vec3 {
-        let Light::Spot {
-            position,
-            direction,
-            color,
-            intensity,
-            cos_inner,
-            cos_outer,
-        } = *light
-        else {
-            return Vec3::ZERO;
-        };
-        let share = spot_falloff(
-            direction,
-            cos_inner,
-            cos_outer,
-            (s.p - position).normalize(),
-        );
-        if share.is_nan() || share <= 0.0 {
-            return Vec3::ZERO;
-        }
-        let i = color * intensity * share;
-        self.point_light(s, origin, wo, position, i, counts)
     }
 
     /// A rectangle light's `samples` after the plan's cap.

@@ -197,6 +197,32 @@ pub enum Light {
 }
 
 impl Light {
+    /// Where a point or spot light is and the radiant intensity it sends towards `p` (a
+    /// spot's scaled by its cone's fall-off, [`spot_falloff`]); `None` where a spot sends
+    /// nothing (no shadow ray is needed there) and for a rectangle light, which is not a point.
+    pub fn point_towards(&self, p: Vec3) -> Option<(Vec3, Vec3)> {
+        match *self {
+            Light::Point {
+                position,
+                color,
+                intensity,
+            } => Some((position, color * intensity)),
+            Light::Spot {
+                position,
+                direction,
+                color,
+                intensity,
+                cos_inner,
+                cos_outer,
+            } => {
+                let share =
+                    spot_falloff(direction, cos_inner, cos_outer, (p - position).normalize());
+                (share > 0.0).then(|| (position, color * intensity * share))
+            }
+            Light::Rect { .. } => None,
+        }
+    }
+
     /// Centre of the light (its position for a point light).
     pub fn center(&self) -> Vec3 {
         match self {

@@ -15,10 +15,10 @@
 //! per axis serve all) and finite reciprocals; any other packet is traced ray by ray.
 
 use super::kernel::stack::SmallStack;
-use super::kernel::{BlockHits, FAR_SCALE, Lanes, TriRay};
-use super::traverse::{Best, CULL_SLACK};
+use super::kernel::{FAR_SCALE, Lanes, TriRay};
+use super::traverse::{Best, CULL_SLACK, leaf_closest};
 use super::{Child, TriBlock, WIDTH, WideBvh, WideNode};
-use crate::geometry::{PreparedRay, Ray, intersect_triangle};
+use crate::geometry::{PreparedRay, Ray};
 
 /// Rays per packet: an 8 x 8 tile.
 pub const PACKET: usize = 64;
@@ -422,28 +422,18 @@ pub(crate) fn ray_blocks<L: Lanes>(
     i: usize,
     bests: &mut Bests,
 ) {
-    let mut out = BlockHits::default();
     let ray = PreparedRay::from_parts(
         glam::Vec3A::new(r.origin[0][i], r.origin[1][i], r.origin[2][i]),
         perm_of(tris.perm[i]),
         [tris.shear[0][i], tris.shear[1][i], tris.shear[2][i]],
     );
     let tr = TriRay::new(&ray);
-    let lr = L::tri_ray(&tr);
-    for b in blocks {
-        let limit = f32::from_bits(bests.t[i].to_bits() + (bests.t[i] < f32::INFINITY) as u32);
-        let (mut hits, mut exact) = L::block(b, &lr, limit, &mut out);
-        while hits != 0 {
-            let k = hits.trailing_zeros() as usize;
-            hits &= hits - 1;
-            bests.offer(i, out.t[k], b.prim[k], out.u[k], out.v[k]);
-        }
-        while exact != 0 {
-            let k = exact.trailing_zeros() as usize;
-            exact &= exact - 1;
-            if let Some(h) = intersect_triangle(&ray, &b.triangle(k), limit) {
-                bests.offer(i, h.t, b.prim[k], h.u, h.v);
-            }
-        }
-    }
+    let mut best = Best {
+        t: bests.t[i],
+        prim: bests.prim[i],
+        u: bests.u[i],
+        v: bests.v[i],
+    };
+    leaf_closest::<L>(blocks, &tr, &L::tri_ray(&tr), &mut best);
+    (bests.t[i], bests.prim[i], bests.u[i], bests.v[i]) = (best.t, best.prim, best.u, best.v);
 }

@@ -9,7 +9,7 @@
 
 use super::kernel::stack::Stack;
 use super::kernel::{BlockHits, Lanes, NodeRay, TriRay};
-use super::{Child, WIDTH, WideBvh};
+use super::{Child, TriBlock, WIDTH, WideBvh};
 use crate::geometry::{PreparedRay, Ray, intersect_triangle, intersect_triangle_t};
 
 /// Boxes are culled only when they start clearly beyond the best hit so far: the slack keeps a
@@ -50,23 +50,26 @@ impl Best {
 /// The next float above `t`, for `t` in `(0, +inf]` (the best distance always is): one
 /// integer add, where `f32::next_up` branches on NaN, zero and sign.
 #[inline(always)]
-fn next_up(t: f32) -> f32 {
+pub(crate) fn next_up(t: f32) -> f32 {
     f32::from_bits(t.to_bits() + (t < f32::INFINITY) as u32)
+}
+
+/// The blocks `first..first + count` of `w` (a leaf's).
+#[inline(always)]
+fn leaf(w: &WideBvh, first: u32, count: u32) -> &[TriBlock] {
+    &w.blocks[first as usize..(first + count) as usize]
 }
 
 /// Tests a leaf's blocks, keeping the closest hit (lowest index on ties).
 #[inline(always)]
-fn leaf_closest<L: Lanes>(
-    w: &WideBvh,
-    first: u32,
-    count: u32,
+pub(crate) fn leaf_closest<L: Lanes>(
+    blocks: &[TriBlock],
     r: &TriRay,
     lr: &L::TriRay,
     best: &mut Best,
 ) {
     let mut out = BlockHits::default();
-    for b in first..first + count {
-        let block = &w.blocks[b as usize];
+    for block in blocks {
         // Hits as close as the best so far still count (for the index tie rule).
         let limit = next_up(best.t);
         let (mut hits, mut exact) = L::block(block, lr, limit, &mut out);
@@ -92,7 +95,7 @@ pub(crate) fn closest<L: Lanes, const SAFE: bool>(w: &WideBvh, ray: &Ray, t_max:
     let mut best = Best::none(t_max);
     if let Some((first, count)) = w.root_leaf {
         let tr = TriRay::new(ray);
-        leaf_closest::<L>(w, first, count, &tr, &L::tri_ray(&tr), &mut best);
+        leaf_closest::<L>(leaf(w, first, count), &tr, &L::tri_ray(&tr), &mut best);
         return best;
     }
     let Some(root) = w.nodes.first() else {
@@ -137,7 +140,7 @@ pub(crate) fn closest<L: Lanes, const SAFE: bool>(w: &WideBvh, ray: &Ray, t_max:
                 continue 'node;
             }
             let (first, count) = child.blocks();
-            leaf_closest::<L>(w, first, count, &tr, &lr, &mut best);
+            leaf_closest::<L>(leaf(w, first, count), &tr, &lr, &mut best);
         }
         // Pop, skipping entries that now start beyond the best hit; leaves are tested here.
         loop {
@@ -153,7 +156,7 @@ pub(crate) fn closest<L: Lanes, const SAFE: bool>(w: &WideBvh, ray: &Ray, t_max:
                 continue 'node;
             }
             let (first, count) = child.blocks();
-            leaf_closest::<L>(w, first, count, &tr, &lr, &mut best);
+            leaf_closest::<L>(leaf(w, first, count), &tr, &lr, &mut best);
         }
     }
 }

@@ -21,7 +21,7 @@ use std::arch::x86_64::*;
 use super::stack::Stack;
 use super::{BlockHits, G2, G3, G5, Lanes, NodeRay, TriRay};
 use crate::bvh::wide::packet::{Bests, Group, PACKET, Rays, Tris, perm_of};
-use crate::bvh::wide::traverse::{self, Best};
+use crate::bvh::wide::traverse::{self, Best, next_up};
 use crate::bvh::wide::{BLOCK, TriBlock, WIDTH, WideBvh, WideNode};
 use crate::geometry::{PreparedRay, Ray};
 
@@ -498,10 +498,7 @@ impl Lanes for Avx2 {
                     continue;
                 }
                 // Each ray's limit: the next float above its best distance (ties still count).
-                let limit: [f32; 8] = std::array::from_fn(|j| {
-                    let t = bests.t[g.idx[j]];
-                    f32::from_bits(t.to_bits() + (t < f32::INFINITY) as u32)
-                });
+                let limit: [f32; 8] = std::array::from_fn(|j| next_up(bests.t[g.idx[j]]));
                 // SAFETY: only reached inside the AVX2 entry points; `limit` holds eight floats.
                 let limit8 = unsafe { _mm256_loadu_ps(limit.as_ptr()) };
                 let (mut hits, mut exact) =
