@@ -92,6 +92,45 @@ fn progressive_passes_equal_a_one_shot_render() {
     }
 }
 
+/// With time to spare, passes go in rounds (the first alone, then up to four times the samples
+/// so far): each row is traced once per round, and the picture is still the one-shot render's.
+#[test]
+fn rounds_of_passes_equal_a_one_shot_render() {
+    let (scene, bvh) = scene_and_bvh(Some("assets/scenes/cornell_mirror_glass.toml"));
+    let settings = RenderSettings {
+        width: 37,
+        height: 29,
+        spp: 6,
+        seed: 3,
+        ..RenderSettings::default()
+    };
+    let oneshot = render(&scene, &bvh, &settings, &|_| {}).unwrap().film;
+    let plan = RenderPlan::new(&scene, &settings);
+    let env = EnvironmentMap::load(&scene.environment, plan.environment).unwrap();
+    let tracer = Tracer::new(&scene, &bvh, plan, settings.max_depth, &env);
+    let cam = CameraRays::new(&scene.camera, settings.width, settings.height);
+    let mut p = Progressive::new(settings.width, settings.height);
+    let step = |p: &mut Progressive, max_passes: u32| {
+        p.step_shaded(
+            &tracer,
+            &cam,
+            settings.sampler,
+            settings.seed,
+            Duration::from_secs(60),
+            max_passes,
+        )
+    };
+    // The first pass alone: the first picture comes as soon as one sample is everywhere.
+    let first = step(&mut p, 1);
+    assert_eq!((first.rows, p.passes()), (settings.height, 1));
+    // Then rounds of 3 (to 4 passes) and of 2 (the limit): two sweeps of the rows, not five.
+    let rest = step(&mut p, settings.spp);
+    assert_eq!(p.passes(), settings.spp);
+    assert_eq!(rest.passes_completed, settings.spp - 1);
+    assert_eq!(rest.rows, 2 * settings.height, "rows traced once per round");
+    assert_eq!(p.to_film().expect("between passes"), oneshot);
+}
+
 #[test]
 fn part_way_pass_shows_rows_by_their_own_sample_count() {
     let (scene, bvh) = scene_and_bvh(None);

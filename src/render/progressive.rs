@@ -1,9 +1,16 @@
-//! Progressive rendering: an image refined one pass (one sample per pixel) at a time, traced
+//! Progressive rendering: an image refined pass by pass (one sample per pixel each), traced
 //! in batches of rows within a time budget, so an interactive caller can trace a little every
 //! frame and show the picture as it improves.
 //!
 //! Pass `p` takes sample `p` of every pixel's stream ([`SampleRange`]), so after `n` complete
 //! passes the sums equal those of a one-shot [`super::render`] with `n` samples per pixel.
+//!
+//! Passes are traced in rounds: the first pass alone (a first picture soon), then rounds that
+//! take each row up to four times its samples, at most [`MAX_ROUND`] passes at once. A row
+//! takes a round's samples one after the other, tile by tile, as the one-shot render takes all
+//! of a pixel's samples: the tile's part of the tree stays in cache between them, where a
+//! sweep of the whole image per pass has to fetch it again (the one-shot render traced 5-8%
+//! more rays per second than one pass at a time, same rays).
 
 use std::time::{Duration, Instant};
 
@@ -15,23 +22,52 @@ use crate::camera::CameraRays;
 use crate::film::{Film, encode_rgba8};
 use crate::sampling::SamplerKind;
 
+/// Most passes one round traces (see the module docs).
+pub const MAX_ROUND: u32 = 8;
+
 /// An image being refined pass by pass.
-#[derive(Clone, Debug)]
+#[derive(Debug)]
 pub struct Progressive {
     width: u32,
     height: u32,
     sum: Vec<Vec3>,
-    /// Samples taken in each row: `passes + 1` for rows of the current pass already traced.
+    /// Samples taken in each row: `passes + round` for rows of the current round already
+    /// traced.
     row_samples: Vec<u32>,
-    /// First row of the current pass not yet traced.
+    /// First row of the current round not yet traced.
     next_row: u32,
     passes: u32,
-    /// Estimated wall time of one row, from the batches traced so far.
+    /// Passes the current round adds (1 to [`MAX_ROUND`]).
+    round: u32,
+    /// Estimated wall time of one sample of one row, from the batches traced so far.
     row_seconds: Option<f64>,
     /// Rays traced since the last reset.
     pub rays: RayCounts,
     /// Non-finite samples left out since the last reset.
     pub rejected: u64,
+}
+
+impl Clone for Progressive {
+    fn clone(&self) -> Self {
+        let mut c = Self::new(0, 0);
+        c.clone_from(self);
+        c
+    }
+
+    /// Reuses this image's buffers (the viewer keeps a copy of each still picture it shows:
+    /// a fresh 8 MB buffer would be faulted in page by page while the tracing waits).
+    fn clone_from(&mut self, source: &Self) {
+        self.width = source.width;
+        self.height = source.height;
+        self.sum.clone_from(&source.sum);
+        self.row_samples.clone_from(&source.row_samples);
+        self.next_row = source.next_row;
+        self.passes = source.passes;
+        self.round = source.round;
+        self.row_seconds = source.row_seconds;
+        self.rays = source.rays;
+        self.rejected = source.rejected;
+    }
 }
 
 /// What one call of [`Progressive::step`] did.
@@ -58,6 +94,7 @@ impl Progressive {
             row_samples: vec![0; height as usize],
             next_row: 0,
             passes: 0,
+            round: 1,
             row_seconds: None,
             rays: RayCounts::default(),
             rejected: 0,
@@ -91,21 +128,23 @@ impl Progressive {
         self.row_samples.fill(0);
         self.next_row = 0;
         self.passes = 0;
+        self.round = 1;
         self.rays = RayCounts::default();
         self.rejected = 0;
     }
 
-    /// Traces rows of the current pass (and the passes after it) with `row` until `budget`
+    /// Traces rows of the current round (and the rounds after it) with `rows` until `budget`
     /// is spent or `max_passes` passes are complete; always traces at least one batch when a
-    /// pass is left to do, so progress never stalls. `rows(y0, pass, sums)` adds sample `pass`
-    /// of every pixel of the rows from `y0` to `sums` (whole rows, at most [`BAND`] of them)
-    /// and returns the rays it traced and the number of non-finite samples it left out. Bands
-    /// of rows are traced in parallel on the rayon pool.
+    /// pass is left to do, so progress never stalls. `rows(y0, samples, sums)` adds the
+    /// samples `samples.0..samples.0 + samples.1` of every pixel of the rows from `y0` to
+    /// `sums` (whole rows, at most [`BAND`] of them), each pixel's in order, and returns the
+    /// rays it traced and the number of non-finite samples it left out. Bands of rows are
+    /// traced in parallel on the rayon pool.
     pub fn step(
         &mut self,
         budget: Duration,
         max_passes: u32,
-        rows: impl Fn(u32, u32, &mut [Vec3]) -> (RayCounts, u64) + Sync,
+        rows: impl Fn(u32, (u32, u32), &mut [Vec3]) -> (RayCounts, u64) + Sync,
     ) -> StepReport {
         let start = Instant::now();
         let mut report = StepReport::default();
@@ -119,9 +158,12 @@ impl Progressive {
             if report.rows > 0 && left <= 0.0 {
                 break;
             }
+            if self.next_row == 0 {
+                self.round = self.next_round(budget, max_passes, threads);
+            }
             // Bands of rows that fit in what is left of the budget, in whole rounds of the
-            // pool (`next_row` stays a multiple of the band until the pass's last band).
-            let band_seconds = self.row_seconds.map(|s| s * BAND as f64);
+            // pool (`next_row` stays a multiple of the band until the round's last band).
+            let band_seconds = self.row_seconds.map(|s| s * (BAND * self.round) as f64);
             let fit = BAND
                 * match band_seconds {
                     Some(s) if s > 0.0 => ((left.max(0.0) / s) as u32 / threads).max(1) * threads,
@@ -129,21 +171,21 @@ impl Progressive {
                 };
             let first = self.next_row;
             let count = fit.min(self.height - first);
-            let pass = self.passes;
+            let samples = (self.passes, self.round);
             let t0 = Instant::now();
             let span = &mut self.sum[first as usize * w..(first + count) as usize * w];
             let (rays, rejected) = span
                 .par_chunks_mut(w * BAND as usize)
                 .enumerate()
-                .map(|(i, sums)| rows(first + i as u32 * BAND, pass, sums))
+                .map(|(i, sums)| rows(first + i as u32 * BAND, samples, sums))
                 .reduce(|| (RayCounts::default(), 0), |a, b| (a.0 + b.0, a.1 + b.1));
-            let per_row = t0.elapsed().as_secs_f64() / count as f64;
+            let per_row = t0.elapsed().as_secs_f64() / (count * self.round) as f64;
             self.row_seconds = Some(match self.row_seconds {
                 Some(old) => 0.5 * old + 0.5 * per_row,
                 None => per_row,
             });
             for s in &mut self.row_samples[first as usize..(first + count) as usize] {
-                *s += 1;
+                *s += self.round;
             }
             self.rays = self.rays + rays;
             self.rejected += rejected;
@@ -152,12 +194,28 @@ impl Progressive {
             self.next_row += count;
             if self.next_row == self.height {
                 self.next_row = 0;
-                self.passes += 1;
-                report.passes_completed += 1;
+                self.passes += self.round;
+                report.passes_completed += self.round;
             }
         }
         report.seconds = start.elapsed().as_secs_f64();
         report
+    }
+
+    /// Passes of the next round: the first pass alone, then up to four times the samples so
+    /// far, at most [`MAX_ROUND`], no more than `max_passes` asks for, and few enough that one
+    /// band per thread fits in `budget` (so a caller that traces in short slices still hears
+    /// about a newer job in time).
+    fn next_round(&self, budget: Duration, max_passes: u32, threads: u32) -> u32 {
+        let left = max_passes.saturating_sub(self.passes).max(1);
+        let wanted = (3 * self.passes).clamp(1, MAX_ROUND).min(left);
+        let fits = match self.row_seconds {
+            Some(s) if s > 0.0 => {
+                (budget.as_secs_f64() / (s * BAND as f64 * threads as f64)) as u32
+            }
+            _ => 1,
+        };
+        wanted.min(fits.max(1))
     }
 
     /// [`Progressive::step`] tracing the shaded image of `tracer` through `cam` (which must be
@@ -171,12 +229,12 @@ impl Progressive {
         budget: Duration,
         max_passes: u32,
     ) -> StepReport {
-        self.step(budget, max_passes, |y, pass, sums| {
+        self.step(budget, max_passes, |y, (first, count), sums| {
             let samples = SampleRange {
                 sampler,
                 seed,
-                first: pass,
-                count: 1,
+                first,
+                count,
             };
             trace_rows(tracer, cam, &samples, y, sums)
         })

@@ -39,7 +39,8 @@ use crate::scene::Scene;
 /// While the view stays the same, the moving picture is shown again this often.
 const MOVING_REFRESH: Duration = Duration::from_millis(33);
 
-/// While still, a completed pass is shown when the passes reach a power of two, and otherwise
+/// While still, a completed round of passes is shown when the passes reach a power of two
+/// (after 1 and 4 passes: see [`crate::render::Progressive`]'s rounds), and otherwise
 /// at most this often (the last at once): each picture costs the window a redraw, taken from
 /// the tracing.
 const STILL_REFRESH: Duration = Duration::from_millis(1000);
@@ -727,7 +728,10 @@ fn still_step(st: &mut State, job: &Job, shared: &Shared, stale: &dyn Fn() -> bo
         };
         let passes = film.passes();
         if let Ok(mut slot) = shared.still.lock() {
-            *slot = Some(film.clone());
+            match slot.as_mut() {
+                Some(kept) => kept.clone_from(film),
+                None => *slot = Some(film.clone()),
+            }
         }
         // Once the still picture is done (the worker would wait), or refining for a second
         // already (a seed costs a tenth of that), it seeds the moving picture.
