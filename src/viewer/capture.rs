@@ -39,7 +39,7 @@ pub struct CaptureScript {
     /// Orbit the camera about the scene's look-at point for this many frames first, then
     /// stop and let the picture converge: prints the moving frame times, the fresh samples per
     /// frame, the moving picture's error against the converged one (and the stretched
-    /// preview's), the still Mrays/s against `tracery render` of the same view, and the CPU
+    /// previews' and a picture with every pixel traced afresh once), the still Mrays/s against `tracery render` of the same view, and the CPU
     /// use once converged.
     pub orbit_frames: u32,
 }
@@ -710,7 +710,7 @@ fn report(
             ((32_400.0 / ow as f64).round() as u32).clamp(1, display.y),
         );
         println!(
-            "moving picture against the converged one ({} spp) of the same pose: RMSE {:.2} levels; stretched preview with as many fresh samples ({}x{}): {:.2} levels; the earlier design's {}x{} preview: {:.2} levels",
+            "moving picture against the converged one ({} spp) of the same pose: RMSE {:.2} levels; stretched preview with as many fresh samples ({}x{}): {:.2} levels; the earlier design's {}x{} preview: {:.2} levels; every pixel freshly traced with one sample (the floor for one sample a pixel, unfiltered): {:.2} levels",
             film.passes(),
             rmse_levels(&snap.rgba, &converged),
             pw,
@@ -719,6 +719,7 @@ fn report(
             old.x,
             old.y,
             stretched(old),
+            stretched(display),
         );
     } else {
         println!("moving picture: none shown at the end of the orbit to compare");
