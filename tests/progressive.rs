@@ -30,6 +30,23 @@ fn look_rotation(eye: Vec3, target: Vec3, up: Vec3) -> Quat {
     Quat::from_mat3(&glam::Mat3::from_cols(r, u, -f))
 }
 
+/// Renders `settings` of the scene at `path` (the Cornell box for `None`) in one shot and
+/// hands `check` that film with the tracer and camera a progressive film of the same settings
+/// traces with.
+fn against_one_shot(
+    path: Option<&str>,
+    settings: &RenderSettings,
+    check: impl FnOnce(&tracery::film::Film, &Tracer, &CameraRays),
+) {
+    let (scene, bvh) = scene_and_bvh(path);
+    let oneshot = render(&scene, &bvh, settings, &|_| {}).unwrap().film;
+    let plan = RenderPlan::new(&scene, settings);
+    let env = EnvironmentMap::load(&scene.environment, plan.environment).unwrap();
+    let tracer = Tracer::new(&scene, &bvh, plan, settings.max_depth, &env);
+    let cam = CameraRays::new(&scene.camera, settings.width, settings.height);
+    check(&oneshot, &tracer, &cam);
+}
+
 #[test]
 fn progressive_passes_equal_a_one_shot_render() {
     // The second size is no multiple of the 8 x 8 camera-ray tiles: partial tiles and bands.
@@ -38,7 +55,6 @@ fn progressive_passes_equal_a_one_shot_render() {
         (Some("assets/scenes/cornell_mirror_glass.toml"), (48, 40)),
         (Some("assets/scenes/cornell_mirror_glass.toml"), (37, 29)),
     ] {
-        let (scene, bvh) = scene_and_bvh(path);
         let settings = RenderSettings {
             width,
             height,
@@ -46,49 +62,45 @@ fn progressive_passes_equal_a_one_shot_render() {
             seed: 7,
             ..RenderSettings::default()
         };
-        let oneshot = render(&scene, &bvh, &settings, &|_| {}).unwrap().film;
-
-        let plan = RenderPlan::new(&scene, &settings);
-        let env = EnvironmentMap::load(&scene.environment, plan.environment).unwrap();
-        let tracer = Tracer::new(&scene, &bvh, plan, settings.max_depth, &env);
-        let cam = CameraRays::new(&scene.camera, settings.width, settings.height);
-        let mut p = Progressive::new(settings.width, settings.height);
-        // A zero budget still traces one batch per call: many small steps, as a frame would.
-        let mut steps = 0;
-        while p.passes() < settings.spp {
-            let r = p.step_shaded(
-                &tracer,
-                &cam,
-                settings.sampler,
-                settings.seed,
-                Duration::ZERO,
-                3,
+        against_one_shot(path, &settings, |oneshot, tracer, cam| {
+            let mut p = Progressive::new(settings.width, settings.height);
+            // A zero budget still traces one batch per call: many small steps, as a frame would.
+            let mut steps = 0;
+            while p.passes() < settings.spp {
+                let r = p.step_shaded(
+                    tracer,
+                    cam,
+                    settings.sampler,
+                    settings.seed,
+                    Duration::ZERO,
+                    3,
+                );
+                assert!(r.rows > 0, "a step always makes progress");
+                steps += 1;
+            }
+            assert!(steps > 3, "passes were split over several steps ({steps})");
+            // Asking for more than max_passes does nothing.
+            assert_eq!(
+                p.step_shaded(
+                    tracer,
+                    cam,
+                    settings.sampler,
+                    settings.seed,
+                    Duration::ZERO,
+                    3
+                )
+                .rows,
+                0
             );
-            assert!(r.rows > 0, "a step always makes progress");
-            steps += 1;
-        }
-        assert!(steps > 3, "passes were split over several steps ({steps})");
-        // Asking for more than max_passes does nothing.
-        assert_eq!(
-            p.step_shaded(
-                &tracer,
-                &cam,
-                settings.sampler,
-                settings.seed,
-                Duration::ZERO,
-                3
-            )
-            .rows,
-            0
-        );
-        let film = p.to_film().expect("between passes");
-        assert_eq!(film, oneshot, "{path:?}");
-        assert_eq!(p.to_rgba8(1.0), oneshot.to_rgba8(1.0));
+            let film = p.to_film().expect("between passes");
+            assert_eq!(&film, oneshot, "{path:?}");
+            assert_eq!(p.to_rgba8(1.0), oneshot.to_rgba8(1.0));
 
-        p.reset();
-        assert_eq!(p.passes(), 0);
-        assert!(p.sums().iter().all(|s| *s == Vec3::ZERO));
-        assert!(p.to_rgba8(1.0).chunks(4).all(|c| c == [0, 0, 0, 255]));
+            p.reset();
+            assert_eq!(p.passes(), 0);
+            assert!(p.sums().iter().all(|s| *s == Vec3::ZERO));
+            assert!(p.to_rgba8(1.0).chunks(4).all(|c| c == [0, 0, 0, 255]));
+        });
     }
 }
 
@@ -96,7 +108,6 @@ fn progressive_passes_equal_a_one_shot_render() {
 /// so far): each row is traced once per round, and the picture is still the one-shot render's.
 #[test]
 fn rounds_of_passes_equal_a_one_shot_render() {
-    let (scene, bvh) = scene_and_bvh(Some("assets/scenes/cornell_mirror_glass.toml"));
     let settings = RenderSettings {
         width: 37,
         height: 29,
@@ -104,31 +115,29 @@ fn rounds_of_passes_equal_a_one_shot_render() {
         seed: 3,
         ..RenderSettings::default()
     };
-    let oneshot = render(&scene, &bvh, &settings, &|_| {}).unwrap().film;
-    let plan = RenderPlan::new(&scene, &settings);
-    let env = EnvironmentMap::load(&scene.environment, plan.environment).unwrap();
-    let tracer = Tracer::new(&scene, &bvh, plan, settings.max_depth, &env);
-    let cam = CameraRays::new(&scene.camera, settings.width, settings.height);
-    let mut p = Progressive::new(settings.width, settings.height);
-    let step = |p: &mut Progressive, max_passes: u32| {
-        p.step_shaded(
-            &tracer,
-            &cam,
-            settings.sampler,
-            settings.seed,
-            Duration::from_secs(60),
-            max_passes,
-        )
-    };
-    // The first pass alone: the first picture comes as soon as one sample is everywhere.
-    let first = step(&mut p, 1);
-    assert_eq!((first.rows, p.passes()), (settings.height, 1));
-    // Then rounds of 3 (to 4 passes) and of 2 (the limit): two sweeps of the rows, not five.
-    let rest = step(&mut p, settings.spp);
-    assert_eq!(p.passes(), settings.spp);
-    assert_eq!(rest.passes_completed, settings.spp - 1);
-    assert_eq!(rest.rows, 2 * settings.height, "rows traced once per round");
-    assert_eq!(p.to_film().expect("between passes"), oneshot);
+    let path = Some("assets/scenes/cornell_mirror_glass.toml");
+    against_one_shot(path, &settings, |oneshot, tracer, cam| {
+        let mut p = Progressive::new(settings.width, settings.height);
+        let step = |p: &mut Progressive, max_passes: u32| {
+            p.step_shaded(
+                tracer,
+                cam,
+                settings.sampler,
+                settings.seed,
+                Duration::from_secs(60),
+                max_passes,
+            )
+        };
+        // The first pass alone: the first picture comes as soon as one sample is everywhere.
+        let first = step(&mut p, 1);
+        assert_eq!((first.rows, p.passes()), (settings.height, 1));
+        // Then rounds of 3 (to 4 passes) and of 2 (the limit): two sweeps of the rows, not five.
+        let rest = step(&mut p, settings.spp);
+        assert_eq!(p.passes(), settings.spp);
+        assert_eq!(rest.passes_completed, settings.spp - 1);
+        assert_eq!(rest.rows, 2 * settings.height, "rows traced once per round");
+        assert_eq!(&p.to_film().expect("between passes"), oneshot);
+    });
 }
 
 #[test]
