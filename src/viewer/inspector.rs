@@ -395,6 +395,7 @@ fn render_section(
                 egui::Slider::new(&mut s.still_after_ms, 0.0..=1000.0)
                     .text("ms still before refining"),
             );
+            ui.checkbox(&mut s.smooth_moving, "smooth the moving picture");
             if s.mode != RenderMode::Shaded {
                 heat_legend(ui, s, stats);
             }

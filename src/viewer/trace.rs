@@ -141,6 +141,9 @@ pub struct ViewSettings {
     /// How long the view must stay the same before the still picture starts over from fresh
     /// samples, in milliseconds.
     pub still_after_ms: f32,
+    /// Show the moving picture with each sample averaged with its neighbours on the same
+    /// surface (display only: the samples and the still picture are untouched).
+    pub smooth_moving: bool,
 }
 
 impl Default for ViewSettings {
@@ -167,19 +170,22 @@ impl Default for ViewSettings {
             heat_max: 0.0,
             moving_budget_ms: 20.0,
             still_after_ms: 120.0,
+            smooth_moving: true,
         }
     }
 }
 
 impl ViewSettings {
     /// The settings that change the traced samples (everything but exposure, the heatmap
-    /// scale, the budgets and the sample limit): a change of these starts the pictures over.
+    /// scale, the budgets, the sample limit and the moving picture's smoothing): a change of
+    /// these starts the pictures over.
     pub fn trace_key(&self) -> ViewSettings {
         ViewSettings {
             exposure: 1.0,
             heat_max: 0.0,
             moving_budget_ms: 0.0,
             still_after_ms: 0.0,
+            smooth_moving: true,
             max_samples: 0,
             // The work view traces what the shaded view traces.
             mode: if self.mode == RenderMode::Work {

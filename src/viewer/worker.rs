@@ -556,7 +556,7 @@ fn moving_step(st: &mut State, job: &Job, shared: &Shared, stale: &dyn Fn() -> b
     let (rgba, heat) = if job.settings.mode == RenderMode::Work {
         work_heatmap(&work, m.cache.tiles(), size, &job.settings)
     } else {
-        (m.cache.to_rgba8(), (0.0, 0.0))
+        (m.cache.to_rgba8(job.settings.smooth_moving), (0.0, 0.0))
     };
     let holes = (size.x as u64 * size.y as u64).saturating_sub(m.cache.filled() as u64);
     let picture = Picture {
