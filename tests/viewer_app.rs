@@ -281,9 +281,12 @@ fn a_stale_jobs_picture_is_never_shown() {
 #[test]
 fn reprojection_of_a_pure_pan_keeps_every_still_valid_pixel() {
     let mut app = app(None);
-    app.world_mut()
-        .resource_mut::<ViewSettings>()
-        .still_after_ms = 1e6;
+    {
+        let mut settings = app.world_mut().resource_mut::<ViewSettings>();
+        settings.still_after_ms = 1e6;
+        // The carried samples themselves, not averaged with their neighbours for display.
+        settings.smooth_moving = false;
+    }
     settle(&mut app, "a complete moving picture", |w| {
         let (i, s) = (w.resource::<TracedImage>(), w.resource::<TraceStats>());
         i.preview && s.holes == 0 && i.generation == w.resource::<Accumulation>().generation
