@@ -73,6 +73,11 @@ pub struct ViewArgs {
     /// still Mrays/s against `tracery render` of the same view, and the idle CPU use.
     #[arg(long, default_value_t = 0)]
     orbit: u32,
+    /// With --orbit: save the last moving picture, the converged picture of its pose and the
+    /// two stretched previews as PNGs into this directory (moving.png, converged.png,
+    /// stretched.png, earlier.png).
+    #[arg(long, value_name = "DIR")]
+    orbit_pictures: Option<PathBuf>,
 }
 
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, ValueEnum)]
@@ -132,6 +137,9 @@ pub fn run(a: ViewArgs) -> Result<()> {
     if a.frames.is_none() && (a.screenshot.is_some() || a.orbit > 0 || a.wait_spp) {
         bail!("--screenshot, --orbit and --wait-spp need --frames");
     }
+    if a.orbit_pictures.is_some() && a.orbit == 0 {
+        bail!("--orbit-pictures needs --orbit");
+    }
     if let (Some(from), Some(at)) = (a.look_from, a.look_at)
         && from == at
     {
@@ -180,6 +188,7 @@ pub fn run(a: ViewArgs) -> Result<()> {
             samples: a.wait_spp.then_some(a.spp),
             screenshot: a.screenshot.clone(),
             orbit_frames: a.orbit,
+            orbit_pictures: a.orbit_pictures.clone(),
         }),
     })
 }

@@ -42,6 +42,9 @@ pub struct CaptureScript {
     /// previews' and a picture with every pixel traced afresh once), the still Mrays/s against `tracery render` of the same view, and the CPU
     /// use once converged.
     pub orbit_frames: u32,
+    /// Directory for the orbit's pictures (the last moving one, the converged one of its pose,
+    /// the two stretched previews), as PNGs.
+    pub orbit_pictures: Option<PathBuf>,
 }
 
 /// How long the idle CPU use is measured for.
@@ -700,7 +703,7 @@ fn report(
                 display.y,
                 Filter::Bilinear,
             );
-            rmse_levels(&rgba, &converged)
+            (rmse_levels(&rgba, &converged), rgba)
         };
         // The earlier design's pass: 240x135 for a 16:9 window, as many pixels (32,400) at
         // another shape.
@@ -709,18 +712,50 @@ fn report(
             ow,
             ((32_400.0 / ow as f64).round() as u32).clamp(1, display.y),
         );
+        let (same_samples, earlier, fresh) = (
+            stretched(UVec2::new(pw, ph)),
+            stretched(old),
+            stretched(display),
+        );
         println!(
             "moving picture against the converged one ({} spp) of the same pose: RMSE {:.2} levels; stretched preview with as many fresh samples ({}x{}): {:.2} levels; the earlier design's {}x{} preview: {:.2} levels; every pixel freshly traced with one sample (the floor for one sample a pixel, unfiltered): {:.2} levels",
             film.passes(),
             rmse_levels(&snap.rgba, &converged),
             pw,
             ph,
-            stretched(UVec2::new(pw, ph)),
+            same_samples.0,
             old.x,
             old.y,
-            stretched(old),
-            stretched(display),
+            earlier.0,
+            fresh.0,
         );
+        if let Some(dir) = &script.script.orbit_pictures {
+            let pictures = [
+                ("moving.png", &snap.rgba),
+                ("converged.png", &converged),
+                ("stretched.png", &same_samples.1),
+                ("earlier.png", &earlier.1),
+            ];
+            let saved = std::fs::create_dir_all(dir)
+                .map_err(anyhow::Error::from)
+                .and_then(|_| {
+                    pictures.iter().try_for_each(|(name, rgba)| {
+                        let path = dir.join(name);
+                        image::save_buffer(
+                            &path,
+                            rgba,
+                            display.x,
+                            display.y,
+                            image::ColorType::Rgba8,
+                        )
+                        .map_err(|e| anyhow::anyhow!("{}: cannot write PNG: {e}", path.display()))
+                    })
+                });
+            match saved {
+                Ok(()) => println!("orbit pictures: saved in {}", dir.display()),
+                Err(e) => println!("orbit pictures: {e:#}"),
+            }
+        }
     } else {
         println!("moving picture: none shown at the end of the orbit to compare");
     }
