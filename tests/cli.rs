@@ -217,7 +217,7 @@ fn bad_input_fails_with_a_message_naming_the_file() {
 
 #[cfg(feature = "viewer")]
 #[test]
-fn bad_viewer_camera_poses_fail_before_a_window_opens() {
+fn bad_viewer_arguments_fail_before_a_window_opens() {
     for (args, says) in [
         (
             vec!["view", "--look-from=1,2", "--look-at=0,0,0"],
@@ -232,6 +232,10 @@ fn bad_viewer_camera_poses_fail_before_a_window_opens() {
             "finite",
         ),
         (vec!["view", "--look-from=1,1,1"], "--look-at"),
+        (
+            vec!["view", "--frames", "5", "--orbit-pictures", "out"],
+            "needs --orbit",
+        ),
     ] {
         let o = tracery(&args);
         assert!(!o.status.success(), "{args:?} should fail");
