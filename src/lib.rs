@@ -8,7 +8,7 @@
 //! - [`bvh`]: median and binned-SAH builders; closest-hit, any-hit, transmittance and visiting
 //!   queries; brute force to check them against.
 //! - [`camera`], [`render`], [`film`], [`sampling`]: from camera rays to an 8-bit image.
-//! - [`bench`]: the canonical benchmark rays, their file formats, and peers measured alike.
+//! - [`mod@bench`]: the canonical benchmark rays, their file formats, and peers measured alike.
 //! - [`convergence`]: image error against render time, per sampler, with a plot.
 //!
 //! ```

@@ -1,7 +1,7 @@
 //! The benchmark of DESIGN.md: canonical camera rays, the rays and hits file formats, and our
 //! BVH traced side by side with the engines users would pick instead, on the same rays:
-//! Embree 3 ([`embree`], single rays and its own coherent 16-ray packets; cargo feature
-//! `embree`) and the `obvhs` crate ([`obvhs`]).
+//! Embree 3 (`embree`, single rays and its own coherent 16-ray packets; cargo feature
+//! `embree`) and the `obvhs` crate (`obvhs`).
 //!
 //! Triangles with a NaN or infinite vertex are left out before any engine sees them (some
 //! peers would index out of bounds on them), and counted.

@@ -76,7 +76,7 @@ fn change(old: [u8; 4], new: [u8; 4]) -> f32 {
 
 /// The per-pixel samples of the moving picture and the schedule of fresh samples.
 ///
-/// A pixel's sample is where its camera ray met the scene (or a point [`FAR`] along a ray that
+/// A pixel's sample is where its camera ray met the scene (or a point `FAR` along a ray that
 /// left it), the surface normal there and its colour as shown, sRGB RGBA8; kept as separate
 /// arrays, so the reprojection's first pass reads only the points and a picture is a copy of
 /// the colours.
@@ -438,7 +438,7 @@ impl RenderCache {
     }
 
     /// About `count` pixels for fresh samples: the tiles of highest priority (how much their
-    /// last samples changed, times how long since they were visited) get [`PER_VISIT`] pixels
+    /// last samples changed, times how long since they were visited) get `PER_VISIT` pixels
     /// each, the next in their ordered-dither order.
     pub fn next_pixels(&mut self, count: usize) -> Vec<u32> {
         let t = &mut self.tiles;
@@ -488,7 +488,7 @@ impl RenderCache {
     /// Traces one sample through the centre of each of `pixels` with `tracer` and the view
     /// `cam` (framed for this cache's size), on the rayon pool, and keeps it: camera rays in
     /// packets of neighbouring pixels where they lie close together, else one by one (see
-    /// [`is_dense`]). Returns the rays traced.
+    /// `is_dense`). Returns the rays traced.
     pub fn trace(&mut self, tracer: &Tracer, cam: &CameraRays, pixels: &[u32]) -> RayCounts {
         let w = self.width;
         let k = self.exposure;

@@ -1,6 +1,6 @@
 //! Scenes: triangles with per-triangle materials, lights, a camera and an environment.
 //!
-//! Loaded from a scene file (TOML, [`file`]), a bare OBJ with its MTL ([`obj`]), a PLY
+//! Loaded from a scene file (TOML, [`mod@file`]), a bare OBJ with its MTL ([`obj`]), a PLY
 //! ([`ply`]) or a glTF 2.0 file ([`gltf`]); or made in code ([`shapes`], [`Scene::cornell_box`]). Every loader reports errors
 //! as `file:line: message` where a line is known.
 

@@ -1,6 +1,6 @@
-//! The ray-trace systems: every frame, [`send_job`] hands the view of the [`TraceCamera`] (with
+//! The ray-trace systems: every frame, `send_job` hands the view of the [`TraceCamera`] (with
 //! the scene, BVH, environment and settings) to the trace worker ([`super::worker`]) when it
-//! changed, and [`take_picture`] installs the newest picture the worker finished. The worker
+//! changed, and `take_picture` installs the newest picture the worker finished. The worker
 //! traces on its own threads, so the frame never waits for it.
 
 use std::path::PathBuf;

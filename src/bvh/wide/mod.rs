@@ -2,9 +2,9 @@
 //! lanes, with the triangles in blocks of four in structure-of-arrays form.
 //!
 //! The binary tree ([`super::Bvh::nodes`]) stays the tree of record (statistics, debug drawing,
-//! the visiting traversal); this layout is derived from it after the build ([`collapse`]) and is
+//! the visiting traversal); this layout is derived from it after the build (`collapse`) and is
 //! what the closest-hit, any-hit and every-hit queries walk. One traversal loop
-//! ([`traverse`]) is written once over a small [`kernel`] interface with three
+//! ([`traverse`]) is written once over a small `kernel` interface with three
 //! implementations chosen once, when the BVH is built: AVX2 when the CPU has AVX2 and FMA,
 //! else SSE2 (two 4-wide halves per node), else plain scalar code, the readable reference
 //! beside the SIMD kernels. Every kernel computes the same watertight triangle test as

@@ -1,9 +1,9 @@
-//! The traversal loops over the 8-wide layout, written once for every kernel ([`Lanes`]).
+//! The traversal loops over the 8-wide layout, written once for every kernel (`Lanes`).
 //!
-//! [`closest`] visits the nearest child first. One child hit: go there with no stack traffic;
+//! `closest` visits the nearest child first. One child hit: go there with no stack traffic;
 //! two: push the farther; more: push all in the node's visiting order for the ray's octant
 //! (farthest first, so the nearest ends on top; no sort). A popped entry that starts beyond
-//! the best hit so far is skipped, a popped leaf is tested on the spot. [`each_hit`] tests the
+//! the best hit so far is skipped, a popped leaf is tested on the spot. `each_hit` tests the
 //! leaves a node leads to at once and visits its inner children in lane order, until the caller
 //! asks to stop.
 
