@@ -628,8 +628,7 @@ impl RenderCache {
         let same = |a: [i8; 4], b: [i8; 4], filled_a: u8, filled_b: u8| -> u8 {
             let dot =
                 a[0] as i32 * b[0] as i32 + a[1] as i32 * b[1] as i32 + a[2] as i32 * b[2] as i32;
-            let sky_a = (a[0] | a[1] | a[2]) == 0;
-            let sky_b = (b[0] | b[1] | b[2]) == 0;
+            let (sky_a, sky_b) = (a == NO_NORMAL, b == NO_NORMAL);
             let surface = (!sky_a & !sky_b & (dot >= SAME_NORMAL)) | (sky_a & sky_b);
             (surface & (filled_a != 0) & (filled_b != 0)) as u8
         };
@@ -745,7 +744,7 @@ fn smooth_pixels(r: &SmoothRows, xs: std::ops::Range<usize>, o: &mut [u8]) {
 
 /// `ceil(2^16 / n)` for the averages of 1 to 5 samples: `(s * RECIPROCAL[n]) >> 16` is
 /// `s / n` for every sum `s` of `n` bytes.
-const RECIPROCAL: [u32; 6] = [0, 65536, 32768, 21846, 16384, 13108];
+pub(super) const RECIPROCAL: [u32; 6] = [0, 65536, 32768, 21846, 16384, 13108];
 
 /// Normals whose packed dot product is at least this (about cos 18 degrees) count as one surface.
 const SAME_NORMAL: i32 = (0.95 * 127.0 * 127.0) as i32;

@@ -6,7 +6,7 @@
 use std::arch::x86_64::*;
 use std::ops::Range;
 
-use super::SmoothRows;
+use super::{RECIPROCAL, SmoothRows};
 
 /// Smooths the pixels of the row that can go four at a time (both horizontal neighbours
 /// inside the row: from 1 while the fourth pixel's right neighbour exists) into `o`, the
@@ -81,15 +81,14 @@ fn four(r: &SmoothRows, x: usize, o: &mut [u8]) {
         let (n_lo, n_hi) = (_mm_unpacklo_epi32(n16, n16), _mm_unpackhi_epi32(n16, n16));
         // `(sum + n / 2) * RECIPROCAL[n] >> 16`, and the sum itself where n is 1.
         let divide = |sum: __m128i, n: __m128i| {
-            let pick = |k: i16, r: u16| {
-                _mm_and_si128(
-                    _mm_cmpeq_epi16(n, _mm_set1_epi16(k)),
-                    _mm_set1_epi16(r as i16),
-                )
+            // `RECIPROCAL[k]` in the lanes where n is k (2 to 5: each fits 16 bits).
+            let pick = |k: usize| {
+                let (count, r) = (_mm_set1_epi16(k as i16), RECIPROCAL[k] as u16 as i16);
+                _mm_and_si128(_mm_cmpeq_epi16(n, count), _mm_set1_epi16(r))
             };
             let reciprocal = _mm_or_si128(
-                _mm_or_si128(pick(2, 32768), pick(3, 21846)),
-                _mm_or_si128(pick(4, 16384), pick(5, 13108)),
+                _mm_or_si128(pick(2), pick(3)),
+                _mm_or_si128(pick(4), pick(5)),
             );
             let q = _mm_mulhi_epu16(_mm_add_epi16(sum, _mm_srli_epi16(n, 1)), reciprocal);
             let alone = _mm_cmpeq_epi16(n, _mm_set1_epi16(1));
