@@ -5,6 +5,12 @@
 //! own that the parent then joins to its own. Below [`PARALLEL_MIN`] triangles a subtree is
 //! built by one thread into one array, depth first. On a one-thread pool the whole build runs
 //! in order on that thread, and the tree is the same on any number of threads.
+//!
+//! A SAH split moves each reference once: its two sides are written, in order, from the
+//! references to a scratch array of the same length (or back), so a range's data alternates
+//! between the two as the tree deepens, and a leaf whose data ends in the scratch array copies
+//! it back. One pass reads and writes each reference once, where swapping in place read and
+//! wrote it twice, and the order within each side is kept (a stable partition).
 
 use std::time::Instant;
 
@@ -29,7 +35,8 @@ pub(super) fn build(triangles: &[[Vec3; 3]], options: &BuildOptions) -> Bvh {
     };
 
     // One 32-byte reference per finite triangle: its box, with the triangle's index in the
-    // spare lane. The builders partition these in place, so every pass reads memory in order.
+    // spare lane. The builders move these as they split (see the module docs), so every pass
+    // reads memory in order.
     let mut refs: Vec<PrimRef> = Vec::with_capacity(triangles.len());
     let mut root_bounds = Aabb::EMPTY;
     let mut root_centroids = Aabb::EMPTY;
@@ -55,15 +62,26 @@ pub(super) fn build(triangles: &[[Vec3; 3]], options: &BuildOptions) -> Bvh {
     let nodes = if refs.is_empty() {
         vec![EMPTY_NODE; 2]
     } else {
+        let mut scratch = vec![PrimRef::ZERO; refs.len()];
         let mut keys = vec![0u8; refs.len()];
+        let root = Task {
+            node: 0,
+            start: 0,
+            end: refs.len(),
+            depth: 0,
+            bounds: root_bounds,
+            centroids: root_centroids,
+            in_scratch: false,
+        };
         subtree(
             &options,
-            &mut refs,
-            &mut keys,
+            Buffers {
+                refs: &mut refs,
+                scratch: &mut scratch,
+                keys: &mut keys,
+            },
             0,
-            root_bounds,
-            root_centroids,
-            0,
+            root,
         )
     };
 
@@ -100,60 +118,46 @@ const EMPTY_NODE: BvhNode = BvhNode {
     count: 0,
 };
 
-/// Builds the subtree over `local` (reference `offset` of the whole list onwards; `keys` is the
-/// scratch of the same range) into a node array of its own: root at 0, slot 1 unused, sibling
-/// pairs from 2, leaves pointing at whole-list reference slots.
+/// Builds the subtree of `task` (whose range is all of `bufs`; `offset` is the position of
+/// `bufs` in the whole reference list) into a node array of its own: root at 0, slot 1 unused,
+/// sibling pairs from 2, leaves pointing at whole-list reference slots.
 fn subtree(
     options: &BuildOptions,
-    local: &mut [PrimRef],
-    keys: &mut [u8],
+    mut bufs: Buffers<'_>,
     offset: usize,
-    bounds: Aabb,
-    centroids: Aabb,
-    depth: u32,
+    task: Task,
 ) -> Vec<BvhNode> {
     let builder = Builder::new(options, offset);
-    if local.len() < PARALLEL_MIN {
-        return builder.run(local, keys, bounds, centroids, depth);
+    // On one thread the halves would be built one after the other and then copied into
+    // their parent's array: build them in place instead (the same node array).
+    if bufs.refs.len() < PARALLEL_MIN || rayon::current_num_threads() == 1 {
+        return builder.run(bufs, task);
     }
-    let task = Task {
+    let Some(split) = builder.split(&mut bufs, &task) else {
+        return builder.run(bufs, task);
+    };
+    let (left, right) = bufs.split_at(split.mid);
+    let child = |start: usize, end: usize, (bounds, centroids): (Aabb, Aabb)| Task {
         node: 0,
         start: 0,
-        end: local.len(),
-        depth,
+        end: end - start,
+        depth: task.depth + 1,
         bounds,
         centroids,
+        in_scratch: split.in_scratch,
     };
-    let Some(split) = builder.split(local, keys, &task) else {
-        return builder.run(local, keys, bounds, centroids, depth);
-    };
-    let (left, right) = local.split_at_mut(split.mid);
-    let (left_keys, right_keys) = keys.split_at_mut(split.mid);
     let (l, r) = rayon::join(
-        || {
-            subtree(
-                options,
-                left,
-                left_keys,
-                offset,
-                split.left.0,
-                split.left.1,
-                depth + 1,
-            )
-        },
+        || subtree(options, left, offset, child(0, split.mid, split.left)),
         || {
             subtree(
                 options,
                 right,
-                right_keys,
                 offset + split.mid,
-                split.right.0,
-                split.right.1,
-                depth + 1,
+                child(split.mid, task.end, split.right),
             )
         },
     );
-    join_subtrees(&bounds, l, r)
+    join_subtrees(&task.bounds, l, r)
 }
 
 /// The node array of a node over `bounds` whose children are the roots of `l` and `r`.
@@ -188,6 +192,60 @@ struct Task {
     depth: u32,
     bounds: Aabb,
     centroids: Aabb,
+    /// The range's references are in the scratch array, not the reference array.
+    in_scratch: bool,
+}
+
+/// A subtree's references, their scratch twin (see the module docs) and each reference's bin.
+struct Buffers<'a> {
+    refs: &'a mut [PrimRef],
+    scratch: &'a mut [PrimRef],
+    keys: &'a mut [u8],
+}
+
+impl<'a> Buffers<'a> {
+    /// The array holding the data of a range (`in_scratch` as its task says).
+    fn data(&mut self, in_scratch: bool) -> &mut [PrimRef] {
+        if in_scratch { self.scratch } else { self.refs }
+    }
+
+    /// Over `range`: the data (in the array `in_scratch` names), the other array, and the
+    /// references' bins.
+    fn parts(
+        &mut self,
+        in_scratch: bool,
+        range: std::ops::Range<usize>,
+    ) -> (&[PrimRef], &mut [PrimRef], &mut [u8]) {
+        let (src, dst) = if in_scratch {
+            (&*self.scratch, &mut *self.refs)
+        } else {
+            (&*self.refs, &mut *self.scratch)
+        };
+        (
+            &src[range.clone()],
+            &mut dst[range.clone()],
+            &mut self.keys[range],
+        )
+    }
+
+    /// The two halves at `mid`, each with its part of all three arrays.
+    fn split_at(self, mid: usize) -> (Buffers<'a>, Buffers<'a>) {
+        let (rl, rr) = self.refs.split_at_mut(mid);
+        let (sl, sr) = self.scratch.split_at_mut(mid);
+        let (kl, kr) = self.keys.split_at_mut(mid);
+        (
+            Buffers {
+                refs: rl,
+                scratch: sl,
+                keys: kl,
+            },
+            Buffers {
+                refs: rr,
+                scratch: sr,
+                keys: kr,
+            },
+        )
+    }
 }
 
 /// One thread's builder of one subtree.
@@ -196,7 +254,7 @@ struct Builder<'a> {
     /// Index in the whole reference list of the subtree's first reference.
     offset: usize,
     /// Scratch bins, reused from node to node.
-    grid: std::cell::RefCell<Box<[Bin; MAX_BINS]>>,
+    grid: std::cell::RefCell<Box<Grid>>,
 }
 
 /// A triangle's box with its index stored in the `w` lane of `min`.
@@ -207,6 +265,12 @@ struct PrimRef {
 }
 
 impl PrimRef {
+    /// A placeholder (scratch slots before they are written).
+    const ZERO: PrimRef = PrimRef {
+        min: Vec4::ZERO,
+        max: Vec4::ZERO,
+    };
+
     fn new(b: &Aabb, id: u32) -> Self {
         Self {
             min: b.min.extend(f32::from_bits(id)),
@@ -234,11 +298,13 @@ impl PrimRef {
     }
 }
 
-/// A chosen split: `local[start..mid]` goes left, `local[mid..end]` right, with their boxes.
+/// A chosen split: `start..mid` goes left, `mid..end` right, with their boxes and centroid
+/// boxes; the sides' data are in the scratch array when `in_scratch`.
 struct Split {
     mid: usize,
     left: (Aabb, Aabb),
     right: (Aabb, Aabb),
+    in_scratch: bool,
 }
 
 #[derive(Clone, Copy)]
@@ -250,47 +316,42 @@ struct Bin {
     count: u32,
 }
 
+impl Bin {
+    const EMPTY: Bin = Bin {
+        bounds: Aabb::EMPTY,
+        centroids: Aabb::EMPTY,
+        count: 0,
+    };
+}
+
 impl<'a> Builder<'a> {
     fn new(options: &'a BuildOptions, offset: usize) -> Self {
-        let empty = Bin {
-            bounds: Aabb::EMPTY,
-            centroids: Aabb::EMPTY,
-            count: 0,
-        };
         Self {
             options,
             offset,
-            grid: std::cell::RefCell::new(Box::new([empty; MAX_BINS])),
+            grid: std::cell::RefCell::new(Box::new([[Bin::EMPTY; MAX_BINS]; 2])),
         }
     }
 
-    /// Builds the subtree over `local` on this thread, depth first (see [`subtree`]).
-    fn run(
-        &self,
-        local: &mut [PrimRef],
-        keys: &mut [u8],
-        root_bounds: Aabb,
-        root_centroids: Aabb,
-        depth: u32,
-    ) -> Vec<BvhNode> {
-        let mut nodes = Vec::with_capacity(2 * local.len().div_ceil(2));
+    /// Builds the subtree of `root` (whose range is all of `bufs`) on this thread, depth first
+    /// (see [`subtree`]).
+    fn run(&self, mut bufs: Buffers<'_>, root: Task) -> Vec<BvhNode> {
+        let mut nodes = Vec::with_capacity(2 * bufs.refs.len().div_ceil(2));
         nodes.extend([EMPTY_NODE; 2]);
-        let mut stack = vec![Task {
-            node: 0,
-            start: 0,
-            end: local.len(),
-            depth,
-            bounds: root_bounds,
-            centroids: root_centroids,
-        }];
+        let mut stack = vec![root];
         while let Some(task) = stack.pop() {
             nodes[task.node].set_aabb(&task.bounds);
-            let split = self.split(local, keys, &task);
+            let split = self.split(&mut bufs, &task);
             match split {
                 None => {
                     let n = &mut nodes[task.node];
                     n.first = (self.offset + task.start) as u32;
                     n.count = (task.end - task.start) as u32;
+                    // Leaves point into the reference array: bring the data home.
+                    if task.in_scratch {
+                        let range = task.start..task.end;
+                        bufs.refs[range.clone()].copy_from_slice(&bufs.scratch[range]);
+                    }
                 }
                 Some(s) => {
                     let left = nodes.len();
@@ -306,6 +367,7 @@ impl<'a> Builder<'a> {
                         depth: task.depth + 1,
                         bounds: s.right.0,
                         centroids: s.right.1,
+                        in_scratch: s.in_scratch,
                     });
                     stack.push(Task {
                         node: left,
@@ -314,6 +376,7 @@ impl<'a> Builder<'a> {
                         depth: task.depth + 1,
                         bounds: s.left.0,
                         centroids: s.left.1,
+                        in_scratch: s.in_scratch,
                     });
                 }
             }
@@ -322,57 +385,40 @@ impl<'a> Builder<'a> {
     }
 
     /// Decides how to split a range, or `None` for a leaf.
-    fn split(&self, local: &mut [PrimRef], keys: &mut [u8], task: &Task) -> Option<Split> {
+    fn split(&self, bufs: &mut Buffers<'_>, task: &Task) -> Option<Split> {
         let n = task.end - task.start;
         let max_leaf = self.options.max_leaf_size as usize;
         if n <= 1 {
             return None;
         }
         if task.depth >= COUNT_SPLIT_DEPTH {
-            return (n > max_leaf).then(|| self.split_by_count(local, task));
+            return (n > max_leaf).then(|| self.split_by_count(bufs, task));
         }
         match self.options.split {
-            SplitMethod::Median => (n > max_leaf).then(|| self.split_median(local, task)),
-            SplitMethod::Sah => self.split_sah(local, keys, task),
+            SplitMethod::Median => (n > max_leaf).then(|| self.split_median(bufs, task)),
+            SplitMethod::Sah => self.split_sah(bufs, task),
         }
     }
 
     /// Splits in the middle of the range as it stands (used when nothing better exists).
-    fn split_by_count(&self, local: &mut [PrimRef], task: &Task) -> Split {
+    fn split_by_count(&self, bufs: &mut Buffers<'_>, task: &Task) -> Split {
         let mid = task.start + (task.end - task.start) / 2;
-        self.finish(local, task.start, mid, task.end)
+        finish(bufs.data(task.in_scratch), task, mid)
     }
 
     /// Object median along the longest axis of the centroid bounds.
-    fn split_median(&self, local: &mut [PrimRef], task: &Task) -> Split {
+    fn split_median(&self, bufs: &mut Buffers<'_>, task: &Task) -> Split {
         let axis = task.centroids.longest_axis();
         let mid = task.start + (task.end - task.start) / 2;
-        local[task.start..task.end].select_nth_unstable_by(mid - task.start, |a, b| {
+        let data = bufs.data(task.in_scratch);
+        data[task.start..task.end].select_nth_unstable_by(mid - task.start, |a, b| {
             a.centroid()[axis].total_cmp(&b.centroid()[axis])
         });
-        self.finish(local, task.start, mid, task.end)
-    }
-
-    /// Computes both sides' boxes for a split at `mid`.
-    fn finish(&self, local: &[PrimRef], start: usize, mid: usize, end: usize) -> Split {
-        let side = |r: &[PrimRef]| {
-            let mut b = Aabb::EMPTY;
-            let mut c = Aabb::EMPTY;
-            for p in r {
-                b.grow(&p.bounds());
-                c.grow_point(p.centroid());
-            }
-            (b, c)
-        };
-        Split {
-            mid,
-            left: side(&local[start..mid]),
-            right: side(&local[mid..end]),
-        }
+        finish(data, task, mid)
     }
 
     /// Binned SAH over the three axes of the centroid bounds, with SAH leaf termination.
-    fn split_sah(&self, local: &mut [PrimRef], keys: &mut [u8], task: &Task) -> Option<Split> {
+    fn split_sah(&self, bufs: &mut Buffers<'_>, task: &Task) -> Option<Split> {
         let n = task.end - task.start;
         let max_leaf = self.options.max_leaf_size as usize;
         // Small nodes need no more bins than they have triangles: the per-node cost of
@@ -385,34 +431,26 @@ impl<'a> Builder<'a> {
         let scale = bin_scale(task.centroids.max[axis] - lo, bins);
         if scale == 0.0 {
             // Every centroid in one point: no plane separates them.
-            return (n > max_leaf).then(|| self.split_by_count(local, task));
+            return (n > max_leaf).then(|| self.split_by_count(bufs, task));
         }
 
-        let empty = Bin {
-            bounds: Aabb::EMPTY,
-            centroids: Aabb::EMPTY,
-            count: 0,
-        };
         // Only the bins in use are reset: clearing all MAX_BINS per node would cost more than
         // the binning itself deep in the tree, where nodes are small.
         let mut guard = self.grid.borrow_mut();
-        let row: &mut [Bin] = &mut guard[..bins];
-        row.fill(empty);
+        let grid: &mut Grid = &mut guard;
+        grid[0][..bins].fill(Bin::EMPTY);
         let last = bins as u32 - 1;
         // Each triangle's bin is kept, so the partition below need not recompute it.
-        let keys = &mut keys[task.start..task.end];
-        for (p, key) in local[task.start..task.end].iter().zip(keys.iter_mut()) {
-            let c = p.centroid();
-            let k = bin_index(c[axis], lo, scale, last);
-            *key = k as u8;
-            let bin = &mut row[k as usize];
-            bin.bounds.grow(&p.bounds());
-            bin.centroids.grow_point(c);
-            bin.count += 1;
+        let (src, _, keys) = bufs.parts(task.in_scratch, task.start..task.end);
+        let bin = BinPlan { lo, scale, last };
+        match axis {
+            0 => bin.fill::<0>(src, keys, grid, bins),
+            1 => bin.fill::<1>(src, keys, grid, bins),
+            _ => bin.fill::<2>(src, keys, grid, bins),
         }
 
         // Sweep: cost of splitting before bin `p` (left = bins 0..p).
-        let row = &*row;
+        let row = &grid[0][..bins];
         let mut right_area = [0.0f64; MAX_BINS];
         let mut right_count = [0u32; MAX_BINS];
         let mut acc = Aabb::EMPTY;
@@ -423,7 +461,7 @@ impl<'a> Builder<'a> {
             right_area[p] = acc.half_area();
             right_count[p] = count;
         }
-        let mut best: Option<(f64, usize)> = None; // (cost, p)
+        let mut best: Option<(f64, usize, usize)> = None; // (cost, p, left count)
         let mut acc = Aabb::EMPTY;
         let mut count = 0;
         for p in 1..bins {
@@ -434,12 +472,12 @@ impl<'a> Builder<'a> {
             }
             let cost = sah::blocks(count as usize) * acc.half_area()
                 + sah::blocks(right_count[p] as usize) * right_area[p];
-            if best.is_none_or(|(c, _)| cost < c) {
-                best = Some((cost, p));
+            if best.is_none_or(|(c, _, _)| cost < c) {
+                best = Some((cost, p, count as usize));
             }
         }
-        let Some((cost, p)) = best else {
-            return (n > max_leaf).then(|| self.split_by_count(local, task));
+        let Some((cost, p, left_count)) = best else {
+            return (n > max_leaf).then(|| self.split_by_count(bufs, task));
         };
         // Compare un-normalized costs so that a flat node (zero area) does not divide by zero.
         let area = task.bounds.half_area();
@@ -449,31 +487,128 @@ impl<'a> Builder<'a> {
             return None;
         }
 
-        // Partition by the chosen plane, reading the bins kept above. Branchless Lomuto:
-        // always swap, advance the boundary only for a left item (the side is as good as
-        // random, so a branch would be mispredicted half the time).
-        let local = &mut local[task.start..task.end];
-        let mut i = 0;
-        for j in 0..local.len() {
-            let left = (keys[j] as usize) < p;
-            local.swap(i, j);
-            keys.swap(i, j);
-            i += left as usize;
-        }
-        let i = task.start + i;
+        // Each side written in order to the other array, reading the bins kept above.
+        let (src, dst, keys) = bufs.parts(task.in_scratch, task.start..task.end);
+        partition(src, keys, p as u8, dst, left_count);
         let union = |bins: &[Bin]| {
             bins.iter().fold((Aabb::EMPTY, Aabb::EMPTY), |(b, c), bin| {
                 (b.union(&bin.bounds), c.union(&bin.centroids))
             })
         };
-        let (left_b, left_c) = union(&row[..p]);
-        let (right_b, right_c) = union(&row[p..]);
         Some(Split {
-            mid: i,
-            left: (left_b, left_c),
-            right: (right_b, right_c),
+            mid: task.start + left_count,
+            left: union(&row[..p]),
+            right: union(&row[p..]),
+            in_scratch: !task.in_scratch,
         })
     }
+}
+
+/// Both sides' boxes for a split of `task`'s range (in `data`) at `mid`; the data stay where
+/// they are.
+fn finish(data: &[PrimRef], task: &Task, mid: usize) -> Split {
+    let side = |r: &[PrimRef]| {
+        let mut b = Aabb::EMPTY;
+        let mut c = Aabb::EMPTY;
+        for p in r {
+            b.grow(&p.bounds());
+            c.grow_point(p.centroid());
+        }
+        (b, c)
+    };
+    Split {
+        mid,
+        left: side(&data[task.start..mid]),
+        right: side(&data[mid..task.end]),
+        in_scratch: task.in_scratch,
+    }
+}
+
+/// Where a node's centroids fall into bins along its axis.
+struct BinPlan {
+    lo: f32,
+    scale: f32,
+    last: u32,
+}
+
+impl BinPlan {
+    /// Bins `refs` along axis `AXIS` (a constant, so the loop has no per-reference branch on
+    /// the axis), writing each one's bin to `keys`. Large ranges are binned as two halves side
+    /// by side into two rows, merged at the end: neighbouring triangles mostly share a bin, and
+    /// with one row each update waited for the store of the one before.
+    #[inline(always)]
+    fn fill<const AXIS: usize>(
+        &self,
+        refs: &[PrimRef],
+        keys: &mut [u8],
+        grid: &mut Grid,
+        bins: usize,
+    ) {
+        if refs.len() < TWO_ROWS_MIN {
+            for (p, key) in refs.iter().zip(keys.iter_mut()) {
+                *key = self.add::<AXIS>(p, &mut grid[0]);
+            }
+            return;
+        }
+        grid[1][..bins].fill(Bin::EMPTY);
+        let half = refs.len() / 2;
+        let (ra, rb) = refs.split_at(half);
+        let (ka, kb) = keys.split_at_mut(half);
+        let [row_a, row_b] = grid;
+        for ((pa, pb), (ka, kb)) in ra.iter().zip(rb).zip(ka.iter_mut().zip(kb.iter_mut())) {
+            *ka = self.add::<AXIS>(pa, row_a);
+            *kb = self.add::<AXIS>(pb, row_b);
+        }
+        // An odd count leaves the last reference.
+        if rb.len() > ra.len() {
+            kb[half] = self.add::<AXIS>(&rb[half], row_a);
+        }
+        for (a, b) in row_a[..bins].iter_mut().zip(&row_b[..bins]) {
+            a.bounds.grow(&b.bounds);
+            a.centroids.grow(&b.centroids);
+            a.count += b.count;
+        }
+    }
+
+    /// Adds one reference to its bin of `row`; returns the bin.
+    #[inline(always)]
+    fn add<const AXIS: usize>(&self, p: &PrimRef, row: &mut [Bin; MAX_BINS]) -> u8 {
+        let c = p.centroid();
+        let along = match AXIS {
+            0 => c.x,
+            1 => c.y,
+            _ => c.z,
+        };
+        let k = bin_index(along, self.lo, self.scale, self.last);
+        // `k <= last < MAX_BINS`: the mask changes nothing and spares the bounds check.
+        let bin = &mut row[k as usize & (MAX_BINS - 1)];
+        bin.bounds.grow(&p.bounds());
+        bin.centroids.grow_point(c);
+        bin.count += 1;
+        k as u8
+    }
+}
+
+/// Two rows of bins (see [`BinPlan::fill`]).
+type Grid = [[Bin; MAX_BINS]; 2];
+
+/// Ranges from this size on are binned as two halves into two rows.
+const TWO_ROWS_MIN: usize = 64;
+
+/// Writes the references of `src` whose bin (`keys`) is below `p` to the front of `dst` and
+/// the others after them (from `left_count`), each side in its order in `src`: every
+/// reference is read once and written once, to a slot chosen without a branch.
+#[inline(always)]
+fn partition(src: &[PrimRef], keys: &[u8], p: u8, dst: &mut [PrimRef], left_count: usize) {
+    let (mut left, mut right) = (0, left_count);
+    for (r, &key) in src.iter().zip(keys) {
+        let is_left = key < p;
+        let at = if is_left { left } else { right };
+        dst[at] = *r;
+        left += is_left as usize;
+        right += !is_left as usize;
+    }
+    debug_assert_eq!((left, right), (left_count, src.len()));
 }
 
 /// `bins / extent`, slightly shrunk so that the largest centroid lands in the last bin, or

@@ -150,13 +150,16 @@ fn octant_order(node: &WideNode) -> [u32; WIDTH] {
             }
         }
         // Each lane's rank: how many lanes come before it (larger key, or equal key and lower
-        // lane). Branch-free, and every rank is distinct.
-        for i in 0..WIDTH {
-            let mut rank = 0;
-            for (j, &kj) in key.iter().enumerate() {
-                rank += ((kj > key[i]) | ((kj == key[i]) & (j < i))) as usize;
+        // lane). Branch-free, and every rank is distinct. Lane `j` is compared with all eight
+        // lanes at once (the inner loop is vectorized; lane by lane it took 5% of a build).
+        let mut rank = [0u32; WIDTH];
+        for (j, &kj) in key.iter().enumerate() {
+            for i in 0..WIDTH {
+                rank[i] += ((kj > key[i]) | ((kj == key[i]) & (j < i))) as u32;
             }
-            order[rank] |= (i as u32) << (3 * q);
+        }
+        for (i, &r) in rank.iter().enumerate() {
+            order[r as usize] |= (i as u32) << (3 * q);
         }
     }
     order
@@ -192,4 +195,57 @@ fn fill_blocks(sources: &[(u32, u32)], tris: &[[Vec3A; 3]], prim_ids: &[u32]) ->
             block
         })
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The octant order is, per octant, the lanes sorted by entry-corner key (farthest first,
+    /// the lower lane first on equal keys, empty lanes first of all), as a plain sort finds it.
+    #[test]
+    fn octant_order_sorts_lanes_by_their_entry_corner() {
+        // A small deterministic generator: boxes on a coarse grid, so that equal keys occur.
+        let mut seed = 12345u32;
+        let mut next = move || {
+            seed = seed.wrapping_mul(1664525).wrapping_add(1013904223);
+            (seed >> 28) as f32
+        };
+        for children in 1..=WIDTH {
+            for _ in 0..200 {
+                let mut node = WideNode::EMPTY;
+                for lane in 0..children {
+                    for a in 0..3 {
+                        let (x, y) = (next(), next());
+                        node.planes[2 * a][lane] = x.min(y);
+                        node.planes[2 * a + 1][lane] = x.max(y);
+                    }
+                }
+                node.order = octant_order(&node);
+                for q in 0..8u32 {
+                    let key = |lane: usize| -> f32 {
+                        if lane >= children {
+                            return f32::INFINITY;
+                        }
+                        (0..3)
+                            .map(|a| {
+                                if q >> a & 1 == 0 {
+                                    node.planes[2 * a][lane]
+                                } else {
+                                    -node.planes[2 * a + 1][lane]
+                                }
+                            })
+                            .fold(0.0, |acc, x| acc + x)
+                    };
+                    let mut expected: Vec<usize> = (0..WIDTH).collect();
+                    expected.sort_by(|&a, &b| {
+                        // Keys are never NaN; -0 and +0 are equal keys.
+                        key(b).partial_cmp(&key(a)).unwrap().then(a.cmp(&b))
+                    });
+                    let got: Vec<usize> = (0..WIDTH).map(|i| node.lane_in_order(q, i)).collect();
+                    assert_eq!(got, expected, "octant {q}, {children} children");
+                }
+            }
+        }
+    }
 }

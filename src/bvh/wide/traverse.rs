@@ -7,7 +7,7 @@
 //! leaves a node leads to at once and visits its inner children in lane order, until the caller
 //! asks to stop.
 
-use super::kernel::stack::Stack;
+use super::kernel::stack::{Slots, Stack};
 use super::kernel::{BlockHits, Lanes, NodeRay, TriRay};
 use super::{Child, TriBlock, WIDTH, WideBvh};
 use crate::geometry::{PreparedRay, Ray, intersect_triangle, intersect_triangle_t};
@@ -110,7 +110,8 @@ pub(crate) fn closest<L: Lanes, const SAFE: bool>(w: &WideBvh, ray: &Ray, t_max:
     }
     let tr = TriRay::new(ray);
     let lr = L::tri_ray(&tr);
-    let mut stack = Stack::new();
+    let mut slots = Slots::new();
+    let mut stack = Stack::new(&mut slots);
     let mut current = 0u32;
     'node: loop {
         let node = &w.nodes[current as usize];
@@ -217,7 +218,8 @@ pub(crate) fn each_hit<L: Lanes, const SAFE: bool>(
     // Boxes are culled with the same slack as the closest-hit search: a hit on a box's face
     // just before `t_max` may have a computed entry distance just past it.
     let cull = t_max * CULL_SLACK;
-    let mut stack = Stack::new();
+    let mut slots = Slots::new();
+    let mut stack = Stack::new(&mut slots);
     let mut current = 0u32;
     let mut near = [0.0f32; WIDTH];
     loop {

@@ -204,7 +204,7 @@ pub(crate) trait Lanes: Sized {
         r: &Self::NodeRay,
         mask: u32,
         near: &[f32; WIDTH],
-        stack: &mut Stack,
+        stack: &mut Stack<'_>,
     ) {
         let octant = Self::octant(r);
         for i in 0..WIDTH {

@@ -20,22 +20,37 @@ use crate::bvh::wide::WIDTH;
 /// `WIDTH` slots a [`Stack::push8`] writes above the top.
 pub(crate) const CAPACITY: usize = (WIDTH - 1) * MAX_DEPTH + 2 * WIDTH;
 
-/// A stack of `(child word, entry distance)` with a fixed capacity.
-pub(crate) struct Stack {
+/// The slots of a [`Stack`]: `(child word, entry distance)` pairs, uninitialized until pushed.
+pub(crate) struct Slots {
     child: [MaybeUninit<u32>; CAPACITY],
     dist: [MaybeUninit<f32>; CAPACITY],
-    len: usize,
 }
 
-impl Stack {
-    /// An empty stack (nothing is written).
+impl Slots {
+    /// Slots with nothing written.
     #[inline(always)]
     pub fn new() -> Self {
         Self {
             child: [const { MaybeUninit::uninit() }; CAPACITY],
             dist: [const { MaybeUninit::uninit() }; CAPACITY],
-            len: 0,
         }
+    }
+}
+
+/// A stack of `(child word, entry distance)` with a fixed capacity. The slots are borrowed
+/// and the length is kept beside them, so that the length lives in a register: kept in the
+/// same struct as the arrays it stayed in memory, and every push and pop waited on the
+/// store of the one before.
+pub(crate) struct Stack<'a> {
+    slots: &'a mut Slots,
+    len: usize,
+}
+
+impl<'a> Stack<'a> {
+    /// An empty stack over `slots` (nothing is written).
+    #[inline(always)]
+    pub fn new(slots: &'a mut Slots) -> Self {
+        Self { slots, len: 0 }
     }
 
     /// Writes `child` and `dist` to the eight slots above the top, then keeps the first
@@ -45,8 +60,8 @@ impl Stack {
     pub fn push8(&mut self, child: [u32; WIDTH], dist: [f32; WIDTH], count: usize) {
         let top = self.len;
         let (c, d) = (
-            &mut self.child[top..top + WIDTH],
-            &mut self.dist[top..top + WIDTH],
+            &mut self.slots.child[top..top + WIDTH],
+            &mut self.slots.dist[top..top + WIDTH],
         );
         for k in 0..WIDTH {
             c[k].write(child[k]);
@@ -58,8 +73,8 @@ impl Stack {
     /// Pushes one entry.
     #[inline(always)]
     pub fn push(&mut self, child: u32, dist: f32) {
-        self.child[self.len].write(child);
-        self.dist[self.len].write(dist);
+        self.slots.child[self.len].write(child);
+        self.slots.dist[self.len].write(dist);
         self.len += 1;
     }
 
@@ -74,8 +89,8 @@ impl Stack {
         // writes eight slots and keeps at most eight), and `len` only grows through them.
         Some(unsafe {
             (
-                self.child[self.len].assume_init(),
-                self.dist[self.len].assume_init(),
+                self.slots.child[self.len].assume_init(),
+                self.slots.dist[self.len].assume_init(),
             )
         })
     }

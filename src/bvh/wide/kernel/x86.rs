@@ -405,7 +405,7 @@ impl Lanes for Avx2 {
         r: &NodeRay8,
         mask: u32,
         near: &[f32; WIDTH],
-        stack: &mut Stack,
+        stack: &mut Stack<'_>,
     ) {
         // SAFETY: only reached inside the AVX2 entry points (see `node_ray`); the loads read
         // whole `[u32; 8]` / `[f32; 8]` rows; the transmutes reinterpret 32-byte vectors as
