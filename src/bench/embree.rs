@@ -160,6 +160,10 @@ unsafe extern "C" {
 pub struct Embree {
     device: RtcDevice,
     scene: RtcScene,
+    /// Milliseconds the scene took to build: from `rtcNewScene` to the end of
+    /// `rtcCommitScene`, the copy into Embree's vertex buffers included, the device's creation
+    /// (its thread pool) not.
+    pub build_ms: f64,
 }
 
 // SAFETY: Embree documents a committed scene as safe to trace from any number of threads at
@@ -183,7 +187,9 @@ impl Embree {
         let mut e = Embree {
             device,
             scene: std::ptr::null_mut(),
+            build_ms: 0.0,
         };
+        let start = std::time::Instant::now();
         // SAFETY: `device` is a live device handle.
         e.scene = unsafe { rtcNewScene(device) };
         if e.scene.is_null() {
@@ -246,6 +252,7 @@ impl Embree {
             rtcReleaseGeometry(geometry);
             rtcCommitScene(e.scene);
         }
+        e.build_ms = start.elapsed().as_secs_f64() * 1e3;
         match e.error() {
             0 => Ok(e),
             code => bail!("Embree: the scene build failed (error {code})"),
@@ -284,6 +291,9 @@ fn rtc_ray(r: &Ray) -> RtcRay {
 }
 
 impl Engine for Embree {
+    fn build_ms(&self) -> Option<f64> {
+        Some(self.build_ms)
+    }
     fn closest(&self, ray: &Ray) -> HitRecord {
         self.intersect1(ray)
     }
@@ -366,6 +376,9 @@ fn packet(rays: &[Ray]) -> (RtcRayHit16, [c_int; 16]) {
 }
 
 impl Engine for EmbreePackets {
+    fn build_ms(&self) -> Option<f64> {
+        Some(self.0.build_ms)
+    }
     fn closest(&self, ray: &Ray) -> HitRecord {
         self.0.closest(ray)
     }

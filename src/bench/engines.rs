@@ -13,6 +13,11 @@ pub(super) trait Engine: Sync + Send {
     fn closest(&self, ray: &Ray) -> HitRecord;
     /// Whether anything lies on the ray.
     fn occluded(&self, ray: &Ray) -> bool;
+    /// The build time the engine measured itself, when its builder call does more than build
+    /// (Embree's creates a device, with its thread pool, first); `None`: the call's time.
+    fn build_ms(&self) -> Option<f64> {
+        None
+    }
     /// Side of the square pixel tiles a packet engine traces at once; `None` for single rays.
     fn tile(&self) -> Option<u32> {
         None

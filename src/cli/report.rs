@@ -187,18 +187,16 @@ fn bins_table(mesh: PathBuf, bins: Vec<u32>, repeat: usize) -> Result<()> {
     Ok(())
 }
 
-/// Best build time in ms of `build` over `repeat` runs on a pool of `threads` threads.
-fn best_ms(threads: usize, repeat: usize, build: &(dyn Fn() -> Result<()> + Sync)) -> Result<f64> {
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(threads)
-        .build()?;
-    let mut best = f64::INFINITY;
-    for _ in 0..repeat.max(1) {
-        let start = Instant::now();
-        pool.install(build)?;
-        best = best.min(start.elapsed().as_secs_f64() * 1e3);
-    }
-    Ok(best)
+/// Time in ms of one `build` on `pool`; what it built is dropped after the clock stops.
+fn build_ms<T: Send>(
+    pool: &rayon::ThreadPool,
+    build: impl FnOnce() -> Result<T> + Send,
+) -> Result<f64> {
+    let start = Instant::now();
+    let built = pool.install(build)?;
+    let ms = start.elapsed().as_secs_f64() * 1e3;
+    drop(built);
+    Ok(ms)
 }
 
 fn scaling(meshes: Vec<PathBuf>, generated: u32, repeat: usize) -> Result<()> {
@@ -234,27 +232,33 @@ fn scaling(meshes: Vec<PathBuf>, generated: u32, repeat: usize) -> Result<()> {
             ""
         }
     );
+    let pools = [1, cores].map(|t| {
+        let pool = rayon::ThreadPoolBuilder::new().num_threads(t).build();
+        pool.map(|pool| (t, pool))
+    });
+    let pools = pools.into_iter().collect::<Result<Vec<_>, _>>()?;
     let mut last: Option<(usize, f64, f64)> = None;
     for (name, tris) in &inputs {
         eprintln!("{name}: {} triangles", tris.len());
-        let ours = |t: usize| {
-            best_ms(t, repeat, &|| {
-                std::hint::black_box(Bvh::build(tris, &BuildOptions::sah()));
-                Ok(())
-            })
-        };
-        let (o1, on) = (ours(1)?, ours(cores)?);
-        #[cfg(feature = "embree")]
-        let theirs = |t: usize| {
-            best_ms(t, repeat, &|| {
-                std::hint::black_box(bench::embree::Embree::build(tris, t)?);
-                Ok(())
-            })
-        };
-        #[cfg(feature = "embree")]
-        let (e1, en) = (theirs(1)?, theirs(cores)?);
-        #[cfg(not(feature = "embree"))]
-        let (e1, en) = (f64::NAN, f64::NAN);
+        // Interleaved rounds, as in `tracery bench`: every engine on every pool once per
+        // round, each figure its best round, so a burst of load from another tenant of the
+        // machine costs both engines alike.
+        let mut best = [[f64::INFINITY; 2]; 2]; // [ours, Embree][1 thread, all threads]
+        for _ in 0..repeat.max(1) {
+            for (p, (threads, pool)) in pools.iter().enumerate() {
+                let ms = build_ms(pool, || Ok(Bvh::build(tris, &BuildOptions::sah())))?;
+                best[0][p] = best[0][p].min(ms);
+                #[cfg(feature = "embree")]
+                if embree {
+                    // The scene's build, as `tracery bench` counts it (not the device's).
+                    let e = pool.install(|| bench::embree::Embree::build(tris, *threads))?;
+                    best[1][p] = best[1][p].min(e.build_ms);
+                }
+                #[cfg(not(feature = "embree"))]
+                let _ = threads;
+            }
+        }
+        let [[o1, on], [e1, en]] = best;
         let growth = |prev: Option<(usize, f64)>, ms: f64| match prev {
             Some((n, t)) if tris.len() > n => {
                 let doublings = (tris.len() as f64 / n as f64).log2();
