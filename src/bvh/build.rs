@@ -137,23 +137,24 @@ fn subtree(
         return builder.run(bufs, task);
     };
     let (left, right) = bufs.split_at(split.mid);
-    let child = |start: usize, end: usize, (bounds, centroids): (Aabb, Aabb)| Task {
+    // Each half's task over its own arrays: `len` references from 0.
+    let child = |len: usize, (bounds, centroids): (Aabb, Aabb)| Task {
         node: 0,
         start: 0,
-        end: end - start,
+        end: len,
         depth: task.depth + 1,
         bounds,
         centroids,
         in_scratch: split.in_scratch,
     };
     let (l, r) = rayon::join(
-        || subtree(options, left, offset, child(0, split.mid, split.left)),
+        || subtree(options, left, offset, child(split.mid, split.left)),
         || {
             subtree(
                 options,
                 right,
                 offset + split.mid,
-                child(split.mid, task.end, split.right),
+                child(task.end - split.mid, split.right),
             )
         },
     );
