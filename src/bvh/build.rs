@@ -418,7 +418,7 @@ impl<'a> Builder<'a> {
         finish(data, task, mid)
     }
 
-    /// Binned SAH over the three axes of the centroid bounds, with SAH leaf termination.
+    /// Binned SAH along the longest axis of the centroid bounds, with SAH leaf termination.
     fn split_sah(&self, bufs: &mut Buffers<'_>, task: &Task) -> Option<Split> {
         let n = task.end - task.start;
         let max_leaf = self.options.max_leaf_size as usize;
