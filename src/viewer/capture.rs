@@ -196,7 +196,7 @@ struct Script {
     moving_cpu: [(f64, f64); 2],
     snapshot: Option<Snapshot>,
     /// Start of the idle measurement: wall clock and process CPU seconds.
-    idle_from: Option<(Instant, f64)>,
+    idle_from: Option<(Instant, f64, u32)>,
     screenshot_requested: bool,
     /// Frames drawn since the gizmos asked for at start were ready (and every render pipeline
     /// compiled).
@@ -402,14 +402,18 @@ fn finish(
     }
     if orbit && !script.reported {
         // Converged: measure the CPU use with nothing to do before reporting.
-        let Some((t0, cpu0)) = script.idle_from else {
-            script.idle_from = Some((Instant::now(), process_cpu_seconds().unwrap_or(0.0)));
+        let Some((t0, cpu0, frame0)) = script.idle_from else {
+            let cpu = process_cpu_seconds().unwrap_or(0.0);
+            script.idle_from = Some((Instant::now(), cpu, script.frame));
             return;
         };
         if t0.elapsed() < IDLE_WINDOW {
             return;
         }
-        let idle = process_cpu_seconds().map(|c| (c - cpu0) / t0.elapsed().as_secs_f64());
+        let idle = process_cpu_seconds().map(|c| {
+            let frames = script.frame - frame0;
+            ((c - cpu0) / t0.elapsed().as_secs_f64(), frames)
+        });
         report(&script, &stats, &settings, &views, idle);
         script.reported = true;
         // The screenshot needs frames again.
@@ -558,7 +562,7 @@ fn report(
     stats: &TraceStats,
     settings: &ViewSettings,
     views: &ReportViews,
-    idle_cpu: Option<f64>,
+    idle_cpu: Option<(f64, u32)>,
 ) {
     let w = views.worker.0.shared.stats();
     let display = views.viewport.0;
@@ -760,8 +764,8 @@ fn report(
         println!("moving picture: none shown at the end of the orbit to compare");
     }
     match idle_cpu {
-        Some(c) => println!(
-            "converged and idle: the process used {:.1}% of one core over {:.0} s",
+        Some((c, frames)) => println!(
+            "converged and idle: the process used {:.1}% of one core over {:.0} s ({frames} frames drawn)",
             c * 100.0,
             IDLE_WINDOW.as_secs_f64()
         ),
