@@ -176,7 +176,7 @@ impl PixelGrid {
 
 /// Splits pixel indices of a picture `width` wide into columns and rows with a multiply
 /// instead of an integer division (which the compiler cannot take out of a loop over a width
-/// known only at run time: in `is_dense` it was a third of the reprojection's gather).
+/// known only at run time): for the camera rays, `is_dense` and `tile_of`, per sample.
 #[derive(Clone, Copy, Debug)]
 struct Rows {
     width: u32,

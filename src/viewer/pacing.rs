@@ -31,7 +31,7 @@ pub struct KeepAwake(pub bool);
 /// that changes the picture wakes the loop itself (input and window events, the worker's
 /// pictures), and loading keeps it running. Each idle frame costs the window a redraw, about
 /// 40 ms of CPU under the software driver: a converged dragon used 4.5-4.8% of a core waking
-/// every second, 0.6-0.7% every ten (`tracery view --orbit`'s idle figure).
+/// every second, 0.5-0.7% every ten (`tracery view --orbit`'s idle figure).
 const IDLE_WAIT: Duration = Duration::from_secs(10);
 
 /// The worker wakes the event loop whenever it hands over a picture.
