@@ -1,6 +1,7 @@
 //! The viewer in a real window under Xvfb: it opens, traces, saves a window screenshot and
 //! exits 0; the screenshot shows the traced scene (it matches the headless render of the same
-//! camera), and gizmos, when enabled, change the picture.
+//! camera), and gizmos, when enabled, change the picture; the inspector shown from its kept
+//! pixels looks as egui draws it.
 //!
 //! Needs `xvfb-run` and Mesa's Vulkan driver (`.ci/run` installs them). Without `xvfb-run`
 //! the test is skipped locally and fails in CI.
@@ -33,25 +34,35 @@ fn bin() -> &'static str {
 
 /// Runs `tracery view` under Xvfb with `args` and returns the screenshot it saved.
 fn screenshot(dir: &Path, name: &str, args: &[&str]) -> image::RgbImage {
+    let size = [
+        "--width",
+        &W.to_string(),
+        "--height",
+        &H.to_string(),
+        "--no-ui",
+    ]
+    .map(String::from);
+    screenshot_with(dir, name, args, &size, &[]).0
+}
+
+/// Runs `tracery view` under Xvfb with `args`, `size` and environment `env`; returns the
+/// screenshot it saved and what it printed.
+fn screenshot_with(
+    dir: &Path,
+    name: &str,
+    args: &[&str],
+    size: &[String],
+    env: &[(&str, &str)],
+) -> (image::RgbImage, String) {
     let out = dir.join(name);
     let status = Command::new("xvfb-run")
         .args(["-a", "-s", "-screen 0 1280x1024x24", bin(), "view"])
         .args(args)
-        .args([
-            "--width",
-            &W.to_string(),
-            "--height",
-            &H.to_string(),
-            "--frames",
-            "8",
-            "--spp",
-            "4",
-            "--wait-spp",
-            "--no-ui",
-            "--screenshot",
-        ])
+        .args(size)
+        .args(["--frames", "8", "--spp", "4", "--wait-spp", "--screenshot"])
         .arg(&out)
         .env("WGPU_BACKEND", "vulkan")
+        .envs(env.iter().copied())
         .output()
         .expect("xvfb-run starts");
     assert!(
@@ -61,9 +72,10 @@ fn screenshot(dir: &Path, name: &str, args: &[&str]) -> image::RgbImage {
         String::from_utf8_lossy(&status.stdout),
         String::from_utf8_lossy(&status.stderr)
     );
-    image::open(&out)
+    let shot = image::open(&out)
         .unwrap_or_else(|e| panic!("{}: {e}", out.display()))
-        .to_rgb8()
+        .to_rgb8();
+    (shot, String::from_utf8_lossy(&status.stdout).into_owned())
 }
 
 fn mean_abs_diff(a: &image::RgbImage, b: &image::RgbImage) -> f64 {
@@ -135,4 +147,64 @@ fn window_shows_the_traced_scene_and_gizmos_change_it() {
     );
     // ... while the rest of the picture is the same traced image.
     assert!(mean_abs_diff(&gizmos, &reference) < 12.0);
+}
+
+/// The inspector panel shown from its kept pixels (`panel_cache`) against the same panel drawn
+/// by egui in every frame: the picture the same to the bit, the panel the same but for the
+/// figures that differ between runs (frame time, Mrays/s, BVH build time).
+#[test]
+fn inspector_from_kept_pixels_looks_as_egui_draws_it() {
+    if !have_xvfb() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let scene = "assets/scenes/cornell_box.toml";
+    let size = ["--width", "960", "--height", "540"].map(String::from);
+    let (kept, said) = screenshot_with(dir.path(), "kept.png", &[scene], &size, &[]);
+    let (drawn, said_off) = screenshot_with(
+        dir.path(),
+        "drawn.png",
+        &[scene],
+        &size,
+        &[("TRACERY_PANEL_CACHE", "off")],
+    );
+    assert!(
+        said.contains("inspector panel shown from its kept pixels"),
+        "the screenshot frame reuses the kept panel:\n{said}"
+    );
+    assert!(
+        said_off.contains("inspector panel drawn by egui, not kept"),
+        "with the cache off, egui draws the panel:\n{said_off}"
+    );
+    assert_eq!(kept.dimensions(), (960, 540));
+    // The picture is the window's left part; the panel the rest.
+    let panel_x: u32 = said
+        .split("screenshot: picture ")
+        .nth(1)
+        .and_then(|r| r.split('x').next())
+        .and_then(|w| w.parse().ok())
+        .unwrap_or_else(|| panic!("no picture size in:\n{said}"));
+    assert!(
+        (240..900).contains(&panel_x),
+        "the inspector panel starts at column {panel_x}"
+    );
+    let (mut picture_diff, mut panel_diff, mut panel_pixels) = (0u64, 0u64, 0u64);
+    for (x, y, a) in kept.enumerate_pixels() {
+        let b = drawn.get_pixel(x, y);
+        let differs = a.0 != b.0;
+        if x + 1 < panel_x {
+            picture_diff += differs as u64;
+        } else {
+            panel_pixels += 1;
+            panel_diff += differs as u64;
+        }
+    }
+    eprintln!(
+        "panel from column {panel_x}: {panel_diff} of {panel_pixels} pixels differ; picture: {picture_diff}"
+    );
+    assert_eq!(picture_diff, 0, "the picture beside the panel is the same");
+    assert!(
+        panel_diff * 100 < panel_pixels * 3,
+        "the kept panel is egui's drawing ({panel_diff} of {panel_pixels} pixels differ)"
+    );
 }

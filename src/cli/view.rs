@@ -67,8 +67,8 @@ pub struct ViewArgs {
     /// With --frames: window screenshot to save before exiting (PNG).
     #[arg(long)]
     screenshot: Option<PathBuf>,
-    /// With --frames: orbit the camera for this many frames, then stop and let the picture
-    /// converge to --spp; prints the moving frame times and fresh samples per frame, the
+    /// With --frames: orbit the camera for this many frames (72 degrees a second about the
+    /// scene's look-at point), then stop and let the picture converge to --spp; prints the moving frame times and fresh samples per frame, the
     /// moving picture's error against the converged one (and a stretched preview's), the
     /// still Mrays/s against `tracery render` of the same view, and the idle CPU use.
     #[arg(long, default_value_t = 0)]

@@ -194,6 +194,9 @@ struct Script {
     /// CPU seconds of the trace worker's threads and of all the others, when the timed orbit
     /// frames began and ended.
     moving_cpu: [(f64, f64); 2],
+    /// How the inspector panel was shown (drawn, reused), when the timed orbit frames began
+    /// and ended.
+    moving_panel: [super::panel_cache::PanelCounts; 2],
     snapshot: Option<Snapshot>,
     /// Start of the idle measurement: wall clock and process CPU seconds.
     idle_from: Option<(Instant, f64, u32)>,
@@ -203,14 +206,23 @@ struct Script {
     gizmo_frames: u32,
     /// When the screenshot began waiting for render pipelines.
     pipelines_from: Option<Instant>,
+    /// Frames the screenshot passed over because egui drew the inspector afresh in them.
+    panel_waits: u32,
     /// The orbit report is printed.
     reported: bool,
     saved: Arc<AtomicBool>,
     exit_in: Option<u32>,
 }
 
+/// How fast the orbit turns: 72 degrees a second, a full turn in 5 s (the 2.4 degrees a frame
+/// of a 150-frame turn at 33 ms a frame). It turns by time, not by frame, as a person flying
+/// would: a window that draws faster does not fly the camera faster, and the trace worker,
+/// whose pictures come at their own pace, sees the same motion between them.
+const ORBIT_DEGREES_PER_SECOND: f32 = 72.0;
+
 fn orbit(
     script: Res<Script>,
+    time: Res<Time<Real>>,
     current: Res<CurrentScene>,
     mut camera: Query<&mut Transform, With<FlyCamera>>,
 ) {
@@ -227,9 +239,11 @@ fn orbit(
             }
             continue;
         }
-        // A full turn over the orbit, about the vertical through the look-at point.
+        // About the vertical through the look-at point, by the time since the last frame (at
+        // most 0.1 s: a stall does not make the camera jump).
         let center = script.orbit_center.unwrap_or(current.scene.camera.look_at);
-        let q = Quat::from_rotation_y(std::f32::consts::TAU / frames as f32);
+        let dt = time.delta_secs().min(0.1);
+        let q = Quat::from_rotation_y(ORBIT_DEGREES_PER_SECOND.to_radians() * dt);
         t.translation = center + q * (t.translation - center);
         t.rotation = q * t.rotation;
     }
@@ -244,7 +258,9 @@ fn measure(
     current: Res<CurrentScene>,
     ready: SceneReady,
     camera: Query<&Transform, With<TraceCamera>>,
+    panel: Option<Res<super::panel_cache::PanelCounts>>,
 ) {
+    let panel = panel.map(|p| *p).unwrap_or_default();
     // The script's frames count from the first picture of the scene asked for.
     if script.frame == 0 && !ready.is_ready(script.script.orbit_frames > 0) {
         return;
@@ -271,6 +287,7 @@ fn measure(
         script.moving_time[0] = w.moving_time;
         script.moving_wall = Some(Instant::now());
         script.moving_cpu[0] = thread_cpu_seconds();
+        script.moving_panel[0] = panel;
     }
     if frame > 3 {
         script.moving_ms.push(time.delta_secs_f64() * 1e3);
@@ -281,6 +298,7 @@ fn measure(
         }
         script.moving_time[1] = w.moving_time;
         script.moving_cpu[1] = thread_cpu_seconds();
+        script.moving_panel[1] = panel;
         script.moving_seconds = script
             .moving_wall
             .map_or(0.0, |t| t.elapsed().as_secs_f64());
@@ -369,6 +387,7 @@ fn finish(
     gizmos: GizmosShown,
     pipelines: Res<PipelinesReady>,
     mut exit: MessageWriter<AppExit>,
+    panel: Option<Res<super::panel_cache::PanelCopy>>,
 ) {
     if let Some(n) = script.exit_in.as_mut() {
         if *n == 0 {
@@ -447,8 +466,28 @@ fn finish(
             return;
         }
     }
+    // The screenshot shows the inspector as most frames do: from its kept pixels while the
+    // panel cache is in use (a frame whose panel egui draws afresh is passed over, up to 20).
+    let panel = panel.map(|p| *p).unwrap_or_default();
+    if script.script.screenshot.is_some()
+        && matches!(panel, super::panel_cache::PanelCopy::Store { .. })
+        && script.panel_waits < 20
+    {
+        script.panel_waits += 1;
+        return;
+    }
     match script.script.screenshot.clone() {
         Some(path) => {
+            println!(
+                "screenshot: picture {}x{}; inspector panel {}",
+                stats.size.x,
+                stats.size.y,
+                match panel {
+                    super::panel_cache::PanelCopy::Restore(_) => "shown from its kept pixels",
+                    super::panel_cache::PanelCopy::Store { .. } => "drawn by egui and kept",
+                    super::panel_cache::PanelCopy::Off => "drawn by egui, not kept",
+                }
+            );
             let saved = script.saved.clone();
             commands.spawn(Screenshot::primary_window()).observe(
                 move |shot: On<ScreenshotCaptured>| {
@@ -595,6 +634,13 @@ fn report(
             "moving CPU: trace worker {:.2} cores, everything else (Bevy, window, graphics driver) {:.2} cores",
             (w1 - w0) / wall,
             (o1 - o0) / wall
+        );
+        let [p0, p1] = script.moving_panel;
+        println!(
+            "moving inspector panel: drawn by egui {} times, its kept pixels shown {} times, drawn without the cache {} times",
+            p1.drawn - p0.drawn,
+            p1.reused - p0.reused,
+            p1.uncached - p0.uncached,
         );
         println!(
             "moving worker time: reprojecting {:.0}%, tracing {:.0}%, making pictures {:.0}% of the wall clock",

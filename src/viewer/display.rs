@@ -88,7 +88,8 @@ fn spawn_view(mut commands: Commands, mut images: ResMut<Assets<Image>>, size: R
             clear_color: ClearColorConfig::None,
             ..default()
         },
-        CameraMainTextureUsages::default().with(TextureUsages::COPY_DST),
+        // Copied into (the traced picture, the kept inspector panel) and out of (the panel).
+        CameraMainTextureUsages::default().with(TextureUsages::COPY_DST | TextureUsages::COPY_SRC),
         TracedBackground(handle),
         Tonemapping::None,
         DebandDither::Disabled,

@@ -29,18 +29,19 @@ pub struct InspectorPlugin {
 
 impl Plugin for InspectorPlugin {
     fn build(&self, app: &mut App) {
-        app.insert_resource(InspectorState {
-            visible: self.visible,
-            help: false,
-            scenes: scene_files(std::path::Path::new("assets/scenes")),
-            hdrs: hdr_files(),
-        })
-        .add_systems(PreUpdate, track_focus)
-        .add_systems(Update, keys)
-        .add_systems(
-            EguiPrimaryContextPass,
-            (plain_style, status_line, inspector, help).chain(),
-        );
+        app.init_resource::<StatusLine>()
+            .insert_resource(InspectorState {
+                visible: self.visible,
+                help: false,
+                scenes: scene_files(std::path::Path::new("assets/scenes")),
+                hdrs: hdr_files(),
+            })
+            .add_systems(PreUpdate, track_focus)
+            .add_systems(Update, keys)
+            .add_systems(
+                EguiPrimaryContextPass,
+                (plain_style, status_line, inspector, help).chain(),
+            );
     }
 }
 
@@ -133,9 +134,23 @@ fn keys(
     }
 }
 
+/// The status line's text as the top of the inspector shows it.
+#[derive(Resource, Default)]
+struct StatusLine {
+    text: String,
+    /// What the text says apart from its figures (scene, moving or still, loading, building,
+    /// waiting): when that changes, the line is rewritten at once.
+    kind: String,
+    shown: Option<std::time::Instant>,
+}
+
+/// How often the status line's figures are rewritten: a panel that changes every frame is
+/// drawn every frame (`panel_cache`), and figures that change 30 times a second cannot be
+/// read anyway.
+const STATUS_REFRESH: std::time::Duration = std::time::Duration::from_millis(250);
+
 #[allow(clippy::too_many_arguments)]
 fn status_line(
-    mut contexts: EguiContexts,
     stats: Res<TraceStats>,
     bvh: Res<SceneBvh>,
     building: Res<BvhBuilding>,
@@ -143,11 +158,11 @@ fn status_line(
     current: Res<CurrentScene>,
     time: Res<Time<Real>>,
     state: Res<InspectorState>,
-) -> Result {
+    mut line: ResMut<StatusLine>,
+) {
     if !state.visible {
-        return Ok(());
+        return;
     }
-    let ctx = contexts.ctx_mut()?;
     let frame_ms = time.delta_secs_f64() * 1e3;
     // Idle, the window redraws only on events: the time since the last one is no frame time.
     let frame = if stats.idle && frame_ms > 250.0 {
@@ -163,31 +178,42 @@ fn status_line(
         format!("{} spp", stats.spp)
     };
     let mut text = format!(
-        "{} | {picture} | {:.1} Mrays/s | {frame} | BVH {:.1} ms | {}x{}",
+        "{}\n{picture}\n{:.1} Mrays/s | {frame}\nBVH {:.1} ms | {}x{}",
         current.scene.name,
         stats.mrays_per_s,
         bvh.bvh.as_ref().map_or(0.0, |b| b.stats.build_ms),
         stats.size.x,
         stats.size.y,
     );
-    if let Some((path, secs)) = loading.current() {
-        text += &format!(" | loading {} ({secs:.1} s)", path.display());
+    let loading = loading.current();
+    let built = building.elapsed();
+    if let Some((path, secs)) = &loading {
+        text += &format!("\nloading {} ({secs:.1} s)", path.display());
     }
-    if let Some(secs) = building.elapsed() {
-        text += &format!(" | building BVH ({secs:.1} s)");
+    if let Some(secs) = built {
+        text += &format!("\nbuilding BVH ({secs:.1} s)");
     }
     if let Some(w) = stats.waiting {
-        text += &format!(" | {w}");
+        text += &format!("\n{w}");
     }
-    egui::Area::new(egui::Id::new("status"))
-        .anchor(egui::Align2::LEFT_TOP, egui::vec2(8.0, 8.0))
-        .interactable(false)
-        .show(ctx, |ui| {
-            egui::Frame::popup(ui.style()).show(ui, |ui| {
-                ui.add(egui::Label::new(egui::RichText::new(text).monospace()).extend());
-            });
-        });
-    Ok(())
+    let kind = format!(
+        "{} {} {} {} {} {:?}",
+        current.scene.name,
+        stats.moving,
+        stats.idle,
+        loading.is_some(),
+        built.is_some(),
+        stats.waiting
+    );
+    let now = time.last_update().unwrap_or_else(std::time::Instant::now);
+    let due = line
+        .shown
+        .is_none_or(|t| now.saturating_duration_since(t) >= STATUS_REFRESH);
+    if due || kind != line.kind {
+        line.text = text;
+        line.kind = kind;
+        line.shown = Some(now);
+    }
 }
 
 fn help(mut contexts: EguiContexts, mut state: ResMut<InspectorState>) -> Result {
@@ -235,7 +261,7 @@ fn inspector(
     mut picking: ResMut<FocusPicking>,
     stats: Res<TraceStats>,
     (mut load, mut save): (MessageWriter<LoadScene>, MessageWriter<SavePng>),
-    mut panel: ResMut<PanelWidth>,
+    (mut panel, line): (ResMut<PanelWidth>, Res<StatusLine>),
 ) -> Result {
     if !state.visible {
         panel.set_if_neq(PanelWidth(0));
@@ -254,6 +280,10 @@ fn inspector(
         .resizable(false)
         .exact_size(INSPECTOR_WIDTH)
         .show(ctx, |ui| {
+            // The status line heads the panel, outside the scrolling part: nothing of the
+            // picture is under it.
+            ui.add(egui::Label::new(egui::RichText::new(&line.text).monospace()).wrap());
+            ui.separator();
             egui::ScrollArea::vertical().show(ui, |ui| {
                 ui.heading("Inspector");
                 scene_section(ui, &state, &current, &status, &mut load);

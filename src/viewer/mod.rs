@@ -6,8 +6,9 @@
 //! [`trace::TracePlugin`] (the ray-trace system), [`display::DisplayPlugin`] (the traced
 //! image on screen), [`camera::FlyCameraPlugin`], [`gizmos::BvhGizmoPlugin`],
 //! [`debug_ray::DebugRayPlugin`], [`inspector::InspectorPlugin`],
-//! [`pacing::PacingPlugin`] (continuous updates only while something changes) and
-//! [`capture::CapturePlugin`] (PNG, screenshots, scripted runs). The tracing itself runs on the
+//! [`pacing::PacingPlugin`] (continuous updates only while something changes),
+//! [`panel_cache::PanelCachePlugin`] (the inspector's pixels reused while it does not change)
+//! and [`capture::CapturePlugin`] (PNG, screenshots, scripted runs). The tracing itself runs on the
 //! trace worker ([`worker`]), off the schedule. [`CorePlugins`] is the part
 //! that needs no window, for tests with `MinimalPlugins`.
 
@@ -19,6 +20,7 @@ pub mod display;
 pub mod gizmos;
 pub mod inspector;
 pub mod pacing;
+pub mod panel_cache;
 pub mod scene;
 pub mod task;
 pub mod trace;
@@ -189,6 +191,7 @@ pub fn run(options: ViewOptions) -> anyhow::Result<()> {
         capture::CapturePlugin {
             script: options.script.clone(),
         },
+        panel_cache::PanelCachePlugin,
     ))
     .insert_resource(options.leaves.clone())
     .insert_resource(StartState {
