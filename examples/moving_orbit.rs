@@ -6,8 +6,14 @@
 //! of those samples cost (traced again after the orbit). No window, so no frame rate: a steady
 //! figure for changes to the cache and the shading, beside the viewer's `--orbit` run.
 //!
-//! `cargo run --release --no-default-features --example moving_orbit -- [SCENE] [BUDGET_MS] [VIEWS]`
-//! (defaults: `assets/scenes/dragon.toml`, which needs `scripts/fetch-assets`; 20 ms; 150).
+//! With `QUALITY_EVERY` n > 0, every n-th view's picture (smoothed, as the viewer shows it) is
+//! compared with the headless render of its pose at 4 samples per pixel (the viewer's converged
+//! picture): the RMSE in 8-bit levels, and their mean. With `MOVING_ORBIT_SAMPLES=N` in the
+//! environment every view gets exactly N fresh samples instead of the time budget, so two
+//! builds' pictures can be compared sample for sample.
+//!
+//! `cargo run --release --no-default-features --example moving_orbit -- [SCENE] [BUDGET_MS] [VIEWS] [QUALITY_EVERY]`
+//! (defaults: `assets/scenes/dragon.toml`, which needs `scripts/fetch-assets`; 20 ms; 150; 0).
 
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
@@ -16,8 +22,9 @@ use anyhow::{Context, Result};
 use glam::Quat;
 use tracery::bvh::{BuildOptions, Bvh};
 use tracery::camera::CameraRays;
+use tracery::film::rmse_levels;
 use tracery::render::cache::RenderCache;
-use tracery::render::{EnvironmentMap, RenderPlan, RenderSettings, Tracer};
+use tracery::render::{EnvironmentMap, RenderPlan, RenderSettings, Tracer, render_with_plan};
 use tracery::scene::Scene;
 
 /// Pixels traced per batch between checks of the budget (the viewer's for this size).
@@ -34,6 +41,15 @@ fn main() -> Result<()> {
         .next()
         .map_or(Ok(150), |s| s.parse())
         .context("views")?;
+    let quality_every: usize = args
+        .next()
+        .map_or(Ok(0), |s| s.parse())
+        .context("quality every")?;
+    let fixed: Option<usize> = std::env::var("MOVING_ORBIT_SAMPLES")
+        .ok()
+        .map(|s| s.parse())
+        .transpose()
+        .context("MOVING_ORBIT_SAMPLES")?;
     let scene = Scene::load(&path)?;
     let bvh = Bvh::build(&scene.mesh.triangles, &BuildOptions::sah());
     let env = EnvironmentMap::load(&scene.environment, true)?;
@@ -53,32 +69,44 @@ fn main() -> Result<()> {
         let q = Quat::from_rotation_y(std::f32::consts::TAU / views as f32);
         let (mut reproject, mut trace, mut picture) = (0.0, 0.0, 0.0);
         let mut traced: Vec<(CameraRays, Vec<u32>)> = Vec::new();
+        let mut errors = Vec::new();
+        let mut reference_time = Duration::ZERO;
         let wall = Instant::now();
-        for _ in 0..views {
+        for view in 0..views {
             cam.eye = centre + q * (cam.eye - centre);
             (cam.forward, cam.right, cam.up) = (q * cam.forward, q * cam.right, q * cam.up);
             let t0 = Instant::now();
             let mut holes = cache.reproject(&cam);
             let t1 = Instant::now();
             let mut pixels = Vec::new();
-            while t1.elapsed() < budget {
+            let more = |traced: usize| match fixed {
+                Some(n) => traced < n,
+                None => t1.elapsed() < budget,
+            };
+            while more(pixels.len()) {
+                let n = fixed.map_or(CHUNK, |n| CHUNK.min(n - pixels.len()));
                 let batch: Vec<u32> = if holes.is_empty() {
-                    cache.next_pixels(CHUNK)
+                    cache.next_pixels(n)
                 } else {
-                    holes.drain(..CHUNK.min(holes.len())).collect()
+                    holes.drain(..n.min(holes.len())).collect()
                 };
                 cache.trace(&tracer, &cam, &batch);
                 pixels.extend(batch);
             }
             let t2 = Instant::now();
-            std::hint::black_box(cache.to_rgba8(true));
+            let shown = std::hint::black_box(cache.to_rgba8(true));
             let t3 = Instant::now();
+            if quality_every > 0 && (view + 1) % quality_every == 0 {
+                let r = Instant::now();
+                errors.push(rmse_levels(&shown, &reference(&scene, &bvh, &env, &cam, w, h)));
+                reference_time += r.elapsed();
+            }
             reproject += (t1 - t0).as_secs_f64();
             trace += (t2 - t1).as_secs_f64();
             picture += (t3 - t2).as_secs_f64();
             traced.push((cam, pixels));
         }
-        let wall = wall.elapsed().as_secs_f64();
+        let wall = (wall.elapsed() - reference_time).as_secs_f64();
         let samples: usize = traced.iter().map(|(_, p)| p.len()).sum();
         // The same samples' camera rays alone.
         let t = Instant::now();
@@ -105,6 +133,40 @@ fn main() -> Result<()> {
             samples as f64 / trace / 1e6,
             camera / samples as f64 * 1e9,
         );
+        if !errors.is_empty() {
+            let list: Vec<String> = errors.iter().map(|e| format!("{e:.2}")).collect();
+            println!(
+                "moving picture against the 4-spp render of its pose, every {quality_every} views: RMSE {} levels, mean {:.2}",
+                list.join(", "),
+                errors.iter().sum::<f64>() / errors.len() as f64
+            );
+        }
     });
     Ok(())
+}
+
+/// The headless render of the view `cam` at 4 samples per pixel (the viewer's converged
+/// picture), as RGBA8.
+fn reference(
+    scene: &Scene,
+    bvh: &Bvh,
+    env: &EnvironmentMap,
+    cam: &CameraRays,
+    w: u32,
+    h: u32,
+) -> Vec<u8> {
+    let mut scene = scene.clone();
+    scene.camera.position = cam.eye;
+    scene.camera.look_at = cam.eye + cam.forward;
+    scene.camera.up = cam.up;
+    let settings = RenderSettings {
+        width: w,
+        height: h,
+        spp: 4,
+        ..RenderSettings::default()
+    };
+    let plan = RenderPlan::new(&scene, &settings);
+    render_with_plan(&scene, bvh, env, &settings, plan, &|_| {})
+        .film
+        .to_rgba8(1.0)
 }

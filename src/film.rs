@@ -193,3 +193,17 @@ pub fn srgb8_table() -> &'static [f32; 256] {
     static TABLE: std::sync::OnceLock<[f32; 256]> = std::sync::OnceLock::new();
     TABLE.get_or_init(|| std::array::from_fn(|i| srgb_to_linear(i as f32 / 255.0)))
 }
+
+/// Root mean square difference of the colour channels (alpha left out) of two RGBA8 pictures
+/// of the same size, in 8-bit levels.
+pub fn rmse_levels(a: &[u8], b: &[u8]) -> f64 {
+    let (mut sum, mut n) = (0.0f64, 0u64);
+    for (p, q) in a.chunks_exact(4).zip(b.chunks_exact(4)) {
+        for c in 0..3 {
+            let d = p[c] as f64 - q[c] as f64;
+            sum += d * d;
+            n += 1;
+        }
+    }
+    (sum / n.max(1) as f64).sqrt()
+}

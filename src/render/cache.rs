@@ -12,7 +12,8 @@
 //! collide more every frame: a third of them lost after a few frames of an orbit). (Filling
 //! one-pixel cracks from a neighbour's sample, and tracing the holes spread over the picture,
 //! were tried: both cost more than they gave, half the fresh samples and a worse picture.) Pixels no sample reaches
-//! (newly uncovered) are traced first; then fresh samples go to 16 x 16 tiles by priority
+//! (newly uncovered) are traced first, a row's run of them at a time, the rows coarse to fine
+//! so that a budget that runs out leaves the rest spread thin; then fresh samples go to 16 x 16 tiles by priority
 //! ([`RenderCache::next_pixels`]): tiles whose new samples differed most from what they held
 //! (changed or noisy) and tiles not visited for longest come first, and within a tile pixels
 //! follow an ordered-dither order, so the fresh samples of one picture spread over the screen
@@ -174,6 +175,32 @@ impl PixelGrid {
     }
 }
 
+/// The rows in the order holes are traced: every eighth row first (0, 8, 16, ...), then the
+/// rows halfway between (4, 12, ...), then 2, 6, ..., then the odd rows; within a row, left to
+/// right. `pixels` come in row order and keep it within each of the eight groups. A fast turn
+/// opens more holes than one picture's tracing fills: traced in plain row order, the top of the
+/// picture was traced and its bottom filled for display from far away (blocks); in this order
+/// the traced rows spread over all the holes and the fill spans a few rows.
+fn rows_coarse_to_fine(pixels: Vec<u32>, rows: Rows) -> Vec<u32> {
+    // Row modulo 8 -> its group (three bits reversed).
+    const GROUP: [usize; 8] = [0, 4, 2, 6, 1, 5, 3, 7];
+    let group = |i: u32| GROUP[(rows.xy(i).1 % 8) as usize];
+    let mut start = [0usize; 9];
+    for &i in &pixels {
+        start[group(i) + 1] += 1;
+    }
+    for g in 0..8 {
+        start[g + 1] += start[g];
+    }
+    let mut out = vec![0u32; pixels.len()];
+    for &i in &pixels {
+        let g = group(i);
+        out[start[g]] = i;
+        start[g] += 1;
+    }
+    out
+}
+
 /// Splits pixel indices of a picture `width` wide into columns and rows with a multiply
 /// instead of an integer division (which the compiler cannot take out of a loop over a width
 /// known only at run time): for the camera rays, `is_dense` and `tile_of`, per sample.
@@ -283,13 +310,14 @@ impl RenderCache {
     /// equally near ones, the first in memory); samples that fall outside the picture or behind
     /// the camera are dropped. Each carried sample moves onto its new pixel's centre ray
     /// (within its tangent plane). Returns the pixels left without a sample, row by row (runs
-    /// of neighbours, so their packets stay coherent).
+    /// of neighbours, so their packets stay coherent), the rows coarse to fine (see
+    /// [`rows_coarse_to_fine`]).
     pub fn reproject(&mut self, to: &CameraRays) -> Vec<u32> {
         let (w, h) = (self.width, self.height);
         let n = self.points.len();
         if self.holes == n {
             // Nothing to carry: every pixel, in tracing order.
-            return (0..n as u32).collect();
+            return rows_coarse_to_fine((0..n as u32).collect(), self.rows);
         }
         // Each pixel keeps the smallest (depth, source index): positive floats order like
         // their bits, so the minimum of the packed pair picks the nearest sample. One thread
@@ -368,6 +396,7 @@ impl RenderCache {
                 holes
             })
             .collect();
+        let holes = rows_coarse_to_fine(holes, self.rows);
         std::mem::swap(&mut self.normals, &mut self.spare_normals);
         std::mem::swap(&mut self.points, &mut self.spare_points);
         std::mem::swap(&mut self.colours, &mut self.spare_colours);
@@ -992,6 +1021,29 @@ mod tests {
                 }
             }
         }
+    }
+
+    #[test]
+    fn holes_come_rows_coarse_to_fine() {
+        let (w, h) = (7u32, 21u32);
+        // Every third pixel of a 7 x 21 picture, in row order, as the reprojection finds them.
+        let pixels: Vec<u32> = (0..w * h).filter(|i| i % 3 != 1).collect();
+        let out = rows_coarse_to_fine(pixels.clone(), Rows::new(w));
+        let mut sorted = out.clone();
+        sorted.sort_unstable();
+        assert_eq!(sorted, pixels, "the same pixels");
+        let rows: Vec<u32> = out.iter().map(|i| i / w).collect();
+        let mut order: Vec<u32> = rows.clone();
+        order.dedup();
+        assert_eq!(
+            order,
+            [
+                0, 8, 16, 4, 12, 20, 2, 10, 18, 6, 14, 1, 9, 17, 5, 13, 3, 11, 19, 7, 15
+            ],
+            "rows coarse to fine"
+        );
+        // Within a row, left to right.
+        assert!(out.windows(2).all(|p| p[0] / w != p[1] / w || p[0] < p[1]));
     }
 
     #[test]

@@ -18,6 +18,7 @@ use super::trace::{
     LoadedEnvironment, TraceCamera, TraceStats, TraceWorker, TracedImage, ViewSettings,
     ViewportSize, camera_rays, picture_of,
 };
+use crate::film::rmse_levels;
 use crate::render::resample::{Filter, resize_rgba8};
 use crate::render::{Progressive, RenderSettings, Tracer, render_with_plan};
 
@@ -580,20 +581,6 @@ fn save_screenshot(image: &Image, path: &std::path::Path) {
             path.display()
         ),
     }
-}
-
-/// Root mean square difference of two RGBA8 pictures over their colour channels, in 8-bit
-/// levels.
-fn rmse_levels(a: &[u8], b: &[u8]) -> f64 {
-    let (mut sum, mut n) = (0.0f64, 0u64);
-    for (p, q) in a.chunks_exact(4).zip(b.chunks_exact(4)) {
-        for c in 0..3 {
-            let d = p[c] as f64 - q[c] as f64;
-            sum += d * d;
-            n += 1;
-        }
-    }
-    (sum / n.max(1) as f64).sqrt()
 }
 
 fn report(
