@@ -392,6 +392,13 @@ impl<'a> Builder<'a> {
         if n <= 1 {
             return None;
         }
+        // A leaf of one block costs one block test; any split costs a traversal step plus at
+        // least one block test per side weighted by its area, never less while traversing
+        // costs at least a block test (`C_TRAVERSE >= C_INTERSECT`). The SAH would bin and
+        // sweep the node to decide the same: half the nodes of a tree are such leaves.
+        if n <= max_leaf && sah::C_TRAVERSE >= sah::C_INTERSECT * sah::blocks(n) {
+            return None;
+        }
         if task.depth >= COUNT_SPLIT_DEPTH {
             return (n > max_leaf).then(|| self.split_by_count(bufs, task));
         }

@@ -1,0 +1,55 @@
+//! Times the SAH build alone: `BUILDS` builds of a mesh on a pool of `THREADS` threads, and
+//! prints the fastest, the median and the tree (SAH cost, leaves, levels), so two builders can
+//! be compared by running their binaries one after the other (the machines are noisy: alternate
+//! them, compare within a session). Embree's build time, beside ours in one run, is in
+//! `tracery bench` (`--features embree`).
+//!
+//! `cargo run --release --no-default-features --example build_time -- MESH [BUILDS] [THREADS]`
+
+use std::path::PathBuf;
+
+use anyhow::{Context, Result};
+use tracery::bvh::{BuildOptions, Bvh};
+use tracery::scene::Scene;
+
+fn main() -> Result<()> {
+    let mut args = std::env::args().skip(1);
+    let path = PathBuf::from(args.next().context("MESH")?);
+    let builds: usize = args
+        .next()
+        .map_or(Ok(20), |s| s.parse())
+        .context("BUILDS")?;
+    let threads: usize = args
+        .next()
+        .map_or(Ok(1), |s| s.parse())
+        .context("THREADS")?;
+    let scene = Scene::load(&path)?;
+    let tris = &scene.mesh.triangles;
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()?;
+    let mut ours = Vec::with_capacity(builds);
+    let mut last = None;
+    pool.install(|| {
+        for _ in 0..builds {
+            let bvh = Bvh::build(tris, &BuildOptions::sah());
+            ours.push(bvh.stats.build_ms);
+            last = Some(bvh);
+        }
+    });
+    ours.sort_by(f64::total_cmp);
+    let s = &last.context("no build")?.stats;
+    println!(
+        "{} ({} triangles), {threads} thread(s), {builds} builds: fastest {:.1} ms, median {:.1} ms; SAH cost {:.2}, {} leaves, {} levels, {} wide nodes, {} blocks",
+        path.display(),
+        tris.len(),
+        ours[0],
+        ours[builds / 2],
+        s.sah_cost,
+        s.leaves,
+        s.levels,
+        s.wide_nodes,
+        s.blocks
+    );
+    Ok(())
+}
