@@ -6,7 +6,7 @@
 //! triangles cut into blocks of four. Siblings' nodes and blocks are stored side by side, and
 //! subtrees depth first. Each node gets its per-octant visiting order ([`WideNode::order`]).
 
-use glam::Vec3A;
+use glam::{Vec3A, Vec4};
 
 use super::{BLOCK, Child, Kernel, TriBlock, WIDTH, WideBvh, WideNode};
 use crate::bvh::BvhNode;
@@ -124,38 +124,56 @@ fn leaf_child(nodes: &mut Vec<WideNode>, leaf: &BvhNode, first: u32, count: u32)
 /// The visiting order of a node's lanes for each octant: by how far along the octant's
 /// diagonal each box starts (its entry corner projected on the diagonal), farthest first;
 /// empty lanes first of all.
-#[expect(
-    clippy::needless_range_loop,
-    reason = "lanes index several parallel arrays at once"
-)]
 fn octant_order(node: &WideNode) -> [u32; WIDTH] {
-    // Per lane, its entry coordinate on each axis for a positive and a negative direction:
-    // `lo`, and `-hi` (so larger is always farther); empty lanes are farthest of all.
-    let mut corner = [[[0.0f32; WIDTH]; 2]; 3];
-    for a in 0..3 {
-        for lane in 0..WIDTH {
-            let (lo, hi) = (node.planes[2 * a][lane], node.planes[2 * a + 1][lane]);
-            let empty = lo > hi;
-            corner[a][0][lane] = if empty { f32::INFINITY } else { lo };
-            corner[a][1][lane] = if empty { f32::INFINITY } else { -hi };
+    // Bits set in each byte: `count_ones` of the portable build (no POPCNT) is a sequence of
+    // shifts and masks, and this loop counts 64 masks a node.
+    const BITS_SET: [u8; 256] = {
+        let mut t = [0u8; 256];
+        let mut i = 0;
+        while i < 256 {
+            t[i] = (i as u32).count_ones() as u8;
+            i += 1;
+        }
+        t
+    };
+    // Per axis, each lane's entry coordinate for a positive and a negative direction: `lo`,
+    // and `-hi` (so larger is always farther); empty lanes are farthest of all. Lanes 0-3 and
+    // 4-7 as two vectors.
+    let half = |v: &[f32; WIDTH], h: usize| Vec4::from_slice(&v[4 * h..4 * h + 4]);
+    let mut corner = [[[Vec4::ZERO; 2]; 2]; 3];
+    for (a, side) in corner.iter_mut().enumerate() {
+        for h in 0..2 {
+            let (lo, hi) = (
+                half(&node.planes[2 * a], h),
+                half(&node.planes[2 * a + 1], h),
+            );
+            let empty = lo.cmpgt(hi);
+            side[0][h] = Vec4::select(empty, Vec4::INFINITY, lo);
+            side[1][h] = Vec4::select(empty, Vec4::INFINITY, -hi);
         }
     }
     let mut order = [0u32; WIDTH];
     for q in 0..8usize {
-        let mut key = [0.0f32; WIDTH];
-        for (a, c) in corner.iter().enumerate() {
-            let side = &c[q >> a & 1];
-            for lane in 0..WIDTH {
-                key[lane] += side[lane];
-            }
+        // The keys summed axis by axis from zero, as the scalar definition does.
+        let mut key = [Vec4::ZERO; 2];
+        for (a, side) in corner.iter().enumerate() {
+            let s = &side[q >> a & 1];
+            key[0] += s[0];
+            key[1] += s[1];
         }
+        let keys: [f32; WIDTH] = {
+            let mut k = [0.0; WIDTH];
+            key[0].write_to_slice(&mut k[..4]);
+            key[1].write_to_slice(&mut k[4..]);
+            k
+        };
         // Each lane's rank: how many lanes come before it (larger key, or equal key and lower
-        // lane). Branch-free, and every rank is distinct.
-        for i in 0..WIDTH {
-            let mut rank = 0;
-            for (j, &kj) in key.iter().enumerate() {
-                rank += ((kj > key[i]) | ((kj == key[i]) & (j < i))) as usize;
-            }
+        // lane), all eight compared at once; every rank is distinct.
+        for (i, &ki) in keys.iter().enumerate() {
+            let k = Vec4::splat(ki);
+            let larger = key[0].cmpgt(k).bitmask() | key[1].cmpgt(k).bitmask() << 4;
+            let equal = key[0].cmpeq(k).bitmask() | key[1].cmpeq(k).bitmask() << 4;
+            let rank = BITS_SET[(larger | (equal & ((1 << i) - 1))) as usize] as usize;
             order[rank] |= (i as u32) << (3 * q);
         }
     }
