@@ -763,3 +763,59 @@ fn still_step(st: &mut State, job: &Job, shared: &Shared, stale: &dyn Fn() -> bo
         st.done = true;
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn picture(generation: u64) -> Picture {
+        Picture {
+            generation,
+            rgba: Vec::new(),
+            width: 0,
+            height: 0,
+            samples: 1,
+            moving: false,
+            fresh: 0,
+            holes: 0,
+            heat: (0.0, 0.0),
+        }
+    }
+
+    /// Jobs 3 to 5 differ only in their view (job 5 the newest sent): their pictures may be
+    /// shown, none of job 2 or earlier, none of a job not yet sent.
+    fn slot(waiting: Option<u64>) -> Slot {
+        Slot {
+            newest: 5,
+            newest_key: None,
+            view_run_from: 3,
+            picture: waiting.map(picture),
+        }
+    }
+
+    #[test]
+    fn an_empty_slot_takes_pictures_of_the_current_run_of_views() {
+        let s = slot(None);
+        assert!(
+            !s.accepts(2),
+            "a job before the run (other content or settings)"
+        );
+        assert!(s.accepts(3) && s.accepts(4) && s.accepts(5));
+        assert!(!s.accepts(6), "a job not yet sent");
+    }
+
+    #[test]
+    fn a_later_picture_of_the_waiting_job_replaces_it_and_an_older_job_never_does() {
+        // The still picture's passes come one after another for one job: the later pass must
+        // replace the one the app has not taken yet, or the last pass is lost.
+        let s = slot(Some(5));
+        assert!(s.accepts(5), "a later pass of the waiting picture's job");
+        assert!(
+            !s.accepts(4),
+            "an older job's picture over a newer one waiting"
+        );
+        let s = slot(Some(4));
+        assert!(s.accepts(4) && s.accepts(5));
+        assert!(!s.accepts(3));
+    }
+}
