@@ -141,15 +141,15 @@ fn octant_order(node: &WideNode) -> [u32; WIDTH] {
     // 4-7 as two vectors.
     let half = |v: &[f32; WIDTH], h: usize| Vec4::from_slice(&v[4 * h..4 * h + 4]);
     let mut corner = [[[Vec4::ZERO; 2]; 2]; 3];
-    for (a, side) in corner.iter_mut().enumerate() {
-        for h in 0..2 {
+    for (a, [positive, negative]) in corner.iter_mut().enumerate() {
+        for (h, (pos, neg)) in positive.iter_mut().zip(negative.iter_mut()).enumerate() {
             let (lo, hi) = (
                 half(&node.planes[2 * a], h),
                 half(&node.planes[2 * a + 1], h),
             );
             let empty = lo.cmpgt(hi);
-            side[0][h] = Vec4::select(empty, Vec4::INFINITY, lo);
-            side[1][h] = Vec4::select(empty, Vec4::INFINITY, -hi);
+            *pos = Vec4::select(empty, Vec4::INFINITY, lo);
+            *neg = Vec4::select(empty, Vec4::INFINITY, -hi);
         }
     }
     let mut order = [0u32; WIDTH];
