@@ -104,6 +104,10 @@ pub struct RenderCache {
     /// Exposure the colours were tone mapped with.
     exposure: f32,
     tiles: Tiles,
+    /// Calls of [`RenderCache::trace`] so far: the sample index of the next call's samples, so
+    /// that a pixel traced again draws new light (and bounce) samples instead of repeating its
+    /// last ones, and a noisy tile shows as changing and keeps its priority.
+    traced: u32,
 }
 
 /// Per-tile schedule state.
@@ -263,6 +267,7 @@ impl RenderCache {
             spare_colours: Vec::new(),
             winner: Vec::new(),
             exposure,
+            traced: 0,
             tiles: Tiles {
                 cols,
                 rows,
@@ -556,6 +561,8 @@ impl RenderCache {
     pub fn trace(&mut self, tracer: &Tracer, cam: &CameraRays, pixels: &[u32]) -> RayCounts {
         let rows = self.rows;
         let k = self.exposure;
+        let index = self.traced;
+        self.traced = self.traced.wrapping_add(1);
         // In the order given: holes come row by row (runs, traced as packets), fresh samples
         // tile by tile (spread, traced one by one). Sorting them by 8 x 8 block first, for
         // packets, cost a tenth of the tracing and no longer pays with single rays.
@@ -591,7 +598,8 @@ impl RenderCache {
                     .zip(rays)
                     .zip(hits)
                     .map(|((&i, ray), hit)| {
-                        let sampler = PixelSampler::new(SamplerKind::Random, 0x5eed, i as u64, 0);
+                        let sampler =
+                            PixelSampler::new(SamplerKind::Random, 0x5eed, i as u64, index);
                         let l = tracer.radiance_from_hit(
                             &ray,
                             hit,
@@ -911,6 +919,42 @@ mod tests {
         let first = c.next_pixels(16 * PER_VISIT);
         let tiles: std::collections::HashSet<usize> = first.iter().map(|&i| c.tile_of(i)).collect();
         assert_eq!(tiles.len(), 16);
+    }
+
+    /// The Cornell box's soft shadows and bounces are noisy: tracing the same pixels of the
+    /// same view again gives other samples, and the tiles' change shows it. With one sample
+    /// index for every call (until session 13) the second call repeated the first exactly, so
+    /// a noisy tile looked settled and lost its priority.
+    #[test]
+    fn pixels_traced_again_get_new_samples() {
+        use crate::bvh::{BuildOptions, Bvh};
+        use crate::render::{EnvironmentMap, RenderPlan, RenderSettings, Tracer};
+        let scene = crate::scene::Scene::cornell_box();
+        let bvh = Bvh::build(&scene.mesh.triangles, &BuildOptions::sah());
+        let settings = RenderSettings::default();
+        let mut plan = RenderPlan::with_integrator(&scene, scene.integrator, &settings);
+        plan.max_light_samples = Some(1);
+        let env = EnvironmentMap::load(&scene.environment, plan.environment).unwrap();
+        let tracer = Tracer::new(&scene, &bvh, plan, settings.max_depth, &env);
+        let (w, h) = (32u32, 32u32);
+        let cam = CameraRays::new(&scene.camera, w, h);
+        let mut cache = RenderCache::new(w, h, 1.0);
+        let all: Vec<u32> = (0..w * h).collect();
+        cache.trace(&tracer, &cam, &all);
+        let first = cache.colours.clone();
+        cache.tiles.change.iter_mut().for_each(|c| *c = 0.0);
+        cache.trace(&tracer, &cam, &all);
+        let differ = first
+            .iter()
+            .zip(&cache.colours)
+            .filter(|(a, b)| a != b)
+            .count();
+        assert!(
+            differ > all.len() / 10,
+            "{differ} of {} pixels changed when traced again",
+            all.len()
+        );
+        assert!(cache.tiles.change.iter().all(|&c| c > 0.0));
     }
 
     #[test]
