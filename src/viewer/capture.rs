@@ -603,7 +603,7 @@ fn report(
         let mean = v.iter().sum::<f64>() / v.len() as f64;
         let p95 = v[((v.len() as f64 * 0.95) as usize).min(v.len() - 1)];
         println!(
-            "moving: {} frames at {}x{}, frame time mean {:.1} ms, p95 {:.1} ms, max {:.1} ms; {:.0} fresh samples per frame ({:.1}% of the pixels), {} moving pictures",
+            "moving: {} frames at {}x{}, frame time mean {:.1} ms, p95 {:.1} ms, max {:.1} ms; {:.0} fresh samples per frame ({:.1}% of the pixels; {:.2} M a second, which does not depend on how fast the window draws), {} moving pictures",
             v.len(),
             stats.size.x,
             stats.size.y,
@@ -612,6 +612,7 @@ fn report(
             v[v.len() - 1],
             fresh_per_frame,
             100.0 * fresh_per_frame / (stats.size.x * stats.size.y).max(1) as f64,
+            script.moving_work.0 as f64 / script.moving_seconds.max(1e-9) / 1e6,
             script.moving_work.1,
         );
         let [a, b] = script.moving_time;
