@@ -5,10 +5,11 @@
 //! the visiting traversal); this layout is derived from it after the build (`collapse`) and is
 //! what the closest-hit, any-hit and every-hit queries walk. One traversal loop
 //! ([`traverse`]) is written once over a small `kernel` interface with three
-//! implementations chosen once, when the BVH is built: AVX2 when the CPU has AVX2 and FMA,
-//! else SSE2 (two 4-wide halves per node), else plain scalar code, the readable reference
-//! beside the SIMD kernels. Every kernel computes the same watertight triangle test as
-//! [`crate::geometry::intersect_triangle`] operation for operation, so all three give the
+//! implementations chosen once, when the BVH is built: AVX2 when the CPU has AVX2 and FMA
+//! (compiled once more with AVX-512 enabled, for CPUs that have it), else SSE2 (two 4-wide
+//! halves per node), else plain scalar code, the readable reference beside the SIMD kernels.
+//! Every kernel computes the same watertight triangle test as
+//! [`crate::geometry::intersect_triangle`] operation for operation, so all of them give the
 //! same hits, bit for bit, as brute force.
 
 mod collapse;
@@ -183,6 +184,8 @@ enum Dispatch {
     Sse2,
     #[cfg(target_arch = "x86_64")]
     Avx2(kernel::Avx2Cpu),
+    #[cfg(target_arch = "x86_64")]
+    Avx512(kernel::Avx512Cpu),
 }
 
 impl WideBvh {
@@ -199,6 +202,8 @@ impl WideBvh {
             Dispatch::Sse2 => Kernel::Sse2,
             #[cfg(target_arch = "x86_64")]
             Dispatch::Avx2(_) => Kernel::Avx2,
+            #[cfg(target_arch = "x86_64")]
+            Dispatch::Avx512(_) => Kernel::Avx512,
         }
     }
 
@@ -213,6 +218,11 @@ impl WideBvh {
             Kernel::Avx2 => match kernel::Avx2Cpu::detect() {
                 Some(cpu) => Dispatch::Avx2(cpu),
                 None => return Err("this CPU cannot run the avx2 kernel".into()),
+            },
+            #[cfg(target_arch = "x86_64")]
+            Kernel::Avx512 => match kernel::Avx512Cpu::detect() {
+                Some(cpu) => Dispatch::Avx512(cpu),
+                None => return Err("this CPU cannot run the avx512 kernel".into()),
             },
             #[cfg(not(target_arch = "x86_64"))]
             other => return Err(format!("the {other} kernel exists on x86-64 only")),
@@ -239,6 +249,12 @@ impl WideBvh {
             (Dispatch::Avx2(cpu), false) => kernel::closest_avx2::<false>(cpu, self, ray, t_max),
             #[cfg(target_arch = "x86_64")]
             (Dispatch::Avx2(cpu), true) => kernel::closest_avx2::<true>(cpu, self, ray, t_max),
+            #[cfg(target_arch = "x86_64")]
+            (Dispatch::Avx512(cpu), false) => {
+                kernel::closest_avx512::<false>(cpu, self, ray, t_max)
+            }
+            #[cfg(target_arch = "x86_64")]
+            (Dispatch::Avx512(cpu), true) => kernel::closest_avx512::<true>(cpu, self, ray, t_max),
         }
     }
 
@@ -273,6 +289,14 @@ impl WideBvh {
             (Dispatch::Avx2(cpu), true) => {
                 kernel::each_hit_avx2::<true, F>(cpu, self, ray, t_max, f)
             }
+            #[cfg(target_arch = "x86_64")]
+            (Dispatch::Avx512(cpu), false) => {
+                kernel::each_hit_avx512::<false, F>(cpu, self, ray, t_max, f)
+            }
+            #[cfg(target_arch = "x86_64")]
+            (Dispatch::Avx512(cpu), true) => {
+                kernel::each_hit_avx512::<true, F>(cpu, self, ray, t_max, f)
+            }
         }
     }
 }
@@ -296,6 +320,10 @@ impl WideBvh {
             Dispatch::Sse2 => packet::trace_packet::<kernel::Sse2, ANY>(self, rays, t_max, best),
             #[cfg(target_arch = "x86_64")]
             Dispatch::Avx2(cpu) => kernel::trace_packet_avx2::<ANY>(cpu, self, rays, t_max, best),
+            #[cfg(target_arch = "x86_64")]
+            Dispatch::Avx512(cpu) => {
+                kernel::trace_packet_avx512::<ANY>(cpu, self, rays, t_max, best)
+            }
         }
     }
 }

@@ -4,7 +4,8 @@
 //!
 //! - [`scalar`]: plain Rust, one lane at a time, calling the reference triangle test. It is the
 //!   readable specification and the fallback on any target.
-//! - `x86` (x86-64 only): SSE2, which every x86-64 CPU has, and AVX2 + FMA, chosen at run time.
+//! - `x86` (x86-64 only): SSE2, which every x86-64 CPU has, and AVX2 + FMA, chosen at run time,
+//!   the latter also compiled with AVX-512 enabled for CPUs that have it (32 vector registers).
 //!
 //! The rules every implementation keeps, written out rather than left to what an instruction
 //! does with NaN:
@@ -41,6 +42,9 @@ pub enum Kernel {
     Sse2,
     /// AVX2 with FMA: one 8-wide node test per instruction sequence.
     Avx2,
+    /// The AVX2 kernel compiled for AVX-512 CPUs (F, VL, BW, DQ): the same operations, with
+    /// 32 vector registers.
+    Avx512,
 }
 
 impl Kernel {
@@ -78,6 +82,9 @@ impl Kernel {
             if x86::Avx2Cpu::detect().is_some() {
                 k.push(Kernel::Avx2);
             }
+            if x86::Avx512Cpu::detect().is_some() {
+                k.push(Kernel::Avx512);
+            }
         }
         k
     }
@@ -88,6 +95,7 @@ impl Kernel {
             Kernel::Scalar => "scalar",
             Kernel::Sse2 => "sse2",
             Kernel::Avx2 => "avx2",
+            Kernel::Avx512 => "avx512",
         }
     }
 }
@@ -99,8 +107,9 @@ impl std::str::FromStr for Kernel {
             "scalar" => Ok(Kernel::Scalar),
             "sse2" => Ok(Kernel::Sse2),
             "avx2" => Ok(Kernel::Avx2),
+            "avx512" => Ok(Kernel::Avx512),
             other => Err(format!(
-                "unknown kernel `{other}` (expected scalar, sse2 or avx2)"
+                "unknown kernel `{other}` (expected scalar, sse2, avx2 or avx512)"
             )),
         }
     }
@@ -255,7 +264,10 @@ pub(crate) struct BlockHits {
 
 pub(crate) use scalar::Scalar;
 #[cfg(target_arch = "x86_64")]
-pub(crate) use x86::{Avx2Cpu, Sse2, closest_avx2, each_hit_avx2, trace_packet_avx2};
+pub(crate) use x86::{
+    Avx2Cpu, Avx512Cpu, Sse2, closest_avx2, closest_avx512, each_hit_avx2, each_hit_avx512,
+    trace_packet_avx2, trace_packet_avx512,
+};
 
 /// The constants of the distance error bound of [`crate::geometry::intersect_triangle`].
 pub(crate) const G2: f32 = gamma(2);

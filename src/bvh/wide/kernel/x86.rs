@@ -1,4 +1,5 @@
-//! The x86-64 kernels: SSE2 (every x86-64 CPU) and AVX2 + FMA (chosen at run time).
+//! The x86-64 kernels: SSE2 (every x86-64 CPU), AVX2 + FMA, and the AVX2 kernel compiled for
+//! AVX-512 CPUs (chosen at run time).
 //!
 //! Both share the triangle test ([`block_sse`], 4 lanes in 128-bit registers, VEX-encoded
 //! inside the AVX2 functions). The box test is 8 lanes in one 256-bit register with AVX2, two
@@ -6,6 +7,12 @@
 //! [`super::super::traverse`], instantiated inside `#[target_feature]` entry points so that
 //! the whole loop, helpers and intrinsics included, is compiled for the kernel's instruction
 //! set (the helpers are `#[inline(always)]` and carry no target features of their own).
+//!
+//! The AVX-512 kernel is the AVX2 one ([`Avx2`], the same intrinsics in the same order, so the
+//! same bits) compiled with AVX-512 F, VL, BW and DQ enabled: 32 vector registers instead of
+//! 16, so the ray's constants stay in registers instead of being reloaded from the stack at
+//! every node, and EVEX encodings. On session 13's Zen 4 it traced the dragon's canonical
+//! rays 2-4% faster (closest, occlusion and packets; `examples/trace_time`, three pairs).
 //!
 //! Every operation mirrors the scalar reference in order and kind: subtract then multiply in
 //! the box test (no FMA, so the conservative far scale stays valid), and in the triangle test
@@ -323,7 +330,7 @@ static COMPACT: [[u32; WIDTH]; 256] = {
 /// it happens to be inlined).
 #[inline(always)]
 fn slab8<const SAFE: bool>(n: &WideNode, r: &NodeRay8, a: usize) -> (__m256, __m256) {
-    // SAFETY: only reached inside the AVX2 entry points (see `Avx2::node_ray`); the loads read
+    // SAFETY: only reached inside the AVX2 and AVX-512 entry points (see `Avx2::node_ray`); the loads read
     // whole `[f32; 8]` plane rows.
     unsafe {
         let lo = _mm256_loadu_ps(n.planes[r.near[a]].as_ptr());
@@ -346,8 +353,8 @@ impl Lanes for Avx2 {
 
     #[inline(always)]
     fn node_ray(r: &NodeRay) -> NodeRay8 {
-        // SAFETY: only reached inside the `#[target_feature(enable = "avx2,fma,popcnt,bmi1,lzcnt")]` entry
-        // points below, which run after the CPU was found to have AVX2 and FMA.
+        // SAFETY: only reached inside the `#[target_feature]` entry points below (AVX2 + FMA,
+        // or those and AVX-512), which run after the CPU was found to have their features.
         let s = |x: f32| unsafe { _mm256_set1_ps(x) };
         NodeRay8 {
             origin: r.origin.map(s),
@@ -372,7 +379,7 @@ impl Lanes for Avx2 {
         limit: f32,
         near: &mut [f32; WIDTH],
     ) -> u32 {
-        // SAFETY: only reached inside the AVX2 entry points (see `node_ray`); the store writes
+        // SAFETY: only reached inside the AVX2 and AVX-512 entry points (see `node_ray`); the store writes
         // the whole `[f32; 8]` of `near`.
         unsafe {
             let (lx, hx) = slab8::<SAFE>(n, r, 0);
@@ -407,7 +414,7 @@ impl Lanes for Avx2 {
         near: &[f32; WIDTH],
         stack: &mut Stack<'_>,
     ) {
-        // SAFETY: only reached inside the AVX2 entry points (see `node_ray`); the loads read
+        // SAFETY: only reached inside the AVX2 and AVX-512 entry points (see `node_ray`); the loads read
         // whole `[u32; 8]` / `[f32; 8]` rows; the transmutes reinterpret 32-byte vectors as
         // 32-byte arrays of the same lane type.
         unsafe {
@@ -442,7 +449,7 @@ impl Lanes for Avx2 {
     #[inline(always)]
     fn rays_entering(n: &WideNode, lane: usize, r: &Rays, limit: &[f32; PACKET]) -> u64 {
         let mut mask = 0u64;
-        // SAFETY: only reached inside the AVX2 entry points.
+        // SAFETY: only reached inside the AVX2 and AVX-512 entry points.
         unsafe {
             let pn: [__m256; 3] =
                 std::array::from_fn(|a| _mm256_set1_ps(n.planes[r.near[a]][lane]));
@@ -477,7 +484,7 @@ impl Lanes for Avx2 {
         // Lanes past the group's end repeat its first ray and are masked off.
         let gather = |a: &[f32; PACKET]| -> __m256 {
             let v: [f32; 8] = std::array::from_fn(|j| a[g.idx[j]]);
-            // SAFETY: only reached inside the AVX2 entry points; `v` holds eight floats.
+            // SAFETY: only reached inside the AVX2 and AVX-512 entry points; `v` holds eight floats.
             unsafe { _mm256_loadu_ps(v.as_ptr()) }
         };
         let o = [
@@ -499,7 +506,7 @@ impl Lanes for Avx2 {
                 }
                 // Each ray's limit: the next float above its best distance (ties still count).
                 let limit: [f32; 8] = std::array::from_fn(|j| next_up(bests.t[g.idx[j]]));
-                // SAFETY: only reached inside the AVX2 entry points; `limit` holds eight floats.
+                // SAFETY: only reached inside the AVX2 and AVX-512 entry points; `limit` holds eight floats.
                 let limit8 = unsafe { _mm256_loadu_ps(limit.as_ptr()) };
                 let (mut hits, mut exact) =
                     triangle_rays8(b, tri, k, &o, &shear, limit8, lanes, &mut out);
@@ -535,7 +542,7 @@ const RAYS_TOGETHER: usize = 3;
 /// Eight consecutive lanes of a packet array from `base`.
 #[inline(always)]
 fn ld8(a: &[f32; PACKET], base: usize) -> __m256 {
-    // SAFETY: only reached inside the AVX2 entry points; the slice `base..base + 8` is
+    // SAFETY: only reached inside the AVX2 and AVX-512 entry points; the slice `base..base + 8` is
     // bounds-checked before the load reads it.
     unsafe { _mm256_loadu_ps(a[base..base + 8].as_ptr()) }
 }
@@ -543,14 +550,14 @@ fn ld8(a: &[f32; PACKET], base: usize) -> __m256 {
 /// `|x|` per lane, as `f32::abs`.
 #[inline(always)]
 fn abs8(x: __m256) -> __m256 {
-    // SAFETY: only reached inside the AVX2 entry points.
+    // SAFETY: only reached inside the AVX2 and AVX-512 entry points.
     unsafe { _mm256_andnot_ps(_mm256_set1_ps(-0.0), x) }
 }
 
 /// `max(|a|, |b|, |c|)` per lane (see [`max3_abs`]).
 #[inline(always)]
 fn max3_abs8(a: __m256, b: __m256, c: __m256) -> __m256 {
-    // SAFETY: only reached inside the AVX2 entry points.
+    // SAFETY: only reached inside the AVX2 and AVX-512 entry points.
     unsafe { _mm256_max_ps(_mm256_max_ps(abs8(a), abs8(b)), abs8(c)) }
 }
 
@@ -566,7 +573,7 @@ fn sheared8(
     sx: __m256,
     sy: __m256,
 ) -> (__m256, __m256, __m256) {
-    // SAFETY: only reached inside the AVX2 entry points.
+    // SAFETY: only reached inside the AVX2 and AVX-512 entry points.
     unsafe {
         let x = _mm256_sub_ps(_mm256_set1_ps(b.v[vertex][k[0]][tri]), o[0]);
         let y = _mm256_sub_ps(_mm256_set1_ps(b.v[vertex][k[1]][tri]), o[1]);
@@ -596,7 +603,7 @@ fn triangle_rays8(
     out: &mut [[f32; 8]; 3],
 ) -> (u32, u32) {
     let [sx, sy, sz] = *shear;
-    // SAFETY: only reached inside the AVX2 entry points; the stores write whole `[f32; 8]`s.
+    // SAFETY: only reached inside the AVX2 and AVX-512 entry points; the stores write whole `[f32; 8]`s.
     unsafe {
         let (ax, ay, az) = sheared8(b, tri, 0, k, o, sx, sy);
         let (bx, by, bz) = sheared8(b, tri, 1, k, o, sx, sy);
@@ -777,4 +784,84 @@ pub(crate) fn each_hit_avx2<const SAFE: bool, F: FnMut(u32, f32) -> bool>(
 ) -> bool {
     // SAFETY: an `Avx2Cpu` exists only when the CPU has every feature enabled here.
     unsafe { each_hit_avx2_inner::<SAFE, F>(w, ray, t_max, f) }
+}
+
+/// Proof that this CPU has AVX-512 F, VL, BW and DQ besides everything [`Avx2Cpu`] proves:
+/// made only by [`Avx512Cpu::detect`].
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Avx512Cpu(());
+
+impl Avx512Cpu {
+    /// The proof, when the CPU has all of them.
+    pub fn detect() -> Option<Avx512Cpu> {
+        (Avx2Cpu::detect().is_some()
+            && is_x86_feature_detected!("avx512f")
+            && is_x86_feature_detected!("avx512vl")
+            && is_x86_feature_detected!("avx512bw")
+            && is_x86_feature_detected!("avx512dq"))
+        .then_some(Avx512Cpu(()))
+    }
+}
+
+#[target_feature(enable = "avx2,fma,popcnt,bmi1,lzcnt,avx512f,avx512vl,avx512bw,avx512dq")]
+fn closest_avx512_inner<const SAFE: bool>(w: &WideBvh, ray: &Ray, t_max: f32) -> Best {
+    traverse::closest::<Avx2, SAFE>(w, ray, t_max)
+}
+
+#[target_feature(enable = "avx2,fma,popcnt,bmi1,lzcnt,avx512f,avx512vl,avx512bw,avx512dq")]
+fn each_hit_avx512_inner<const SAFE: bool, F: FnMut(u32, f32) -> bool>(
+    w: &WideBvh,
+    ray: &Ray,
+    t_max: f32,
+    f: &mut F,
+) -> bool {
+    traverse::each_hit::<Avx2, SAFE>(w, ray, t_max, f)
+}
+
+#[target_feature(enable = "avx2,fma,popcnt,bmi1,lzcnt,avx512f,avx512vl,avx512bw,avx512dq")]
+fn trace_packet_avx512_inner<const ANY: bool>(
+    w: &WideBvh,
+    rays: &[Ray],
+    t_max: f32,
+    best: &mut [Best],
+) -> bool {
+    crate::bvh::wide::packet::trace_packet::<Avx2, ANY>(w, rays, t_max, best)
+}
+
+/// [`trace_packet_avx2`] compiled for AVX-512.
+#[inline]
+pub(crate) fn trace_packet_avx512<const ANY: bool>(
+    _cpu: Avx512Cpu,
+    w: &WideBvh,
+    rays: &[Ray],
+    t_max: f32,
+    best: &mut [Best],
+) -> bool {
+    // SAFETY: an `Avx512Cpu` exists only when the CPU has every feature enabled here.
+    unsafe { trace_packet_avx512_inner::<ANY>(w, rays, t_max, best) }
+}
+
+/// [`closest_avx2`] compiled for AVX-512.
+#[inline]
+pub(crate) fn closest_avx512<const SAFE: bool>(
+    _cpu: Avx512Cpu,
+    w: &WideBvh,
+    ray: &Ray,
+    t_max: f32,
+) -> Best {
+    // SAFETY: an `Avx512Cpu` exists only when the CPU has every feature enabled here.
+    unsafe { closest_avx512_inner::<SAFE>(w, ray, t_max) }
+}
+
+/// [`each_hit_avx2`] compiled for AVX-512.
+#[inline]
+pub(crate) fn each_hit_avx512<const SAFE: bool, F: FnMut(u32, f32) -> bool>(
+    _cpu: Avx512Cpu,
+    w: &WideBvh,
+    ray: &Ray,
+    t_max: f32,
+    f: &mut F,
+) -> bool {
+    // SAFETY: an `Avx512Cpu` exists only when the CPU has every feature enabled here.
+    unsafe { each_hit_avx512_inner::<SAFE, F>(w, ray, t_max, f) }
 }
