@@ -246,15 +246,15 @@ impl WideBvh {
             #[cfg(target_arch = "x86_64")]
             (Dispatch::Sse2, true) => traverse::closest::<kernel::Sse2, true>(self, ray, t_max),
             #[cfg(target_arch = "x86_64")]
-            (Dispatch::Avx2(cpu), false) => kernel::closest_avx2::<false>(cpu, self, ray, t_max),
+            (Dispatch::Avx2(cpu), false) => kernel::avx2::closest::<false>(cpu, self, ray, t_max),
             #[cfg(target_arch = "x86_64")]
-            (Dispatch::Avx2(cpu), true) => kernel::closest_avx2::<true>(cpu, self, ray, t_max),
+            (Dispatch::Avx2(cpu), true) => kernel::avx2::closest::<true>(cpu, self, ray, t_max),
             #[cfg(target_arch = "x86_64")]
             (Dispatch::Avx512(cpu), false) => {
-                kernel::closest_avx512::<false>(cpu, self, ray, t_max)
+                kernel::avx512::closest::<false>(cpu, self, ray, t_max)
             }
             #[cfg(target_arch = "x86_64")]
-            (Dispatch::Avx512(cpu), true) => kernel::closest_avx512::<true>(cpu, self, ray, t_max),
+            (Dispatch::Avx512(cpu), true) => kernel::avx512::closest::<true>(cpu, self, ray, t_max),
         }
     }
 
@@ -283,19 +283,19 @@ impl WideBvh {
             (Dispatch::Sse2, true) => traverse::each_hit::<kernel::Sse2, true>(self, ray, t_max, f),
             #[cfg(target_arch = "x86_64")]
             (Dispatch::Avx2(cpu), false) => {
-                kernel::each_hit_avx2::<false, F>(cpu, self, ray, t_max, f)
+                kernel::avx2::each_hit::<false, F>(cpu, self, ray, t_max, f)
             }
             #[cfg(target_arch = "x86_64")]
             (Dispatch::Avx2(cpu), true) => {
-                kernel::each_hit_avx2::<true, F>(cpu, self, ray, t_max, f)
+                kernel::avx2::each_hit::<true, F>(cpu, self, ray, t_max, f)
             }
             #[cfg(target_arch = "x86_64")]
             (Dispatch::Avx512(cpu), false) => {
-                kernel::each_hit_avx512::<false, F>(cpu, self, ray, t_max, f)
+                kernel::avx512::each_hit::<false, F>(cpu, self, ray, t_max, f)
             }
             #[cfg(target_arch = "x86_64")]
             (Dispatch::Avx512(cpu), true) => {
-                kernel::each_hit_avx512::<true, F>(cpu, self, ray, t_max, f)
+                kernel::avx512::each_hit::<true, F>(cpu, self, ray, t_max, f)
             }
         }
     }
@@ -319,10 +319,10 @@ impl WideBvh {
             #[cfg(target_arch = "x86_64")]
             Dispatch::Sse2 => packet::trace_packet::<kernel::Sse2, ANY>(self, rays, t_max, best),
             #[cfg(target_arch = "x86_64")]
-            Dispatch::Avx2(cpu) => kernel::trace_packet_avx2::<ANY>(cpu, self, rays, t_max, best),
+            Dispatch::Avx2(cpu) => kernel::avx2::trace_packet::<ANY>(cpu, self, rays, t_max, best),
             #[cfg(target_arch = "x86_64")]
             Dispatch::Avx512(cpu) => {
-                kernel::trace_packet_avx512::<ANY>(cpu, self, rays, t_max, best)
+                kernel::avx512::trace_packet::<ANY>(cpu, self, rays, t_max, best)
             }
         }
     }

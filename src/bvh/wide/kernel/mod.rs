@@ -264,10 +264,7 @@ pub(crate) struct BlockHits {
 
 pub(crate) use scalar::Scalar;
 #[cfg(target_arch = "x86_64")]
-pub(crate) use x86::{
-    Avx2Cpu, Avx512Cpu, Sse2, closest_avx2, closest_avx512, each_hit_avx2, each_hit_avx512,
-    trace_packet_avx2, trace_packet_avx512,
-};
+pub(crate) use x86::{Avx2Cpu, Avx512Cpu, Sse2, avx2, avx512};
 
 /// The constants of the distance error bound of [`crate::geometry::intersect_triangle`].
 pub(crate) const G2: f32 = gamma(2);

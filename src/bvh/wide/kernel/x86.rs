@@ -722,70 +722,6 @@ impl Avx2Cpu {
     }
 }
 
-#[target_feature(enable = "avx2,fma,popcnt,bmi1,lzcnt")]
-fn closest_avx2_inner<const SAFE: bool>(w: &WideBvh, ray: &Ray, t_max: f32) -> Best {
-    traverse::closest::<Avx2, SAFE>(w, ray, t_max)
-}
-
-#[target_feature(enable = "avx2,fma,popcnt,bmi1,lzcnt")]
-fn each_hit_avx2_inner<const SAFE: bool, F: FnMut(u32, f32) -> bool>(
-    w: &WideBvh,
-    ray: &Ray,
-    t_max: f32,
-    f: &mut F,
-) -> bool {
-    traverse::each_hit::<Avx2, SAFE>(w, ray, t_max, f)
-}
-
-#[target_feature(enable = "avx2,fma,popcnt,bmi1,lzcnt")]
-fn trace_packet_avx2_inner<const ANY: bool>(
-    w: &WideBvh,
-    rays: &[Ray],
-    t_max: f32,
-    best: &mut [Best],
-) -> bool {
-    crate::bvh::wide::packet::trace_packet::<Avx2, ANY>(w, rays, t_max, best)
-}
-
-/// A packet's closest hits (or, with `ANY`, first hits) with the AVX2 kernel (see
-/// [`crate::bvh::wide::packet`]).
-#[inline]
-pub(crate) fn trace_packet_avx2<const ANY: bool>(
-    _cpu: Avx2Cpu,
-    w: &WideBvh,
-    rays: &[Ray],
-    t_max: f32,
-    best: &mut [Best],
-) -> bool {
-    // SAFETY: an `Avx2Cpu` exists only when the CPU has every feature enabled here.
-    unsafe { trace_packet_avx2_inner::<ANY>(w, rays, t_max, best) }
-}
-
-/// Closest hit with the AVX2 kernel (the whole traversal compiled for AVX2).
-#[inline]
-pub(crate) fn closest_avx2<const SAFE: bool>(
-    _cpu: Avx2Cpu,
-    w: &WideBvh,
-    ray: &Ray,
-    t_max: f32,
-) -> Best {
-    // SAFETY: an `Avx2Cpu` exists only when the CPU has every feature enabled here.
-    unsafe { closest_avx2_inner::<SAFE>(w, ray, t_max) }
-}
-
-/// Every hit with the AVX2 kernel (see [`traverse::each_hit`]).
-#[inline]
-pub(crate) fn each_hit_avx2<const SAFE: bool, F: FnMut(u32, f32) -> bool>(
-    _cpu: Avx2Cpu,
-    w: &WideBvh,
-    ray: &Ray,
-    t_max: f32,
-    f: &mut F,
-) -> bool {
-    // SAFETY: an `Avx2Cpu` exists only when the CPU has every feature enabled here.
-    unsafe { each_hit_avx2_inner::<SAFE, F>(w, ray, t_max, f) }
-}
-
 /// Proof that this CPU has AVX-512 F, VL, BW and DQ besides everything [`Avx2Cpu`] proves:
 /// made only by [`Avx512Cpu::detect`].
 #[derive(Clone, Copy, Debug)]
@@ -803,65 +739,88 @@ impl Avx512Cpu {
     }
 }
 
-#[target_feature(enable = "avx2,fma,popcnt,bmi1,lzcnt,avx512f,avx512vl,avx512bw,avx512dq")]
-fn closest_avx512_inner<const SAFE: bool>(w: &WideBvh, ray: &Ray, t_max: f32) -> Best {
-    traverse::closest::<Avx2, SAFE>(w, ray, t_max)
+/// The traversal's entry points for one instruction set, in a module of their own: the generic
+/// loops of [`traverse`] and [`crate::bvh::wide::packet`] over the [`Avx2`] lanes, compiled
+/// inside `#[target_feature]` functions with `$features` enabled (such functions are never
+/// inlined into callers without the features, so each whole loop, helpers and intrinsics
+/// included, is compiled for the set), callable only with the proof `$cpu` that this CPU has
+/// them. One definition serves the AVX2 and the AVX-512 kernels, which differ in nothing else.
+macro_rules! entry_points {
+    ($module:ident, $cpu:ident, $features:literal) => {
+        pub(crate) mod $module {
+            use super::*;
+
+            #[target_feature(enable = $features)]
+            fn closest_inner<const SAFE: bool>(w: &WideBvh, ray: &Ray, t_max: f32) -> Best {
+                traverse::closest::<Avx2, SAFE>(w, ray, t_max)
+            }
+
+            #[target_feature(enable = $features)]
+            fn each_hit_inner<const SAFE: bool, F: FnMut(u32, f32) -> bool>(
+                w: &WideBvh,
+                ray: &Ray,
+                t_max: f32,
+                f: &mut F,
+            ) -> bool {
+                traverse::each_hit::<Avx2, SAFE>(w, ray, t_max, f)
+            }
+
+            #[target_feature(enable = $features)]
+            fn trace_packet_inner<const ANY: bool>(
+                w: &WideBvh,
+                rays: &[Ray],
+                t_max: f32,
+                best: &mut [Best],
+            ) -> bool {
+                crate::bvh::wide::packet::trace_packet::<Avx2, ANY>(w, rays, t_max, best)
+            }
+
+            /// Closest hit (see [`traverse::closest`]), the whole traversal compiled for this
+            /// instruction set.
+            #[inline]
+            pub(crate) fn closest<const SAFE: bool>(
+                _cpu: $cpu,
+                w: &WideBvh,
+                ray: &Ray,
+                t_max: f32,
+            ) -> Best {
+                // SAFETY: the proof exists only when the CPU has every feature enabled here.
+                unsafe { closest_inner::<SAFE>(w, ray, t_max) }
+            }
+
+            /// Every hit (see [`traverse::each_hit`]).
+            #[inline]
+            pub(crate) fn each_hit<const SAFE: bool, F: FnMut(u32, f32) -> bool>(
+                _cpu: $cpu,
+                w: &WideBvh,
+                ray: &Ray,
+                t_max: f32,
+                f: &mut F,
+            ) -> bool {
+                // SAFETY: the proof exists only when the CPU has every feature enabled here.
+                unsafe { each_hit_inner::<SAFE, F>(w, ray, t_max, f) }
+            }
+
+            /// A packet's closest hits (or, with `ANY`, first hits; see
+            /// [`crate::bvh::wide::packet`]).
+            #[inline]
+            pub(crate) fn trace_packet<const ANY: bool>(
+                _cpu: $cpu,
+                w: &WideBvh,
+                rays: &[Ray],
+                t_max: f32,
+                best: &mut [Best],
+            ) -> bool {
+                // SAFETY: the proof exists only when the CPU has every feature enabled here.
+                unsafe { trace_packet_inner::<ANY>(w, rays, t_max, best) }
+            }
+        }
+    };
 }
 
-#[target_feature(enable = "avx2,fma,popcnt,bmi1,lzcnt,avx512f,avx512vl,avx512bw,avx512dq")]
-fn each_hit_avx512_inner<const SAFE: bool, F: FnMut(u32, f32) -> bool>(
-    w: &WideBvh,
-    ray: &Ray,
-    t_max: f32,
-    f: &mut F,
-) -> bool {
-    traverse::each_hit::<Avx2, SAFE>(w, ray, t_max, f)
-}
-
-#[target_feature(enable = "avx2,fma,popcnt,bmi1,lzcnt,avx512f,avx512vl,avx512bw,avx512dq")]
-fn trace_packet_avx512_inner<const ANY: bool>(
-    w: &WideBvh,
-    rays: &[Ray],
-    t_max: f32,
-    best: &mut [Best],
-) -> bool {
-    crate::bvh::wide::packet::trace_packet::<Avx2, ANY>(w, rays, t_max, best)
-}
-
-/// [`trace_packet_avx2`] compiled for AVX-512.
-#[inline]
-pub(crate) fn trace_packet_avx512<const ANY: bool>(
-    _cpu: Avx512Cpu,
-    w: &WideBvh,
-    rays: &[Ray],
-    t_max: f32,
-    best: &mut [Best],
-) -> bool {
-    // SAFETY: an `Avx512Cpu` exists only when the CPU has every feature enabled here.
-    unsafe { trace_packet_avx512_inner::<ANY>(w, rays, t_max, best) }
-}
-
-/// [`closest_avx2`] compiled for AVX-512.
-#[inline]
-pub(crate) fn closest_avx512<const SAFE: bool>(
-    _cpu: Avx512Cpu,
-    w: &WideBvh,
-    ray: &Ray,
-    t_max: f32,
-) -> Best {
-    // SAFETY: an `Avx512Cpu` exists only when the CPU has every feature enabled here.
-    unsafe { closest_avx512_inner::<SAFE>(w, ray, t_max) }
-}
-
-/// [`each_hit_avx2`] compiled for AVX-512.
-#[inline]
-pub(crate) fn each_hit_avx512<const SAFE: bool, F: FnMut(u32, f32) -> bool>(
-    _cpu: Avx512Cpu,
-    w: &WideBvh,
-    ray: &Ray,
-    t_max: f32,
-    f: &mut F,
-) -> bool {
-    // SAFETY: an `Avx512Cpu` exists only when the CPU has every feature enabled here.
-    unsafe { each_hit_avx512_inner::<SAFE, F>(w, ray, t_max, f) }
-}
+entry_points!(avx2, Avx2Cpu, "avx2,fma,popcnt,bmi1,lzcnt");
+entry_points!(
+    avx512,
+    Avx512Cpu,
+    "avx2,fma,popcnt,bmi1,lzcnt,avx512f,avx512vl,avx512bw,avx512dq"
+);
