@@ -10,7 +10,8 @@
 //! compared with the headless render of its pose at 4 samples per pixel (the viewer's converged
 //! picture): the RMSE in 8-bit levels, and their mean. With `MOVING_ORBIT_SAMPLES=N` in the
 //! environment every view gets exactly N fresh samples instead of the time budget, so two
-//! builds' pictures can be compared sample for sample.
+//! builds' pictures can be compared sample for sample. `MOVING_ORBIT_THREADS=N` traces on N
+//! threads instead of one.
 //!
 //! `cargo run --release --no-default-features --example moving_orbit -- [SCENE] [BUDGET_MS] [VIEWS] [QUALITY_EVERY]`
 //! (defaults: `assets/scenes/dragon.toml`, which needs `scripts/fetch-assets`; 20 ms; 150; 0).
@@ -59,7 +60,15 @@ fn main() -> Result<()> {
         RenderPlan::with_integrator(&scene, scene.integrator, &RenderSettings::default());
     plan.max_light_samples = Some(1);
     let tracer = Tracer::new(&scene, &bvh, plan, 5, &env);
-    let pool = rayon::ThreadPoolBuilder::new().num_threads(1).build()?;
+    let threads: usize = std::env::var("MOVING_ORBIT_THREADS")
+        .ok()
+        .map(|s| s.parse())
+        .transpose()
+        .context("MOVING_ORBIT_THREADS")?
+        .unwrap_or(1);
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()?;
     let budget = Duration::from_secs_f64(budget_ms * 1e-3);
     pool.install(|| {
         let mut cam = CameraRays::new(&scene.camera, w, h);

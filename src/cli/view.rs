@@ -31,6 +31,10 @@ pub struct ViewArgs {
     /// Image resolution relative to the window.
     #[arg(long, default_value_t = 1.0)]
     scale: f32,
+    /// While the picture changes, one frame every this many milliseconds (0: as fast as the
+    /// window draws; every frame the window draws is CPU time the tracing does not get).
+    #[arg(long, default_value_t = 30.0)]
+    frame_ms: f32,
     /// What the image shows at start.
     #[arg(long, value_enum, default_value_t = Mode::Shaded)]
     mode: Mode,
@@ -134,6 +138,9 @@ pub fn run(a: ViewArgs) -> Result<()> {
     if !(a.scale > 0.0 && a.scale <= 1.0) {
         bail!("--scale must be in (0, 1], not {}", a.scale);
     }
+    if !(a.frame_ms >= 0.0 && a.frame_ms <= 1000.0) {
+        bail!("--frame-ms must be in [0, 1000], not {}", a.frame_ms);
+    }
     if a.frames.is_none() && (a.screenshot.is_some() || a.orbit > 0 || a.wait_spp) {
         bail!("--screenshot, --orbit and --wait-spp need --frames");
     }
@@ -156,6 +163,7 @@ pub fn run(a: ViewArgs) -> Result<()> {
         max_depth: a.max_depth,
         scale: a.scale,
         level: a.level,
+        frame_ms: a.frame_ms,
         mode: match a.mode {
             Mode::Shaded => RenderMode::Shaded,
             Mode::Cost => RenderMode::TraversalCost,

@@ -603,10 +603,15 @@ fn report(
         let mean = v.iter().sum::<f64>() / v.len() as f64;
         let p95 = v[((v.len() as f64 * 0.95) as usize).min(v.len() - 1)];
         println!(
-            "moving: {} frames at {}x{}, frame time mean {:.1} ms, p95 {:.1} ms, max {:.1} ms; {:.0} fresh samples per frame ({:.1}% of the pixels; {:.2} M a second, which does not depend on how fast the window draws), {} moving pictures",
+            "moving: {} frames at {}x{} ({}), frame time mean {:.1} ms, p95 {:.1} ms, max {:.1} ms; {:.0} fresh samples per frame ({:.1}% of the pixels; {:.2} M a second, which does not depend on how fast the window draws), {} moving pictures",
             v.len(),
             stats.size.x,
             stats.size.y,
+            if settings.frame_ms > 0.0 {
+                format!("frames paced at {} ms", settings.frame_ms)
+            } else {
+                "frames as fast as the window draws".to_string()
+            },
             mean,
             p95,
             v[v.len() - 1],

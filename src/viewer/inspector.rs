@@ -418,6 +418,9 @@ fn render_section(
                     .text("exposure"),
             );
             ui.add(
+                egui::Slider::new(&mut s.frame_ms, 0.0..=100.0).text("ms per frame (0: fastest)"),
+            );
+            ui.add(
                 egui::Slider::new(&mut s.moving_budget_ms, 1.0..=100.0)
                     .text("ms per moving picture"),
             );

@@ -138,6 +138,11 @@ pub struct ViewSettings {
     /// Tracing time of each new view's moving picture, in milliseconds (its picture comes
     /// this long after the view's samples are carried over).
     pub moving_budget_ms: f32,
+    /// Shortest time between two frames while something changes, in milliseconds (0: as
+    /// fast as the window draws). Each frame costs the window a redraw on the CPU (under a
+    /// software graphics driver, more than half a core at 50 frames a second), taken from
+    /// the tracing; the moving picture changes at most once a frame anyway.
+    pub frame_ms: f32,
     /// How long the view must stay the same before the still picture starts over from fresh
     /// samples, in milliseconds.
     pub still_after_ms: f32,
@@ -169,6 +174,7 @@ impl Default for ViewSettings {
             level: 0,
             heat_max: 0.0,
             moving_budget_ms: 20.0,
+            frame_ms: 30.0,
             still_after_ms: 120.0,
             smooth_moving: true,
         }
@@ -177,13 +183,15 @@ impl Default for ViewSettings {
 
 impl ViewSettings {
     /// The settings that change the traced samples (everything but exposure, the heatmap
-    /// scale, the budgets, the sample limit and the moving picture's smoothing): a change of
+    /// scale, the budgets, the frame pacing, the sample limit and the moving picture's
+    /// smoothing): a change of
     /// these starts the pictures over.
     pub fn trace_key(&self) -> ViewSettings {
         ViewSettings {
             exposure: 1.0,
             heat_max: 0.0,
             moving_budget_ms: 0.0,
+            frame_ms: 0.0,
             still_after_ms: 0.0,
             smooth_moving: true,
             max_samples: 0,
