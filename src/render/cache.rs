@@ -129,6 +129,15 @@ struct Tiles {
     order: Vec<(u8, u8)>,
 }
 
+/// Pixels per unit of the camera's right and up axes on the plane at unit depth, for a
+/// `w x h` picture of `to`.
+fn pixels_per_unit(to: &CameraRays, w: u32, h: u32) -> (f32, f32) {
+    (
+        0.5 * w as f32 / (to.tan_half * to.aspect),
+        0.5 * h as f32 / to.tan_half,
+    )
+}
+
 /// The pixel centres of a view, for moving samples onto them.
 struct PixelGrid {
     eye: Vec3,
@@ -142,8 +151,7 @@ struct PixelGrid {
 
 impl PixelGrid {
     fn new(to: &CameraRays, w: u32, h: u32) -> Self {
-        let kx = 0.5 * w as f32 / (to.tan_half * to.aspect);
-        let ky = 0.5 * h as f32 / to.tan_half;
+        let (kx, ky) = pixels_per_unit(to, w, h);
         Self {
             eye: to.eye,
             forward: to.forward,
@@ -196,8 +204,7 @@ pub(super) struct Projection {
 
 impl Projection {
     fn new(to: &CameraRays, w: u32, h: u32) -> Self {
-        let kx = 0.5 * w as f32 / (to.tan_half * to.aspect);
-        let ky = 0.5 * h as f32 / to.tan_half;
+        let (kx, ky) = pixels_per_unit(to, w, h);
         Self {
             eye: to.eye,
             forward: to.forward,
