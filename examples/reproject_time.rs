@@ -6,7 +6,7 @@
 //!
 //! `cargo run --release --no-default-features --example reproject_time -- [SCENE] [VIEWS] [DEGREES_PER_VIEW]`
 //! (defaults: `assets/scenes/dragon.toml`, 100 views, 2.4 degrees: the viewer's orbit at 30 ms
-//! frames); `THREADS=N` in the environment for N threads (default 1).
+//! frames); `REPROJECT_TIME_THREADS=N` in the environment for N threads (default 1).
 
 use std::path::PathBuf;
 use std::time::Instant;
@@ -30,11 +30,11 @@ fn main() -> Result<()> {
         .next()
         .map_or(Ok(2.4), |s| s.parse())
         .context("degrees per view")?;
-    let threads: usize = std::env::var("THREADS")
+    let threads: usize = std::env::var("REPROJECT_TIME_THREADS")
         .ok()
         .map(|s| s.parse())
         .transpose()
-        .context("THREADS")?
+        .context("REPROJECT_TIME_THREADS")?
         .unwrap_or(1);
     let scene = Scene::load(&path)?;
     let bvh = Bvh::build(&scene.mesh.triangles, &BuildOptions::sah());

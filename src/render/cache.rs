@@ -244,21 +244,26 @@ pub(super) fn project_points(
     }
 }
 
+/// [`project_points`] with the widest vectors the CPU has (AVX2 on x86-64 where present).
+fn project_widest(to: &Projection, points: &[[f32; 3]], pixel: &mut [u32], depth: &mut [u32]) {
+    #[cfg(target_arch = "x86_64")]
+    project_x86::project_points(to, points, pixel, depth);
+    #[cfg(not(target_arch = "x86_64"))]
+    project_points(to, points, pixel, depth);
+}
+
 /// Writes each of `points` into `winner` at the pixel it falls on in the view `to` of a
 /// `w x h` picture, where its key (depth, index in `points`) is the smallest so far; samples
 /// behind the camera or outside the picture are left out.
 fn scatter(to: &CameraRays, w: u32, h: u32, points: &[[f32; 3]], winner: &mut [u64]) {
     let to = Projection::new(to, w, h);
-    // Runs of samples projected together (with the widest vectors the CPU has), then written.
+    // Runs of samples projected together, then written.
     const RUN: usize = 256;
     let mut pixel = [0u32; RUN];
     let mut depth = [0u32; RUN];
     for (run, ps) in points.chunks(RUN).enumerate() {
         let n = ps.len();
-        #[cfg(target_arch = "x86_64")]
-        project_x86::project_points(&to, ps, &mut pixel[..n], &mut depth[..n]);
-        #[cfg(not(target_arch = "x86_64"))]
-        project_points(&to, ps, &mut pixel[..n], &mut depth[..n]);
+        project_widest(&to, ps, &mut pixel[..n], &mut depth[..n]);
         for (k, (&i, &bits)) in pixel[..n].iter().zip(&depth[..n]).enumerate() {
             if i != u32::MAX {
                 let key = (u64::from(bits) << 32) | (run * RUN + k) as u64;
@@ -1283,10 +1288,7 @@ mod tests {
             let (mut a, mut da) = (vec![0u32; n], vec![0u32; n]);
             let (mut b, mut db) = (vec![0u32; n], vec![0u32; n]);
             project_points(&to, &points[..n], &mut a, &mut da);
-            #[cfg(target_arch = "x86_64")]
-            project_x86::project_points(&to, &points[..n], &mut b, &mut db);
-            #[cfg(not(target_arch = "x86_64"))]
-            project_points(&to, &points[..n], &mut b, &mut db);
+            project_widest(&to, &points[..n], &mut b, &mut db);
             assert_eq!((&a, &da), (&b, &db), "{n} points");
             inside = a.iter().filter(|&&i| i != u32::MAX).count();
             assert!(a.iter().all(|&i| i == u32::MAX || i < w * h));

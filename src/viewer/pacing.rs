@@ -4,12 +4,11 @@
 //! for input, window events or the trace worker's next picture (winit's reactive mode), so the
 //! refining picture keeps the cores and a converged one costs next to no CPU.
 //!
-//! The clock: under a software graphics driver each frame costs the window 17-20 ms of CPU
+//! The clock: under a software graphics driver each frame costs the window 17-23 ms of CPU
 //! (main thread, Bevy's task pools, the driver's threads). Drawing as fast as it could (about
-//! 50 frames a second on two cores) took the window 0.84-0.88 of a core while the moving
-//! picture changed on every second frame; paced at 30 ms it takes 0.63-0.73, the trace worker
-//! gets the rest, and the still picture refines as fast as `tracery render` (the `--orbit`
-//! figures).
+//! 50 frames a second on two cores) took the window 0.81-0.88 of a core while the moving
+//! picture changed on every second frame; paced at 30 ms it takes 0.59-0.76 and the trace
+//! worker gets the rest (the `--orbit` figures in the README).
 
 use std::time::Duration;
 
