@@ -333,10 +333,14 @@ pub fn run(
     // Builds, interleaved, with each thread count. A peer's build time is its builder call
     // (plus putting its triangles in leaf order for obvhs; for Embree its scene's build, not
     // the device's creation); ours includes copying the triangles into leaf order and the
-    // 8-wide layout.
+    // 8-wide layout. Each engine is dropped as soon as its build is timed: Embree builds on
+    // as many threads as the live device asking for the most (`getMaxNumThreads` in its
+    // `device.cpp`), so a two-thread device kept alive would make the next one-thread build
+    // run on two threads.
     let pools: Vec<(usize, rayon::ThreadPool)> =
         config.threads.iter().map(|&t| (t, pool(t))).collect();
-    let mut entries: Vec<Entry> = Vec::new();
+    let mut build_ms = vec![vec![f64::INFINITY; pools.len()]; builders.len()];
+    let mut stats = vec![None; builders.len()];
     for round in 0..config.repeat.max(1) {
         for (k, (name, build)) in builders.iter().enumerate() {
             for (p, (threads, pool)) in pools.iter().enumerate() {
@@ -345,28 +349,29 @@ pub fn run(
                     round + 1
                 ));
                 let start = Instant::now();
-                let (engine, stats) = pool.install(|| build(*threads))?;
+                let (engine, s) = pool.install(|| build(*threads))?;
                 let ms = engine
                     .build_ms()
                     .unwrap_or(start.elapsed().as_secs_f64() * 1e3);
-                match entries.get_mut(k) {
-                    Some(e) => {
-                        e.build_ms[p] = e.build_ms[p].min(ms);
-                        e.engine = engine;
-                    }
-                    None => {
-                        let mut build_ms = vec![f64::INFINITY; pools.len()];
-                        build_ms[p] = ms;
-                        entries.push(Entry {
-                            name: name.clone(),
-                            build_ms,
-                            stats,
-                            engine,
-                        });
-                    }
-                }
+                drop(engine);
+                build_ms[k][p] = build_ms[k][p].min(ms);
+                stats[k] = stats[k].or(s);
             }
         }
+    }
+    // The engines to trace with, built once more (untimed) with the most threads; tracing
+    // runs on the caller's threads, whatever the build used.
+    let mut entries: Vec<Entry> = Vec::with_capacity(builders.len());
+    for (k, (name, build)) in builders.iter().enumerate() {
+        let (threads, pool) = pools.last().expect("at least one thread count");
+        progress(&format!("{mesh_name}: building {name} to trace with"));
+        let (engine, _) = pool.install(|| build(*threads))?;
+        entries.push(Entry {
+            name: name.clone(),
+            build_ms: std::mem::take(&mut build_ms[k]),
+            stats: stats[k],
+            engine,
+        });
     }
 
     // Traces, interleaved over engines and thread counts.
