@@ -176,13 +176,17 @@ fn stats_describe_the_tree() {
     assert!(sah < median, "sah {sah} median {median}");
 }
 
-/// Triangles at x = 2^-126 13^k up to 1e38 (69 of them, f32's normal range), one per leaf:
-/// each is 13 times the next, so binned SAH with 12 bins finds only the largest outside the
-/// first bin and peels it off alone at every level: 68 levels deep. The
-/// builders switch to count splits at depth `MAX_DEPTH - 32` = 64, which this input reaches,
-/// the tree stays within `MAX_DEPTH`, and every ray still finds brute force's hit. (Before the
-/// bins were fixed, a centroid went to its nearest bin boundary's bin, the two largest were
-/// peeled together where their ratio allowed, and this input stopped at 48 levels.)
+/// Triangles at x = 2^-126 13^k up to 1e38 (69 of them, f32's normal range), each as large
+/// as its distance from the origin and so 13 times the next, one per leaf: binned SAH with 12
+/// bins finds only the largest outside the first bin, and the sweep that splits small ranges
+/// finds peeling the largest off alone cheapest (its flat box against the rest's), so the
+/// tree peels one triangle per level: 68 levels deep. The builders switch to count splits at
+/// depth `MAX_DEPTH - 32` = 64, which this input reaches, the tree stays within `MAX_DEPTH`,
+/// and every ray still finds brute force's hit. (Before the bins were fixed, a centroid went
+/// to its nearest bin boundary's bin, the two largest were peeled together where their ratio
+/// allowed, and a row of unit triangles stopped at 48 levels; unit triangles no longer reach
+/// the count split since small ranges are swept: below x = 1 their boxes are all alike and
+/// the sweep splits them in blocks.)
 #[test]
 fn a_geometric_row_of_triangles_reaches_the_count_split_and_stays_within_the_depth() {
     let xs: Vec<f32> = (0..)
@@ -195,8 +199,8 @@ fn a_geometric_row_of_triangles_reaches_the_count_split_and_stays_within_the_dep
         .map(|&x| {
             [
                 Vec3::new(x, 0.0, 0.0),
-                Vec3::new(x, 1.0, 0.0),
-                Vec3::new(x, 0.0, 1.0),
+                Vec3::new(x, x, 0.0),
+                Vec3::new(x, 0.0, x),
             ]
         })
         .collect();
@@ -216,8 +220,8 @@ fn a_geometric_row_of_triangles_reaches_the_count_split_and_stays_within_the_dep
     let bf = tracery::bvh::BruteForce::new(&tris);
     for &x in &xs {
         for ray in [
-            Ray::new(Vec3::new(x, 0.25, -1.0), Vec3::Z),
-            Ray::new(Vec3::new(-1.0, 0.25, 0.25), Vec3::X),
+            Ray::new(Vec3::new(x, 0.25 * x, -1.0), Vec3::Z),
+            Ray::new(Vec3::new(-1.0, 0.25 * x, 0.25 * x), Vec3::X),
         ] {
             assert_eq!(
                 bvh.intersect(&ray, f32::INFINITY).map(|h| h.prim),

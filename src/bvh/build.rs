@@ -441,6 +441,9 @@ impl<'a> Builder<'a> {
             // Every centroid in one point: no plane separates them.
             return (n > max_leaf).then(|| self.split_by_count(bufs, task));
         }
+        if n <= SWEEP_MAX {
+            return self.split_sweep(bufs, task, axis);
+        }
 
         // Only the bins in use are reset: clearing all MAX_BINS per node would cost more than
         // the binning itself deep in the tree, where nodes are small.
@@ -510,6 +513,77 @@ impl<'a> Builder<'a> {
             in_scratch: !task.in_scratch,
         })
     }
+}
+
+impl Builder<'_> {
+    /// SAH over every split of a small range's references sorted by centroid along `axis`
+    /// (a full sweep: exact where bins would round), with SAH leaf termination. The sides are
+    /// written, sorted, to the other array.
+    fn split_sweep(&self, bufs: &mut Buffers<'_>, task: &Task, axis: usize) -> Option<Split> {
+        let n = task.end - task.start;
+        debug_assert!((2..=SWEEP_MAX).contains(&n));
+        let max_leaf = self.options.max_leaf_size as usize;
+        let (src, dst, _) = bufs.parts(task.in_scratch, task.start..task.end);
+        // Each reference's centroid as an integer in the same order as the floats (they are
+        // finite), above its position: one sort orders by centroid, ties by position.
+        let mut order = [0u64; SWEEP_MAX];
+        for (i, (o, p)) in order.iter_mut().zip(src).enumerate() {
+            *o = (ordered_bits(p.centroid()[axis]) as u64) << 32 | i as u64;
+        }
+        let order = &mut order[..n];
+        order.sort_unstable();
+        let at = |k: usize| &src[order[k] as u32 as usize];
+        // Area of the boxes from the `k`-th on, for each `k`.
+        let mut right_area = [0.0f64; SWEEP_MAX];
+        let mut acc = Aabb::EMPTY;
+        for k in (1..n).rev() {
+            acc.grow(&at(k).bounds());
+            right_area[k] = acc.half_area();
+        }
+        let (mut cost, mut split) = (f64::INFINITY, 0);
+        let mut acc = Aabb::EMPTY;
+        for (k, &right) in right_area.iter().enumerate().take(n).skip(1) {
+            acc.grow(&at(k - 1).bounds());
+            let c = sah::blocks(k) * acc.half_area() + sah::blocks(n - k) * right;
+            if c < cost {
+                (cost, split) = (c, k);
+            }
+        }
+        let area = task.bounds.half_area();
+        let split_cost = sah::C_TRAVERSE * area + sah::C_INTERSECT * cost;
+        let leaf_cost = sah::C_INTERSECT * sah::blocks(n) * area;
+        if n <= max_leaf && split_cost >= leaf_cost {
+            return None;
+        }
+        for (d, &o) in dst.iter_mut().zip(order.iter()) {
+            *d = src[o as u32 as usize];
+        }
+        let side = |r: &[PrimRef]| {
+            r.iter()
+                .fold((Aabb::EMPTY, Aabb::EMPTY), |(mut b, mut c), p| {
+                    b.grow(&p.bounds());
+                    c.grow_point(p.centroid());
+                    (b, c)
+                })
+        };
+        Some(Split {
+            mid: task.start + split,
+            left: side(&dst[..split]),
+            right: side(&dst[split..]),
+            in_scratch: !task.in_scratch,
+        })
+    }
+}
+
+/// Ranges of up to this many references are split by [`Builder::split_sweep`]: sorting a few
+/// references costs less than clearing, filling and sweeping bins for them.
+const SWEEP_MAX: usize = 32;
+
+/// `x`'s bits as an integer that orders finite floats as `<` does (-0 just below +0).
+#[inline(always)]
+fn ordered_bits(x: f32) -> u32 {
+    let b = x.to_bits();
+    if b >> 31 == 1 { !b } else { b | 1 << 31 }
 }
 
 /// Both sides' boxes for a split of `task`'s range (in `data`) at `mid`; the data stay where
