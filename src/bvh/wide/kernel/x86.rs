@@ -28,7 +28,7 @@ use std::arch::x86_64::*;
 use super::stack::Stack;
 use super::{BlockHits, G2, G3, G5, Lanes, NodeRay, TriRay};
 use crate::bvh::wide::packet::{Bests, Group, PACKET, Rays, Tris, perm_of};
-use crate::bvh::wide::traverse::{self, Best, next_up};
+use crate::bvh::wide::traverse::{self, Best};
 use crate::bvh::wide::{BLOCK, TriBlock, WIDTH, WideBvh, WideNode};
 use crate::geometry::{PreparedRay, Ray};
 
@@ -499,22 +499,38 @@ impl Lanes for Avx2 {
         ];
         let lanes = (1u32 << g.n) - 1;
         let mut out = [[0.0f32; 8]; 3];
+        // The rays' best distances, kept in a register from triangle to triangle (a hit is
+        // never farther than the best it beats or ties), read back from `bests` only after
+        // the scalar test decided some lane.
+        let mut best = gather(&bests.t);
         for b in blocks {
             for tri in 0..BLOCK {
                 if b.prim[tri] == u32::MAX {
                     continue;
                 }
                 // Each ray's limit: the next float above its best distance (ties still count).
-                let limit: [f32; 8] = std::array::from_fn(|j| next_up(bests.t[g.idx[j]]));
-                // SAFETY: only reached inside the AVX2 and AVX-512 entry points; `limit` holds eight floats.
-                let limit8 = unsafe { _mm256_loadu_ps(limit.as_ptr()) };
+                let limit8 = next_up8(best);
                 let (mut hits, mut exact) =
                     triangle_rays8(b, tri, k, &o, &shear, limit8, lanes, &mut out);
+                if hits != 0 {
+                    // SAFETY: only reached inside the AVX2 and AVX-512 entry points; `out[0]`
+                    // holds eight floats.
+                    best = unsafe {
+                        _mm256_blendv_ps(best, _mm256_loadu_ps(out[0].as_ptr()), lane_mask8(hits))
+                    };
+                }
                 while hits != 0 {
                     let j = hits.trailing_zeros() as usize;
                     hits &= hits - 1;
                     bests.offer(g.idx[j], out[0][j], b.prim[tri], out[1][j], out[2][j]);
                 }
+                if exact == 0 {
+                    continue;
+                }
+                let mut limit = [0.0f32; 8];
+                // SAFETY: only reached inside the AVX2 and AVX-512 entry points; `limit` holds
+                // eight floats.
+                unsafe { _mm256_storeu_ps(limit.as_mut_ptr(), limit8) };
                 while exact != 0 {
                     let j = exact.trailing_zeros() as usize;
                     exact &= exact - 1;
@@ -530,8 +546,35 @@ impl Lanes for Avx2 {
                         bests.offer(i, h.t, b.prim[tri], h.u, h.v);
                     }
                 }
+                best = gather(&bests.t);
             }
         }
+    }
+}
+
+/// [`traverse::next_up`] on eight lanes: the next float above each (infinity stays; the lanes are
+/// positive distances, never NaN).
+#[inline(always)]
+fn next_up8(t: __m256) -> __m256 {
+    // SAFETY: only reached inside the AVX2 and AVX-512 entry points.
+    unsafe {
+        // All ones (-1) where `t` is below infinity: subtracting it adds one to the bits.
+        let below = _mm256_castps_si256(_mm256_cmp_ps::<_CMP_LT_OQ>(
+            t,
+            _mm256_set1_ps(f32::INFINITY),
+        ));
+        _mm256_castsi256_ps(_mm256_sub_epi32(_mm256_castps_si256(t), below))
+    }
+}
+
+/// All ones in the lanes whose bit is set in `bits`, zero in the others.
+#[inline(always)]
+fn lane_mask8(bits: u32) -> __m256 {
+    // SAFETY: only reached inside the AVX2 and AVX-512 entry points.
+    unsafe {
+        let lane_bits = _mm256_setr_epi32(1, 2, 4, 8, 16, 32, 64, 128);
+        let set = _mm256_and_si256(_mm256_set1_epi32(bits as i32), lane_bits);
+        _mm256_castsi256_ps(_mm256_cmpeq_epi32(set, lane_bits))
     }
 }
 
