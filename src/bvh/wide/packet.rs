@@ -374,28 +374,29 @@ fn walk<L: Lanes, const ANY: bool>(
     }
 }
 
-/// Up to eight of a packet's rays that share one axis permutation, to be tested together.
+/// Up to sixteen of a packet's rays that share one axis permutation, to be tested together.
 pub(crate) struct Group {
-    /// The rays' indices in the packet (the first `n` are used).
-    pub idx: [usize; 8],
+    /// The rays' indices in the packet (the first `n` are used; the others repeat the first).
+    pub idx: [usize; 16],
     pub n: usize,
     /// Their permutation number (see [`Tris::perm`]).
     pub perm: u8,
 }
 
 impl Group {
-    /// Takes from `todo` the first ray and up to seven more with its permutation.
+    /// Takes from `todo` the first ray and up to `max - 1` more with its permutation
+    /// (`max <= 16`).
     #[inline(always)]
-    fn take(todo: &mut u64, tris: &Tris) -> Group {
+    fn take(todo: &mut u64, tris: &Tris, max: usize) -> Group {
         let first = todo.trailing_zeros() as usize;
         let perm = tris.perm[first];
         let mut g = Group {
-            idx: [first; 8],
+            idx: [first; 16],
             n: 0,
             perm,
         };
         let mut m = *todo;
-        while m != 0 && g.n < 8 {
+        while m != 0 && g.n < max.min(16) {
             let i = m.trailing_zeros() as usize;
             m &= m - 1;
             if tris.perm[i] == perm {
@@ -425,7 +426,7 @@ fn leaf_rays<L: Lanes>(
     let blocks = &w.blocks[first as usize..(first + count) as usize];
     let mut todo = active;
     while todo != 0 {
-        let g = Group::take(&mut todo, tris);
+        let g = Group::take(&mut todo, tris, L::GROUP_MAX);
         if g.n >= L::RAYS_TOGETHER {
             L::group_blocks(blocks, r, tris, &g, bests);
         } else {

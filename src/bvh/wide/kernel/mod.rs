@@ -21,6 +21,8 @@
 //!   test's; lanes where an edge function is exactly zero, or whose distance or its error
 //!   bound overflowed f32, are handed to the scalar test (its f64 path and tie rule).
 
+#[cfg(target_arch = "x86_64")]
+mod group16;
 mod scalar;
 pub(crate) mod stack;
 #[cfg(target_arch = "x86_64")]
@@ -237,6 +239,9 @@ pub(crate) trait Lanes: Sized {
     /// The fewest rays of a [`Group`] that [`Lanes::group_blocks`] tests together; smaller
     /// groups go ray by ray. By default no group is (kernels without a group test).
     const RAYS_TOGETHER: usize = usize::MAX;
+
+    /// The most rays of a [`Group`]: as many as [`Lanes::group_blocks`] tests at once.
+    const GROUP_MAX: usize = 8;
 
     /// A group of a packet's rays (sharing one axis permutation) against `blocks`, each
     /// triangle against every ray of the group at once, keeping each ray's closest hit.

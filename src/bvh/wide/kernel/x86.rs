@@ -12,7 +12,9 @@
 //! same bits) compiled with AVX-512 F, VL, BW and DQ enabled: 32 vector registers instead of
 //! 16, so the ray's constants stay in registers instead of being reloaded from the stack at
 //! every node, and EVEX encodings. On session 13's Zen 4 it traced the dragon's canonical
-//! rays 2-4% faster (closest, occlusion and packets; `examples/trace_time`, three pairs).
+//! rays 2-4% faster (closest, occlusion and packets; `examples/trace_time`, three pairs). Its
+//! one part of its own, a packet's rays tested against a triangle sixteen at a time, is in
+//! [`super::group16`].
 //!
 //! Every operation mirrors the scalar reference in order and kind: subtract then multiply in
 //! the box test (no FMA, so the conservative far scale stays valid), and in the triangle test
@@ -789,13 +791,13 @@ impl Avx512Cpu {
 /// included, is compiled for the set), callable only with the proof `$cpu` that this CPU has
 /// them. One definition serves the AVX2 and the AVX-512 kernels, which differ in nothing else.
 macro_rules! entry_points {
-    ($module:ident, $cpu:ident, $features:literal) => {
+    ($module:ident, $cpu:ident, $lanes:ty, $features:literal) => {
         pub(crate) mod $module {
             use super::*;
 
             #[target_feature(enable = $features)]
             fn closest_inner<const SAFE: bool>(w: &WideBvh, ray: &Ray, t_max: f32) -> Best {
-                traverse::closest::<Avx2, SAFE>(w, ray, t_max)
+                traverse::closest::<$lanes, SAFE>(w, ray, t_max)
             }
 
             #[target_feature(enable = $features)]
@@ -805,7 +807,7 @@ macro_rules! entry_points {
                 t_max: f32,
                 f: &mut F,
             ) -> bool {
-                traverse::each_hit::<Avx2, SAFE>(w, ray, t_max, f)
+                traverse::each_hit::<$lanes, SAFE>(w, ray, t_max, f)
             }
 
             #[target_feature(enable = $features)]
@@ -815,7 +817,7 @@ macro_rules! entry_points {
                 t_max: f32,
                 best: &mut [Best],
             ) -> bool {
-                crate::bvh::wide::packet::trace_packet::<Avx2, ANY>(w, rays, t_max, best)
+                crate::bvh::wide::packet::trace_packet::<$lanes, ANY>(w, rays, t_max, best)
             }
 
             /// Closest hit (see [`traverse::closest`]), the whole traversal compiled for this
@@ -861,9 +863,10 @@ macro_rules! entry_points {
     };
 }
 
-entry_points!(avx2, Avx2Cpu, "avx2,fma,popcnt,bmi1,lzcnt");
+entry_points!(avx2, Avx2Cpu, Avx2, "avx2,fma,popcnt,bmi1,lzcnt");
 entry_points!(
     avx512,
     Avx512Cpu,
+    super::super::group16::Avx512,
     "avx2,fma,popcnt,bmi1,lzcnt,avx512f,avx512vl,avx512bw,avx512dq"
 );

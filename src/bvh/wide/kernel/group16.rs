@@ -1,0 +1,332 @@
+//! The AVX-512 kernel's own part: a packet's rays tested against a triangle sixteen at a time.
+//!
+//! The AVX-512 kernel is the AVX2 one compiled with AVX-512 enabled (see [`super::x86`]), but
+//! for one thing: at a leaf, the rays of a packet that share an axis permutation are taken in
+//! groups of up to sixteen instead of eight, and a group of more than eight is tested against
+//! each triangle in one 512-bit register per value ([`triangle_rays16`]). A leaf is entered by
+//! about twelve rays of a tile, so most leaves need one group where eight lanes needed two.
+//!
+//! The test is [`super::x86`]'s eight-lane test lane for lane, with masks in place of
+//! movemasks: the same multiplications, subtractions and one division in the same order as
+//! [`crate::geometry::intersect_triangle`], so each lane's distance has the scalar bits.
+#![allow(
+    unsafe_code,
+    reason = "SIMD intrinsics: loads, stores and target-feature calls"
+)]
+
+use std::arch::x86_64::*;
+
+use super::stack::Stack;
+use super::x86::{Avx2, NodeRay8, TriRay4};
+use super::{BlockHits, G2, G3, G5, Lanes, NodeRay, TriRay};
+use crate::bvh::wide::packet::{Bests, Group, PACKET, Rays, Tris, perm_of};
+use crate::bvh::wide::{BLOCK, TriBlock, WIDTH, WideNode};
+use crate::geometry::PreparedRay;
+
+/// The AVX-512 kernel's lanes: [`Avx2`]'s tests, but groups of up to sixteen rays.
+pub(crate) struct Avx512;
+
+impl Lanes for Avx512 {
+    type NodeRay = NodeRay8;
+    type TriRay = TriRay4;
+
+    #[inline(always)]
+    fn node_ray(r: &NodeRay) -> NodeRay8 {
+        Avx2::node_ray(r)
+    }
+
+    #[inline(always)]
+    fn tri_ray(r: &TriRay) -> TriRay4 {
+        Avx2::tri_ray(r)
+    }
+
+    #[inline(always)]
+    fn node<const SAFE: bool>(
+        n: &WideNode,
+        r: &NodeRay8,
+        limit: f32,
+        near: &mut [f32; WIDTH],
+    ) -> u32 {
+        Avx2::node::<SAFE>(n, r, limit, near)
+    }
+
+    #[inline(always)]
+    fn push_in_order(
+        n: &WideNode,
+        r: &NodeRay8,
+        mask: u32,
+        near: &[f32; WIDTH],
+        stack: &mut Stack<'_>,
+    ) {
+        Avx2::push_in_order(n, r, mask, near, stack)
+    }
+
+    #[inline(always)]
+    fn octant(r: &NodeRay8) -> u32 {
+        Avx2::octant(r)
+    }
+
+    #[inline(always)]
+    fn rays_entering(n: &WideNode, lane: usize, r: &Rays, limit: &[f32; PACKET]) -> u64 {
+        Avx2::rays_entering(n, lane, r, limit)
+    }
+
+    const RAYS_TOGETHER: usize = Avx2::RAYS_TOGETHER;
+
+    const GROUP_MAX: usize = 16;
+
+    /// Eight rays or fewer as [`Avx2`] tests them, more in sixteen lanes.
+    #[inline(always)]
+    fn group_blocks(blocks: &[TriBlock], r: &Rays, tris: &Tris, g: &Group, bests: &mut Bests) {
+        if g.n <= 8 {
+            Avx2::group_blocks(blocks, r, tris, g, bests)
+        } else {
+            group_blocks16(blocks, r, tris, g, bests)
+        }
+    }
+
+    #[inline(always)]
+    fn block(b: &TriBlock, r: &TriRay4, limit: f32, out: &mut BlockHits) -> (u32, u32) {
+        Avx2::block(b, r, limit, out)
+    }
+}
+
+/// Sixteen lanes of a packet array, lane `j` from the group's `j`-th ray.
+#[inline(always)]
+fn gather16(a: &[f32; PACKET], g: &Group) -> __m512 {
+    let v: [f32; 16] = std::array::from_fn(|j| a[g.idx[j]]);
+    // SAFETY: only reached inside the AVX-512 entry points; `v` holds sixteen floats.
+    unsafe { _mm512_loadu_ps(v.as_ptr()) }
+}
+
+/// Each triangle against the group's rays at once, one ray per lane (lanes past the group's
+/// end repeat its first ray and are masked off), as [`Avx2`]'s eight-lane group test does.
+#[inline(always)]
+fn group_blocks16(blocks: &[TriBlock], r: &Rays, tris: &Tris, g: &Group, bests: &mut Bests) {
+    let k = perm_of(g.perm);
+    let o = [
+        gather16(&r.origin[k[0]], g),
+        gather16(&r.origin[k[1]], g),
+        gather16(&r.origin[k[2]], g),
+    ];
+    let shear = [
+        gather16(&tris.shear[0], g),
+        gather16(&tris.shear[1], g),
+        gather16(&tris.shear[2], g),
+    ];
+    let lanes = ((1u64 << g.n) - 1) as u32;
+    let mut out = [[0.0f32; 16]; 3];
+    // The rays' best distances, kept in a register from triangle to triangle (a hit is never
+    // farther than the best it beats or ties), read back after the scalar test decided a lane.
+    let mut best = gather16(&bests.t, g);
+    for b in blocks {
+        for tri in 0..BLOCK {
+            if b.prim[tri] == u32::MAX {
+                continue;
+            }
+            // Each ray's limit: the next float above its best distance (ties still count).
+            let limit16 = next_up16(best);
+            let (mut hits, mut exact) =
+                triangle_rays16(b, tri, k, &o, &shear, limit16, lanes, &mut out);
+            if hits != 0 {
+                // SAFETY: only reached inside the AVX-512 entry points; `out[0]` holds sixteen
+                // floats.
+                best = unsafe {
+                    _mm512_mask_blend_ps(hits as __mmask16, best, _mm512_loadu_ps(out[0].as_ptr()))
+                };
+            }
+            while hits != 0 {
+                let j = hits.trailing_zeros() as usize;
+                hits &= hits - 1;
+                bests.offer(g.idx[j], out[0][j], b.prim[tri], out[1][j], out[2][j]);
+            }
+            if exact == 0 {
+                continue;
+            }
+            let mut limit = [0.0f32; 16];
+            // SAFETY: only reached inside the AVX-512 entry points; `limit` holds sixteen floats.
+            unsafe { _mm512_storeu_ps(limit.as_mut_ptr(), limit16) };
+            while exact != 0 {
+                let j = exact.trailing_zeros() as usize;
+                exact &= exact - 1;
+                let i = g.idx[j];
+                let ray = PreparedRay::from_parts(
+                    glam::Vec3A::new(r.origin[0][i], r.origin[1][i], r.origin[2][i]),
+                    k,
+                    [tris.shear[0][i], tris.shear[1][i], tris.shear[2][i]],
+                );
+                if let Some(h) =
+                    crate::geometry::intersect_triangle(&ray, &b.triangle(tri), limit[j])
+                {
+                    bests.offer(i, h.t, b.prim[tri], h.u, h.v);
+                }
+            }
+            best = gather16(&bests.t, g);
+        }
+    }
+}
+
+/// The next float above each lane (infinity stays; the lanes are positive distances, never
+/// NaN), as [`crate::bvh::wide::traverse::next_up`].
+#[inline(always)]
+fn next_up16(t: __m512) -> __m512 {
+    // SAFETY: only reached inside the AVX-512 entry points.
+    unsafe {
+        let below = _mm512_cmp_ps_mask::<_CMP_LT_OQ>(t, _mm512_set1_ps(f32::INFINITY));
+        let bits = _mm512_castps_si512(t);
+        _mm512_castsi512_ps(_mm512_mask_add_epi32(
+            bits,
+            below,
+            bits,
+            _mm512_set1_epi32(1),
+        ))
+    }
+}
+
+/// `|x|` per lane, as `f32::abs`.
+#[inline(always)]
+fn abs16(x: __m512) -> __m512 {
+    // SAFETY: only reached inside the AVX-512 entry points (DQ provides the float `andnot`).
+    unsafe { _mm512_andnot_ps(_mm512_set1_ps(-0.0), x) }
+}
+
+/// `max(|a|, |b|, |c|)` per lane.
+#[inline(always)]
+fn max3_abs16(a: __m512, b: __m512, c: __m512) -> __m512 {
+    // SAFETY: only reached inside the AVX-512 entry points.
+    unsafe { _mm512_max_ps(_mm512_max_ps(abs16(a), abs16(b)), abs16(c)) }
+}
+
+/// One vertex of a triangle relative to sixteen rays' origins, then sheared by each ray's
+/// constants.
+#[inline(always)]
+fn sheared16(
+    b: &TriBlock,
+    tri: usize,
+    vertex: usize,
+    k: [usize; 3],
+    o: &[__m512; 3],
+    sx: __m512,
+    sy: __m512,
+) -> (__m512, __m512, __m512) {
+    // SAFETY: only reached inside the AVX-512 entry points.
+    unsafe {
+        let x = _mm512_sub_ps(_mm512_set1_ps(b.v[vertex][k[0]][tri]), o[0]);
+        let y = _mm512_sub_ps(_mm512_set1_ps(b.v[vertex][k[1]][tri]), o[1]);
+        let z = _mm512_sub_ps(_mm512_set1_ps(b.v[vertex][k[2]][tri]), o[2]);
+        (
+            _mm512_sub_ps(x, _mm512_mul_ps(sx, z)),
+            _mm512_sub_ps(y, _mm512_mul_ps(sy, z)),
+            z,
+        )
+    }
+}
+
+/// The watertight test of one triangle against sixteen rays sharing one axis permutation:
+/// returns the rays (lane bits, within `lanes`) hit at `0 < t < limit`, the rays the scalar
+/// test must decide, and per lane `t`, `u`, `v` (see [`super::x86`]'s eight-lane test, which
+/// this is lane for lane).
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+fn triangle_rays16(
+    b: &TriBlock,
+    tri: usize,
+    k: [usize; 3],
+    o: &[__m512; 3],
+    shear: &[__m512; 3],
+    limit: __m512,
+    lanes: u32,
+    out: &mut [[f32; 16]; 3],
+) -> (u32, u32) {
+    let [sx, sy, sz] = *shear;
+    // SAFETY: only reached inside the AVX-512 entry points; the stores write whole `[f32; 16]`s.
+    unsafe {
+        let (ax, ay, az) = sheared16(b, tri, 0, k, o, sx, sy);
+        let (bx, by, bz) = sheared16(b, tri, 1, k, o, sx, sy);
+        let (cx, cy, cz) = sheared16(b, tri, 2, k, o, sx, sy);
+        let u = _mm512_sub_ps(_mm512_mul_ps(cx, by), _mm512_mul_ps(cy, bx));
+        let v = _mm512_sub_ps(_mm512_mul_ps(ax, cy), _mm512_mul_ps(ay, cx));
+        let w = _mm512_sub_ps(_mm512_mul_ps(bx, ay), _mm512_mul_ps(by, ax));
+        let zero = _mm512_setzero_ps();
+        let exact = if cfg!(feature = "no-watertight-fallback") {
+            0
+        } else {
+            (_mm512_cmp_ps_mask::<_CMP_EQ_OQ>(u, zero)
+                | _mm512_cmp_ps_mask::<_CMP_EQ_OQ>(v, zero)
+                | _mm512_cmp_ps_mask::<_CMP_EQ_OQ>(w, zero)) as u32
+                & lanes
+        };
+        let neg = _mm512_cmp_ps_mask::<_CMP_LT_OQ>(_mm512_min_ps(_mm512_min_ps(u, v), w), zero);
+        let pos = _mm512_cmp_ps_mask::<_CMP_GT_OQ>(_mm512_max_ps(_mm512_max_ps(u, v), w), zero);
+        let inside = !((neg & pos) as u32) & lanes & !exact;
+        if inside == 0 {
+            return (0, exact);
+        }
+        let det = _mm512_add_ps(_mm512_add_ps(u, v), w);
+        let t_scaled = _mm512_mul_ps(
+            _mm512_add_ps(
+                _mm512_add_ps(_mm512_mul_ps(u, az), _mm512_mul_ps(v, bz)),
+                _mm512_mul_ps(w, cz),
+            ),
+            sz,
+        );
+        let inv = _mm512_div_ps(_mm512_set1_ps(1.0), det);
+        let t = _mm512_mul_ps(t_scaled, inv);
+        let in_range = _mm512_cmp_ps_mask::<_CMP_NEQ_UQ>(det, zero)
+            & _mm512_cmp_ps_mask::<_CMP_GT_OQ>(t, zero)
+            & _mm512_cmp_ps_mask::<_CMP_LT_OQ>(t, limit);
+        // The distance error bound, in the order of `t_error_bound`.
+        let abs_sx = abs16(sx);
+        let abs_sy = abs16(sy);
+        let max_z = max3_abs16(az, bz, cz);
+        let max_zt = _mm512_mul_ps(max_z, abs16(sz));
+        let max_x = max3_abs16(ax, bx, cx);
+        let max_y = max3_abs16(ay, by, cy);
+        let delta_z = _mm512_mul_ps(_mm512_set1_ps(G3), max_zt);
+        let delta_x = _mm512_mul_ps(
+            _mm512_set1_ps(G5),
+            _mm512_add_ps(max_x, _mm512_mul_ps(_mm512_add_ps(abs_sx, abs_sx), max_z)),
+        );
+        let delta_y = _mm512_mul_ps(
+            _mm512_set1_ps(G5),
+            _mm512_add_ps(max_y, _mm512_mul_ps(_mm512_add_ps(abs_sy, abs_sy), max_z)),
+        );
+        let delta_e = _mm512_mul_ps(
+            _mm512_set1_ps(2.0),
+            _mm512_add_ps(
+                _mm512_add_ps(
+                    _mm512_mul_ps(_mm512_mul_ps(_mm512_set1_ps(G2), max_x), max_y),
+                    _mm512_mul_ps(delta_y, max_x),
+                ),
+                _mm512_mul_ps(delta_x, max_y),
+            ),
+        );
+        let max_e = max3_abs16(u, v, w);
+        let bound = _mm512_mul_ps(
+            _mm512_mul_ps(
+                _mm512_set1_ps(3.0),
+                _mm512_add_ps(
+                    _mm512_add_ps(
+                        _mm512_mul_ps(_mm512_mul_ps(_mm512_set1_ps(G3), max_e), max_zt),
+                        _mm512_mul_ps(delta_e, max_zt),
+                    ),
+                    _mm512_mul_ps(delta_z, max_e),
+                ),
+            ),
+            abs16(inv),
+        );
+        let ok = in_range & _mm512_cmp_ps_mask::<_CMP_NLE_UQ>(t, bound);
+        // Infinite or NaN distance or bound: to the scalar test's f64 path.
+        let inf = _mm512_set1_ps(f32::INFINITY);
+        let big = _mm512_cmp_ps_mask::<_CMP_NLT_UQ>(abs16(t_scaled), inf)
+            | _mm512_cmp_ps_mask::<_CMP_NLT_UQ>(bound, inf);
+        let overflow = big as u32 & inside;
+        let hits = ok as u32 & inside & !overflow;
+        if hits != 0 {
+            _mm512_storeu_ps(out[0].as_mut_ptr(), t);
+            _mm512_storeu_ps(out[1].as_mut_ptr(), _mm512_mul_ps(v, inv));
+            _mm512_storeu_ps(out[2].as_mut_ptr(), _mm512_mul_ps(w, inv));
+        }
+        (hits, exact | overflow)
+    }
+}
