@@ -2,7 +2,11 @@ use glam::{BVec3A, Vec3, Vec3A};
 
 /// A ray `origin + t * dir`. The direction need not be normalized; `t` is measured in units of
 /// its length.
+///
+/// Laid out as six floats (origin then direction), which the AVX-512 kernel reads a packet of
+/// rays as.
 #[derive(Clone, Copy, Debug, PartialEq)]
+#[repr(C)]
 pub struct Ray {
     /// Where the ray starts.
     pub origin: Vec3,

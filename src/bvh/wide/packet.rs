@@ -14,6 +14,8 @@
 //! Packets need every ray in the same direction octant (so one child order and one near plane
 //! per axis serve all) and finite reciprocals; any other packet is traced ray by ray.
 
+use glam::{Vec3A, Vec4};
+
 use super::kernel::stack::SmallStack;
 use super::kernel::{FAR_SCALE, Lanes, TriRay};
 use super::traverse::{Best, CULL_SLACK, leaf_closest};
@@ -27,6 +29,7 @@ pub const PACKET: usize = 64;
 pub(crate) struct Rays {
     pub n: usize,
     pub origin: [[f32; PACKET]; 3],
+    pub dir: [[f32; PACKET]; 3],
     pub inv: [[f32; PACKET]; 3],
     pub inv_far: [[f32; PACKET]; 3],
     /// Per axis, the near plane's index in [`WideNode::planes`] (the same for every ray).
@@ -59,18 +62,12 @@ impl Tris {
     #[inline(always)]
     // One lane index reads and writes nine arrays: clearer than zipping them.
     #[allow(clippy::needless_range_loop)]
-    fn make(&mut self, rays: &[Ray], r: &Rays) {
+    fn make(&mut self, r: &Rays) {
         if self.made {
             return;
         }
         self.made = true;
-        // Lanes past the packet's end get a zero direction: constants never used.
-        let mut dir = [[0.0f32; PACKET]; 3];
-        for (i, ray) in rays.iter().enumerate() {
-            for (a, d) in dir.iter_mut().enumerate() {
-                d[i] = ray.dir[a];
-            }
-        }
+        let dir = &r.dir;
         for i in 0..PACKET {
             let (dx, dy, dz) = (dir[0][i], dir[1][i], dir[2][i]);
             let (ax, ay, az) = (dx.abs(), dy.abs(), dz.abs());
@@ -127,14 +124,21 @@ pub(crate) fn perm_of(id: u8) -> [usize; 3] {
 impl Rays {
     /// The packet, or `None` when its rays do not share an octant, some reciprocal is
     /// infinite, or some ray is not valid (a non-finite origin or direction).
+    ///
+    /// The rays are copied component by component first (by the kernel's
+    /// [`Lanes::load_rays`] where it has one); every other step then runs over whole arrays of
+    /// [`PACKET`] lanes with no branch (eight or sixteen lanes per instruction in the SIMD
+    /// kernels this is inlined into). Lanes past the packet's end repeat its first ray, which
+    /// changes no bound.
     #[inline(always)]
-    fn new(rays: &[Ray]) -> Option<Rays> {
-        use glam::Vec3A;
+    fn new<L: Lanes>(rays: &[Ray]) -> Option<Rays> {
         let n = rays.len();
-        let octant = Vec3A::from(rays.first()?.dir).is_negative_bitmask();
+        let first = rays.first()?;
+        let octant = Vec3A::from(first.dir).is_negative_bitmask();
         let mut r = Rays {
             n,
             origin: [[0.0; PACKET]; 3],
+            dir: [[0.0; PACKET]; 3],
             inv: [[0.0; PACKET]; 3],
             inv_far: [[0.0; PACKET]; 3],
             near: std::array::from_fn(|a| 2 * a + ((octant >> a) & 1) as usize),
@@ -146,34 +150,58 @@ impl Rays {
             far_lo: [0.0; 3],
             far_hi: [0.0; 3],
         };
-        let (mut o_lo, mut o_hi) = (Vec3A::INFINITY, Vec3A::NEG_INFINITY);
-        let (mut i_lo, mut i_hi) = (Vec3A::INFINITY, Vec3A::NEG_INFINITY);
-        let mut same = true;
-        for (i, ray) in rays.iter().enumerate() {
-            let (o, d) = (Vec3A::from(ray.origin), Vec3A::from(ray.dir));
-            // A zero direction has an infinite reciprocal, caught below.
-            same &= (d.is_negative_bitmask() == octant) & o.is_finite() & d.is_finite();
-            let inv = Vec3A::ONE / d;
-            (o_lo, o_hi) = (o_lo.min(o), o_hi.max(o));
-            (i_lo, i_hi) = (i_lo.min(inv), i_hi.max(inv));
-            let far = inv * FAR_SCALE;
-            for a in 0..3 {
-                r.origin[a][i] = o[a];
-                r.inv[a][i] = inv[a];
-                r.inv_far[a][i] = far[a];
+        if !L::load_rays(rays, &mut r.origin, &mut r.dir) {
+            for (i, ray) in rays.iter().enumerate() {
+                for a in 0..3 {
+                    r.origin[a][i] = ray.origin[a];
+                    r.dir[a][i] = ray.dir[a];
+                }
             }
         }
-        // A zero or tiny component (infinite reciprocal) could meet 0 * inf.
-        if !same || !i_lo.is_finite() || !i_hi.is_finite() {
-            return None;
+        for i in n..PACKET {
+            for a in 0..3 {
+                r.origin[a][i] = first.origin[a];
+                r.dir[a][i] = first.dir[a];
+            }
         }
-        // Rounding is monotonic, so the far reciprocals' range is the range's product.
-        (r.o_lo, r.o_hi) = (o_lo.to_array(), o_hi.to_array());
-        (r.inv_lo, r.inv_hi) = (i_lo.to_array(), i_hi.to_array());
-        let (f_lo, f_hi) = (i_lo * FAR_SCALE, i_hi * FAR_SCALE);
-        (r.far_lo, r.far_hi) = (f_lo.to_array(), f_hi.to_array());
-        Some(r)
+        let mut bad = false;
+        for a in 0..3 {
+            // Any lane with a non-finite component or a direction sign off the octant's.
+            let sign = (octant >> a & 1) << 31;
+            let mut off = 0u32;
+            for (&o, &d) in r.origin[a].iter().zip(&r.dir[a]) {
+                let (o, d) = (o.to_bits(), d.to_bits());
+                let inf = 0x7f80_0000;
+                off |= ((o & inf == inf) | (d & inf == inf) | (d & 1 << 31 != sign)) as u32;
+            }
+            bad |= off != 0;
+            // A zero or tiny component has an infinite reciprocal, caught below.
+            for ((inv, far), &d) in r.inv[a].iter_mut().zip(&mut r.inv_far[a]).zip(&r.dir[a]) {
+                *inv = 1.0 / d;
+                *far = *inv * FAR_SCALE;
+            }
+            (r.o_lo[a], r.o_hi[a]) = lane_range(&r.origin[a]);
+            (r.inv_lo[a], r.inv_hi[a]) = lane_range(&r.inv[a]);
+            // Rounding is monotonic, so the far reciprocals' range is the range's product.
+            (r.far_lo[a], r.far_hi[a]) = (r.inv_lo[a] * FAR_SCALE, r.inv_hi[a] * FAR_SCALE);
+            // An infinite reciprocal could meet 0 * inf.
+            bad |= !(r.inv_lo[a].is_finite() && r.inv_hi[a].is_finite());
+        }
+        (!bad).then_some(r)
     }
+}
+
+/// The smallest and largest of a packet array's lanes (which are not NaN), four lanes per
+/// instruction (see [`largest`]).
+#[inline(always)]
+fn lane_range(x: &[f32; PACKET]) -> (f32, f32) {
+    let mut lo = Vec4::INFINITY;
+    let mut hi = Vec4::NEG_INFINITY;
+    for c in x.chunks_exact(4) {
+        let v = Vec4::from_slice(c);
+        (lo, hi) = (lo.min(v), hi.max(v));
+    }
+    (lo.min_element(), hi.max_element())
 }
 
 /// The smallest and largest of the four products of `[d_lo, d_hi] x [i_lo, i_hi]`.
@@ -241,17 +269,16 @@ pub(crate) fn rays_entering_scalar(
     mask
 }
 
-/// The largest of the 64 limits (which are never NaN), eight lanes at a time.
+/// The largest of the 64 limits (which are never NaN) and zero, four lanes per instruction
+/// (more where the kernel's instruction set has wider ones: the compiler joins them; a loop
+/// over eight scalar maxima was compiled as scalar instructions).
 #[inline(always)]
 fn largest(limit: &[f32; PACKET]) -> f32 {
-    let mut m = [0.0f32; 8];
-    for c in 0..PACKET / 8 {
-        for j in 0..8 {
-            let x = limit[8 * c + j];
-            m[j] = if x > m[j] { x } else { m[j] };
-        }
+    let mut m = Vec4::ZERO;
+    for c in limit.chunks_exact(4) {
+        m = m.max(Vec4::from_slice(c));
     }
-    m.iter().fold(0.0f32, |a, &b| if b > a { b } else { a })
+    m.max_element()
 }
 
 /// Closest hits of `rays` (at most [`PACKET`]) at `0 < t < t_max`, into `best`
@@ -267,7 +294,7 @@ pub(crate) fn trace_packet<L: Lanes, const ANY: bool>(
     best: &mut [Best],
 ) -> bool {
     debug_assert!(rays.len() <= PACKET && best.len() == rays.len());
-    let Some(r) = Rays::new(rays) else {
+    let Some(r) = Rays::new::<L>(rays) else {
         return false;
     };
     let mut bests = Bests {
@@ -284,11 +311,11 @@ pub(crate) fn trace_packet<L: Lanes, const ANY: bool>(
     if w.nodes.is_empty() {
         if let Some((first, count)) = w.root_leaf {
             let all = u64::MAX >> (64 - r.n);
-            tris.make(rays, &r);
+            tris.make(&r);
             leaf_rays::<L>(w, first, count, &r, &tris, all, &mut bests);
         }
     } else {
-        walk::<L, ANY>(w, rays, &r, &mut tris, t_max, &mut bests);
+        walk::<L, ANY>(w, &r, &mut tris, t_max, &mut bests);
     }
     for (i, b) in best.iter_mut().enumerate() {
         *b = Best {
@@ -306,7 +333,6 @@ pub(crate) fn trace_packet<L: Lanes, const ANY: bool>(
 #[inline(always)]
 fn walk<L: Lanes, const ANY: bool>(
     w: &WideBvh,
-    rays: &[Ray],
     r: &Rays,
     tris: &mut Tris,
     t_max: f32,
@@ -342,7 +368,7 @@ fn walk<L: Lanes, const ANY: bool>(
                 continue;
             }
             let (first, count) = child.blocks();
-            tris.make(rays, r);
+            tris.make(r);
             leaf_rays::<L>(w, first, count, r, tris, active, bests);
             let mut m = active;
             while m != 0 {
@@ -447,7 +473,7 @@ pub(crate) fn ray_blocks<L: Lanes>(
     bests: &mut Bests,
 ) {
     let ray = PreparedRay::from_parts(
-        glam::Vec3A::new(r.origin[0][i], r.origin[1][i], r.origin[2][i]),
+        Vec3A::new(r.origin[0][i], r.origin[1][i], r.origin[2][i]),
         perm_of(tris.perm[i]),
         [tris.shear[0][i], tris.shear[1][i], tris.shear[2][i]],
     );
@@ -492,6 +518,7 @@ mod tests {
             let mut r = Rays {
                 n: PACKET,
                 origin: [[0.0; PACKET]; 3],
+                dir: [[0.0; PACKET]; 3],
                 inv: [[0.0; PACKET]; 3],
                 inv_far: [[0.0; PACKET]; 3],
                 near: [0, 2, 4],
@@ -505,6 +532,7 @@ mod tests {
             };
             for (i, ray) in rays.iter().enumerate() {
                 for a in 0..3 {
+                    r.dir[a][i] = ray.dir[a];
                     r.inv[a][i] = 1.0 / ray.dir[a];
                 }
             }
@@ -513,7 +541,7 @@ mod tests {
                 perm: [0; PACKET],
                 shear: [[0.0; PACKET]; 3],
             };
-            tris.make(&rays, &r);
+            tris.make(&r);
             let single = PreparedRay::new(&rays[p % PACKET]);
             let i = p % PACKET;
             assert_eq!(perm_of(tris.perm[i]), single.k, "direction {d}");

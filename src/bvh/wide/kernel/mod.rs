@@ -22,7 +22,7 @@
 //!   bound overflowed f32, are handed to the scalar test (its f64 path and tie rule).
 
 #[cfg(target_arch = "x86_64")]
-mod group16;
+mod lanes16;
 mod scalar;
 pub(crate) mod stack;
 #[cfg(target_arch = "x86_64")]
@@ -30,7 +30,7 @@ mod x86;
 
 use super::packet::{Bests, Group, PACKET, Rays, Tris, rays_entering_scalar};
 use super::{BLOCK, TriBlock, WIDTH, WideNode};
-use crate::geometry::{PreparedRay, gamma};
+use crate::geometry::{PreparedRay, Ray, gamma};
 use stack::Stack;
 
 /// Which implementation the traversal uses.
@@ -234,6 +234,18 @@ pub(crate) trait Lanes: Sized {
     #[inline(always)]
     fn rays_entering(n: &WideNode, lane: usize, r: &Rays, limit: &[f32; PACKET]) -> u64 {
         rays_entering_scalar(n, lane, r, limit)
+    }
+
+    /// Copies a whole packet of rays ([`PACKET`] of them) component by component into `origin`
+    /// and `dir`, or returns `false` (the caller copies them) when this kernel has no faster
+    /// way or `rays` is not a whole packet.
+    #[inline(always)]
+    fn load_rays(
+        _rays: &[Ray],
+        _origin: &mut [[f32; PACKET]; 3],
+        _dir: &mut [[f32; PACKET]; 3],
+    ) -> bool {
+        false
     }
 
     /// The fewest rays of a [`Group`] that [`Lanes::group_blocks`] tests together; smaller

@@ -14,7 +14,7 @@
 //! every node, and EVEX encodings. On session 13's Zen 4 it traced the dragon's canonical
 //! rays 2-4% faster (closest, occlusion and packets; `examples/trace_time`, three pairs). Its
 //! one part of its own, a packet's rays tested against a triangle sixteen at a time, is in
-//! [`super::group16`].
+//! [`super::lanes16`].
 //!
 //! Every operation mirrors the scalar reference in order and kind: subtract then multiply in
 //! the box test (no FMA, so the conservative far scale stays valid), and in the triangle test
@@ -867,6 +867,6 @@ entry_points!(avx2, Avx2Cpu, Avx2, "avx2,fma,popcnt,bmi1,lzcnt");
 entry_points!(
     avx512,
     Avx512Cpu,
-    super::super::group16::Avx512,
+    super::super::lanes16::Avx512,
     "avx2,fma,popcnt,bmi1,lzcnt,avx512f,avx512vl,avx512bw,avx512dq"
 );

@@ -1,7 +1,11 @@
-//! The AVX-512 kernel's own part: a packet's rays tested against a triangle sixteen at a time.
+//! The AVX-512 kernel's own parts: a packet's rays tested against a triangle sixteen at a
+//! time, and a packet's rays copied component by component sixteen at a time.
 //!
 //! The AVX-512 kernel is the AVX2 one compiled with AVX-512 enabled (see [`super::x86`]), but
-//! for one thing: at a leaf, the rays of a packet that share an axis permutation are taken in
+//! for two things. A packet's rays, six floats each, become its arrays of origins and
+//! directions by two-source lane permutations ([`Avx512::load_rays`]): five instructions per
+//! component for sixteen rays, where copying them one float at a time took six loads and six
+//! stores per ray. And at a leaf, the rays of a packet that share an axis permutation are taken in
 //! groups of up to sixteen instead of eight, and a group of more than eight is tested against
 //! each triangle in one 512-bit register per value ([`triangle_rays16`]). A leaf is entered by
 //! about twelve rays of a tile, so most leaves need one group where eight lanes needed two.
@@ -21,7 +25,7 @@ use super::x86::{Avx2, NodeRay8, TriRay4};
 use super::{BlockHits, G2, G3, G5, Lanes, NodeRay, TriRay};
 use crate::bvh::wide::packet::{Bests, Group, PACKET, Rays, Tris, perm_of};
 use crate::bvh::wide::{BLOCK, TriBlock, WIDTH, WideNode};
-use crate::geometry::PreparedRay;
+use crate::geometry::{PreparedRay, Ray};
 
 /// The AVX-512 kernel's lanes: [`Avx2`]'s tests, but groups of up to sixteen rays.
 pub(crate) struct Avx512;
@@ -71,6 +75,63 @@ impl Lanes for Avx512 {
         Avx2::rays_entering(n, lane, r, limit)
     }
 
+    /// Sixteen rays at a time: six 512-bit loads hold their 96 floats; each component's
+    /// sixteen lanes are picked from rays 0-7 (the first three loads) and 8-15 (the last three)
+    /// by two permutations each, and the halves joined by a blend.
+    #[inline(always)]
+    fn load_rays(
+        rays: &[Ray],
+        origin: &mut [[f32; PACKET]; 3],
+        dir: &mut [[f32; PACKET]; 3],
+    ) -> bool {
+        if rays.len() != PACKET {
+            return false;
+        }
+        let floats = rays.as_ptr().cast::<f32>();
+        // SAFETY: only reached inside the AVX-512 entry points; `Ray` is `repr(C)` of six
+        // `f32` (checked below), so `rays` is `6 * PACKET` contiguous floats, and every load
+        // reads 16 of them at an offset of at most `6 * PACKET - 16`; the stores write 16
+        // floats within one `[f32; PACKET]` row.
+        unsafe {
+            let mut index = [[_mm512_setzero_si512(); 2]; 6];
+            for (c, pair) in index.iter_mut().enumerate() {
+                pair[0] = _mm512_loadu_si512(TRANSPOSE[c][0].as_ptr().cast());
+                pair[1] = _mm512_loadu_si512(TRANSPOSE[c][1].as_ptr().cast());
+            }
+            for chunk in 0..PACKET / 16 {
+                let base = floats.add(96 * chunk);
+                let z = [
+                    _mm512_loadu_ps(base),
+                    _mm512_loadu_ps(base.add(16)),
+                    _mm512_loadu_ps(base.add(32)),
+                    _mm512_loadu_ps(base.add(48)),
+                    _mm512_loadu_ps(base.add(64)),
+                    _mm512_loadu_ps(base.add(80)),
+                ];
+                for (c, [first, second]) in index.iter().enumerate() {
+                    let lo = _mm512_permutex2var_ps(
+                        _mm512_permutex2var_ps(z[0], *first, z[1]),
+                        *second,
+                        z[2],
+                    );
+                    let hi = _mm512_permutex2var_ps(
+                        _mm512_permutex2var_ps(z[3], *first, z[4]),
+                        *second,
+                        z[5],
+                    );
+                    let row = if c < 3 {
+                        &mut origin[c]
+                    } else {
+                        &mut dir[c - 3]
+                    };
+                    let lanes = &mut row[16 * chunk..16 * chunk + 16];
+                    _mm512_storeu_ps(lanes.as_mut_ptr(), _mm512_mask_blend_ps(0xff00, lo, hi));
+                }
+            }
+        }
+        true
+    }
+
     const RAYS_TOGETHER: usize = Avx2::RAYS_TOGETHER;
 
     const GROUP_MAX: usize = 16;
@@ -90,6 +151,34 @@ impl Lanes for Avx512 {
         Avx2::block(b, r, limit, out)
     }
 }
+
+// `load_rays` reads a ray as six floats.
+const _: () = assert!(std::mem::size_of::<Ray>() == 24 && std::mem::align_of::<Ray>() == 4);
+
+/// For each of a ray's six floats `c` (origin x, y, z, direction x, y, z), the lane indices
+/// of the two permutations that pick it from eight rays' 48 floats held in three registers:
+/// lane `j` (for ray `j % 8`) wants float `a = 6 (j % 8) + c`. The first permutation takes it
+/// from the first two registers (indices 0-31) when `a < 32`; the second keeps that lane
+/// (index `j`) or takes float `a` from the third register (index `16 + a - 32`).
+const TRANSPOSE: [[[i32; 16]; 2]; 6] = {
+    let mut t = [[[0i32; 16]; 2]; 6];
+    let mut c = 0;
+    while c < 6 {
+        let mut j = 0;
+        while j < 16 {
+            let a = 6 * (j % 8) + c;
+            if a < 32 {
+                t[c][0][j] = a as i32;
+                t[c][1][j] = j as i32;
+            } else {
+                t[c][1][j] = (a - 16) as i32;
+            }
+            j += 1;
+        }
+        c += 1;
+    }
+    t
+};
 
 /// Sixteen lanes of a packet array, lane `j` from the group's `j`-th ray.
 #[inline(always)]
