@@ -122,20 +122,10 @@ pub(crate) fn perm_of(id: u8) -> [usize; 3] {
 }
 
 impl Rays {
-    /// The packet, or `None` when its rays do not share an octant, some reciprocal is
-    /// infinite, or some ray is not valid (a non-finite origin or direction).
-    ///
-    /// The rays are copied component by component first (by the kernel's
-    /// [`Lanes::load_rays`] where it has one); every other step then runs over whole arrays of
-    /// [`PACKET`] lanes with no branch (eight or sixteen lanes per instruction in the SIMD
-    /// kernels this is inlined into). Lanes past the packet's end repeat its first ray, which
-    /// changes no bound.
+    /// A packet of `n` rays in `octant` with every array and bound zero, to be filled in.
     #[inline(always)]
-    fn new<L: Lanes>(rays: &[Ray]) -> Option<Rays> {
-        let n = rays.len();
-        let first = rays.first()?;
-        let octant = Vec3A::from(first.dir).is_negative_bitmask();
-        let mut r = Rays {
+    fn zeroed(n: usize, octant: u32) -> Rays {
+        Rays {
             n,
             origin: [[0.0; PACKET]; 3],
             dir: [[0.0; PACKET]; 3],
@@ -149,7 +139,23 @@ impl Rays {
             inv_hi: [0.0; 3],
             far_lo: [0.0; 3],
             far_hi: [0.0; 3],
-        };
+        }
+    }
+
+    /// The packet, or `None` when its rays do not share an octant, some reciprocal is
+    /// infinite, or some ray is not valid (a non-finite origin or direction).
+    ///
+    /// The rays are copied component by component first (by the kernel's
+    /// [`Lanes::load_rays`] where it has one); every other step then runs over whole arrays of
+    /// [`PACKET`] lanes with no branch (eight or sixteen lanes per instruction in the SIMD
+    /// kernels this is inlined into). Lanes past the packet's end repeat its first ray, which
+    /// changes no bound.
+    #[inline(always)]
+    fn new<L: Lanes>(rays: &[Ray]) -> Option<Rays> {
+        let n = rays.len();
+        let first = rays.first()?;
+        let octant = Vec3A::from(first.dir).is_negative_bitmask();
+        let mut r = Rays::zeroed(n, octant);
         if !L::load_rays(rays, &mut r.origin, &mut r.dir) {
             for (i, ray) in rays.iter().enumerate() {
                 for a in 0..3 {
@@ -515,21 +521,7 @@ mod tests {
                 .collect();
             // Zero components have infinite reciprocals, which `Rays::new` refuses: the
             // constants are made from the reciprocals directly then.
-            let mut r = Rays {
-                n: PACKET,
-                origin: [[0.0; PACKET]; 3],
-                dir: [[0.0; PACKET]; 3],
-                inv: [[0.0; PACKET]; 3],
-                inv_far: [[0.0; PACKET]; 3],
-                near: [0, 2, 4],
-                octant: 0,
-                o_lo: [0.0; 3],
-                o_hi: [0.0; 3],
-                inv_lo: [0.0; 3],
-                inv_hi: [0.0; 3],
-                far_lo: [0.0; 3],
-                far_hi: [0.0; 3],
-            };
+            let mut r = Rays::zeroed(PACKET, 0);
             for (i, ray) in rays.iter().enumerate() {
                 for a in 0..3 {
                     r.dir[a][i] = ray.dir[a];
