@@ -441,8 +441,8 @@ impl Group {
     }
 }
 
-/// The rays in `active` (bit per ray) against a leaf's blocks: in groups of up to eight rays
-/// that share an axis permutation, gathered from wherever they sit in the tile (a leaf is
+/// The rays in `active` (bit per ray) against a leaf's blocks: in groups of up to
+/// [`Lanes::GROUP_MAX`] rays (eight, sixteen with AVX-512) that share an axis permutation, gathered from wherever they sit in the tile (a leaf is
 /// entered by a few rays scattered over the tile's rows), each group tested together when the
 /// kernel can and it is large enough, else ray by ray.
 #[inline(always)]
