@@ -558,18 +558,10 @@ impl Builder<'_> {
         for (d, &o) in dst.iter_mut().zip(order.iter()) {
             *d = src[o as u32 as usize];
         }
-        let side = |r: &[PrimRef]| {
-            r.iter()
-                .fold((Aabb::EMPTY, Aabb::EMPTY), |(mut b, mut c), p| {
-                    b.grow(&p.bounds());
-                    c.grow_point(p.centroid());
-                    (b, c)
-                })
-        };
         Some(Split {
             mid: task.start + split,
-            left: side(&dst[..split]),
-            right: side(&dst[split..]),
+            left: side_bounds(&dst[..split]),
+            right: side_bounds(&dst[split..]),
             in_scratch: !task.in_scratch,
         })
     }
@@ -586,22 +578,24 @@ fn ordered_bits(x: f32) -> u32 {
     if b >> 31 == 1 { !b } else { b | 1 << 31 }
 }
 
+/// The box and the centroid box of `refs` (one side of a split).
+fn side_bounds(refs: &[PrimRef]) -> (Aabb, Aabb) {
+    let mut b = Aabb::EMPTY;
+    let mut c = Aabb::EMPTY;
+    for p in refs {
+        b.grow(&p.bounds());
+        c.grow_point(p.centroid());
+    }
+    (b, c)
+}
+
 /// Both sides' boxes for a split of `task`'s range (in `data`) at `mid`; the data stay where
 /// they are.
 fn finish(data: &[PrimRef], task: &Task, mid: usize) -> Split {
-    let side = |r: &[PrimRef]| {
-        let mut b = Aabb::EMPTY;
-        let mut c = Aabb::EMPTY;
-        for p in r {
-            b.grow(&p.bounds());
-            c.grow_point(p.centroid());
-        }
-        (b, c)
-    };
     Split {
         mid,
-        left: side(&data[task.start..mid]),
-        right: side(&data[mid..task.end]),
+        left: side_bounds(&data[task.start..mid]),
+        right: side_bounds(&data[mid..task.end]),
         in_scratch: task.in_scratch,
     }
 }
