@@ -478,12 +478,7 @@ pub(crate) fn ray_blocks<L: Lanes>(
     i: usize,
     bests: &mut Bests,
 ) {
-    let ray = PreparedRay::from_parts(
-        Vec3A::new(r.origin[0][i], r.origin[1][i], r.origin[2][i]),
-        perm_of(tris.perm[i]),
-        [tris.shear[0][i], tris.shear[1][i], tris.shear[2][i]],
-    );
-    let tr = TriRay::new(&ray);
+    let tr = TriRay::new(&prepared(r, tris, i));
     let mut best = Best {
         t: bests.t[i],
         prim: bests.prim[i],
@@ -492,6 +487,42 @@ pub(crate) fn ray_blocks<L: Lanes>(
     };
     leaf_closest::<L>(blocks, &tr, &L::tri_ray(&tr), &mut best);
     (bests.t[i], bests.prim[i], bests.u[i], bests.v[i]) = (best.t, best.prim, best.u, best.v);
+}
+
+/// Ray `i` of the packet as the triangle test takes it (the box test's parts left neutral).
+#[inline(always)]
+fn prepared(r: &Rays, tris: &Tris, i: usize) -> PreparedRay {
+    PreparedRay::from_parts(
+        Vec3A::new(r.origin[0][i], r.origin[1][i], r.origin[2][i]),
+        perm_of(tris.perm[i]),
+        [tris.shear[0][i], tris.shear[1][i], tris.shear[2][i]],
+    )
+}
+
+/// The lanes in `exact` (bits of group `g`) against triangle `tri` of `b` with the scalar test
+/// (its f64 path and tie rule), each below its own `limit`: what the group tests of the SIMD
+/// kernels hand over where an edge function was exactly zero or the distance overflowed.
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn group_exact(
+    b: &TriBlock,
+    tri: usize,
+    g: &Group,
+    mut exact: u32,
+    limit: &[f32],
+    r: &Rays,
+    tris: &Tris,
+    bests: &mut Bests,
+) {
+    while exact != 0 {
+        let j = exact.trailing_zeros() as usize;
+        exact &= exact - 1;
+        let i = g.idx[j];
+        let ray = prepared(r, tris, i);
+        if let Some(h) = crate::geometry::intersect_triangle(&ray, &b.triangle(tri), limit[j]) {
+            bests.offer(i, h.t, b.prim[tri], h.u, h.v);
+        }
+    }
 }
 
 #[cfg(test)]

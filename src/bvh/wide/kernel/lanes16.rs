@@ -23,9 +23,9 @@ use std::arch::x86_64::*;
 use super::stack::Stack;
 use super::x86::{Avx2, NodeRay8, TriRay4};
 use super::{BlockHits, G2, G3, G5, Lanes, NodeRay, TriRay};
-use crate::bvh::wide::packet::{Bests, Group, PACKET, Rays, Tris, perm_of};
+use crate::bvh::wide::packet::{Bests, Group, PACKET, Rays, Tris, group_exact, perm_of};
 use crate::bvh::wide::{BLOCK, TriBlock, WIDTH, WideNode};
-use crate::geometry::{PreparedRay, Ray};
+use crate::geometry::Ray;
 
 /// The AVX-512 kernel's lanes: [`Avx2`]'s tests, but groups of up to sixteen rays.
 pub(crate) struct Avx512;
@@ -215,7 +215,7 @@ fn group_blocks16(blocks: &[TriBlock], r: &Rays, tris: &Tris, g: &Group, bests: 
             }
             // Each ray's limit: the next float above its best distance (ties still count).
             let limit16 = next_up16(best);
-            let (mut hits, mut exact) =
+            let (mut hits, exact) =
                 triangle_rays16(b, tri, k, &o, &shear, limit16, lanes, &mut out);
             if hits != 0 {
                 // SAFETY: only reached inside the AVX-512 entry points; `out[0]` holds sixteen
@@ -235,21 +235,7 @@ fn group_blocks16(blocks: &[TriBlock], r: &Rays, tris: &Tris, g: &Group, bests: 
             let mut limit = [0.0f32; 16];
             // SAFETY: only reached inside the AVX-512 entry points; `limit` holds sixteen floats.
             unsafe { _mm512_storeu_ps(limit.as_mut_ptr(), limit16) };
-            while exact != 0 {
-                let j = exact.trailing_zeros() as usize;
-                exact &= exact - 1;
-                let i = g.idx[j];
-                let ray = PreparedRay::from_parts(
-                    glam::Vec3A::new(r.origin[0][i], r.origin[1][i], r.origin[2][i]),
-                    k,
-                    [tris.shear[0][i], tris.shear[1][i], tris.shear[2][i]],
-                );
-                if let Some(h) =
-                    crate::geometry::intersect_triangle(&ray, &b.triangle(tri), limit[j])
-                {
-                    bests.offer(i, h.t, b.prim[tri], h.u, h.v);
-                }
-            }
+            group_exact(b, tri, g, exact, &limit, r, tris, bests);
             best = gather16(&bests.t, g);
         }
     }

@@ -29,10 +29,10 @@ use std::arch::x86_64::*;
 
 use super::stack::Stack;
 use super::{BlockHits, G2, G3, G5, Lanes, NodeRay, TriRay};
-use crate::bvh::wide::packet::{Bests, Group, PACKET, Rays, Tris, perm_of};
+use crate::bvh::wide::packet::{Bests, Group, PACKET, Rays, Tris, group_exact, perm_of};
 use crate::bvh::wide::traverse::{self, Best};
 use crate::bvh::wide::{BLOCK, TriBlock, WIDTH, WideBvh, WideNode};
-use crate::geometry::{PreparedRay, Ray};
+use crate::geometry::Ray;
 
 /// The triangle test's ray data, broadcast to 4 lanes.
 #[derive(Clone, Copy)]
@@ -512,7 +512,7 @@ impl Lanes for Avx2 {
                 }
                 // Each ray's limit: the next float above its best distance (ties still count).
                 let limit8 = next_up8(best);
-                let (mut hits, mut exact) =
+                let (mut hits, exact) =
                     triangle_rays8(b, tri, k, &o, &shear, limit8, lanes, &mut out);
                 if hits != 0 {
                     // SAFETY: only reached inside the AVX2 and AVX-512 entry points; `out[0]`
@@ -533,21 +533,7 @@ impl Lanes for Avx2 {
                 // SAFETY: only reached inside the AVX2 and AVX-512 entry points; `limit` holds
                 // eight floats.
                 unsafe { _mm256_storeu_ps(limit.as_mut_ptr(), limit8) };
-                while exact != 0 {
-                    let j = exact.trailing_zeros() as usize;
-                    exact &= exact - 1;
-                    let i = g.idx[j];
-                    let ray = PreparedRay::from_parts(
-                        glam::Vec3A::new(r.origin[0][i], r.origin[1][i], r.origin[2][i]),
-                        k,
-                        [tris.shear[0][i], tris.shear[1][i], tris.shear[2][i]],
-                    );
-                    if let Some(h) =
-                        crate::geometry::intersect_triangle(&ray, &b.triangle(tri), limit[j])
-                    {
-                        bests.offer(i, h.t, b.prim[tri], h.u, h.v);
-                    }
-                }
+                group_exact(b, tri, g, exact, &limit, r, tris, bests);
                 best = gather(&bests.t);
             }
         }
