@@ -3,7 +3,7 @@
 mod common;
 
 use glam::Vec3;
-use tracery::bvh::{BruteForce, Bvh, Visit};
+use tracery::bvh::{BruteForce, Bvh, RayTile, Visit};
 use tracery::geometry::Ray;
 use tracery::scene::shapes;
 
@@ -221,6 +221,77 @@ fn packets_give_every_ray_its_single_ray_hit() {
             }
         }
     }
+}
+
+/// Tiles read in place from an image of camera rays (rows of the image apart, the right and
+/// bottom edge tiles narrower and shorter) give every ray its single-ray hit and shadow answer,
+/// each ray answered exactly once at its own index. (Before the check was written, a load of
+/// the wrong rows went unnoticed with the canonical camera: its tiles then mixed octants and
+/// went ray by ray.)
+#[test]
+fn tiles_read_in_place_give_every_ray_its_single_ray_answer() {
+    use tracery::camera::CameraRays;
+    use tracery::scene::{Camera, Mesh};
+    let (width, height) = (100, 60);
+    for (name, tris) in [
+        ("icosphere", shapes::icosphere(4)),
+        ("soup", shapes::random_soup(3000, 0.1, 7)),
+    ] {
+        // Looking along (-1, -1, -1) with a narrow field: every ray in one octant, so every
+        // tile goes as a packet (a tile's rays read from the wrong rows would too).
+        let mut camera = Camera::canonical(&Mesh::from_triangles(tris.clone(), 0).bounds());
+        let distance = (camera.position - camera.look_at).length();
+        camera.position = camera.look_at + Vec3::ONE.normalize() * distance;
+        camera.vfov_deg = 25.0;
+        let rays = CameraRays::new(&camera, width, height).pixel_center_rays();
+        assert_eq!(rays.len(), (width * height) as usize);
+        let width = width as usize;
+        for (bvh_name, bvh) in common::all_bvhs(&tris) {
+            let (mut hits, mut answered) = (0, vec![0u8; rays.len()]);
+            for y0 in (0..rays.len() / width).step_by(8) {
+                for x0 in (0..width).step_by(8) {
+                    let rows = (rays.len() / width - y0).min(8);
+                    let band = &rays[y0 * width..];
+                    let tile = RayTile::new(&band[x0..], width, (width - x0).min(8), rows)
+                        .expect("a tile inside the image");
+                    bvh.intersect_tile(tile, f32::INFINITY, |at, got| {
+                        let r = &band[x0 + at];
+                        answered[y0 * width + x0 + at] += 1;
+                        let want = bvh.intersect(r, f32::INFINITY);
+                        hits += want.is_some() as usize;
+                        assert_eq!(got, want, "{name}, {bvh_name}: {r:?}");
+                    });
+                    bvh.occluded_tile(tile, f32::INFINITY, |at, got| {
+                        let r = &band[x0 + at];
+                        assert_eq!(got, bvh.occluded(r, f32::INFINITY), "{name}, {bvh_name}");
+                    });
+                }
+            }
+            assert!(
+                answered.iter().all(|&n| n == 1),
+                "{name}: a ray answered twice or never"
+            );
+            assert!(hits > 500 && hits < rays.len(), "{name}: {hits} hits");
+        }
+    }
+}
+
+/// A tile is only made from rays it lies inside.
+#[test]
+fn tiles_outside_their_rays_are_refused() {
+    let rays = vec![Ray::new(Vec3::ZERO, Vec3::Z); 100];
+    assert!(RayTile::new(&rays, 10, 8, 8).is_some());
+    assert!(
+        RayTile::new(&rays, 10, 10, 10).is_none(),
+        "more than a packet"
+    );
+    assert!(
+        RayTile::new(&rays, 4, 8, 2).is_none(),
+        "rows wider than the stride"
+    );
+    assert!(RayTile::new(&rays, 20, 8, 6).is_none(), "past the end");
+    assert!(RayTile::new(&rays, 20, 0, 1).is_none(), "empty");
+    assert_eq!(RayTile::list(&rays[..13]).len(), 13);
 }
 
 /// Packets of shadow rays (any hit) answer every ray as [`Bvh::occluded`] does, at an infinite

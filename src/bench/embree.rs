@@ -342,8 +342,9 @@ impl Embree {
 /// the coherent context flag.
 pub struct EmbreePackets(pub Embree);
 
-/// A packet of up to 16 rays (the rest of the lanes invalid).
-fn packet(rays: &[Ray]) -> (RtcRayHit16, [c_int; 16]) {
+/// The packet of a tile of up to 4 x 4 rays (see [`Engine::closest_tile`]; the rest of the
+/// lanes invalid), with each lane's index in the band.
+fn packet(band: &[Ray], width: usize, x0: usize) -> (RtcRayHit16, [c_int; 16], [usize; 16]) {
     let mut p = RtcRayHit16 {
         ray: RtcRay16 {
             org: [[0.0; 16]; 3],
@@ -365,14 +366,21 @@ fn packet(rays: &[Ray]) -> (RtcRayHit16, [c_int; 16]) {
         },
     };
     let mut valid = [0 as c_int; 16];
-    for (k, r) in rays.iter().enumerate().take(16) {
-        for a in 0..3 {
-            p.ray.org[a][k] = r.origin[a];
-            p.ray.dir[a][k] = r.dir[a];
+    let mut at = [usize::MAX; 16];
+    let x1 = (x0 + 4).min(width);
+    let mut k = 0;
+    for y in 0..band.len() / width {
+        for x in x0..x1 {
+            let r = &band[y * width + x];
+            for a in 0..3 {
+                p.ray.org[a][k] = r.origin[a];
+                p.ray.dir[a][k] = r.dir[a];
+            }
+            (valid[k], at[k]) = (-1, y * width + x);
+            k += 1;
         }
-        valid[k] = -1;
     }
-    (p, valid)
+    (p, valid, at)
 }
 
 impl Engine for EmbreePackets {
@@ -391,37 +399,35 @@ impl Engine for EmbreePackets {
         Some(4)
     }
 
-    fn closest_tile(&self, rays: &[Ray], out: &mut [HitRecord]) {
-        for (rays, out) in rays.chunks(16).zip(out.chunks_mut(16)) {
-            let (mut p, valid) = packet(rays);
-            let mut ctx = RtcIntersectContext::new(RTC_INTERSECT_CONTEXT_FLAG_COHERENT);
-            // SAFETY: the scene is committed; `valid`, `ctx` and the 64-byte aligned packet are
-            // live and exclusively borrowed for the call; unused lanes are 0 in `valid`.
-            unsafe { rtcIntersect16(valid.as_ptr(), self.0.scene, &mut ctx, &mut p) };
-            for (k, o) in out.iter_mut().enumerate() {
-                *o = if p.hit.geom_id[k] == RTC_INVALID_GEOMETRY_ID {
-                    HitRecord::MISS
-                } else {
-                    HitRecord {
-                        t: p.ray.tfar[k],
-                        prim: p.hit.prim_id[k],
-                    }
-                };
-            }
+    fn closest_tile(&self, band: &[Ray], width: usize, x0: usize, out: &mut [HitRecord]) {
+        let (mut p, valid, at) = packet(band, width, x0);
+        let mut ctx = RtcIntersectContext::new(RTC_INTERSECT_CONTEXT_FLAG_COHERENT);
+        // SAFETY: the scene is committed; `valid`, `ctx` and the 64-byte aligned packet are
+        // live and exclusively borrowed for the call; unused lanes are 0 in `valid`.
+        unsafe { rtcIntersect16(valid.as_ptr(), self.0.scene, &mut ctx, &mut p) };
+        for (k, &at) in at
+            .iter()
+            .enumerate()
+            .take_while(|&(_, &at)| at != usize::MAX)
+        {
+            out[at] = if p.hit.geom_id[k] == RTC_INVALID_GEOMETRY_ID {
+                HitRecord::MISS
+            } else {
+                HitRecord {
+                    t: p.ray.tfar[k],
+                    prim: p.hit.prim_id[k],
+                }
+            };
         }
     }
 
-    fn occluded_tile(&self, rays: &[Ray]) -> usize {
-        let mut n = 0;
-        for rays in rays.chunks(16) {
-            let (mut p, valid) = packet(rays);
-            let mut ctx = RtcIntersectContext::new(RTC_INTERSECT_CONTEXT_FLAG_COHERENT);
-            // SAFETY: as in `closest_tile`; `rtcOccluded16` reads and writes the ray part only.
-            unsafe { rtcOccluded16(valid.as_ptr(), self.0.scene, &mut ctx, &mut p.ray) };
-            n += (0..rays.len())
-                .filter(|&k| p.ray.tfar[k] == f32::NEG_INFINITY)
-                .count();
-        }
-        n
+    fn occluded_tile(&self, band: &[Ray], width: usize, x0: usize) -> usize {
+        let (mut p, valid, _) = packet(band, width, x0);
+        let mut ctx = RtcIntersectContext::new(RTC_INTERSECT_CONTEXT_FLAG_COHERENT);
+        // SAFETY: as in `closest_tile`; `rtcOccluded16` reads and writes the ray part only.
+        unsafe { rtcOccluded16(valid.as_ptr(), self.0.scene, &mut ctx, &mut p.ray) };
+        (0..16)
+            .filter(|&k| valid[k] != 0 && p.ray.tfar[k] == f32::NEG_INFINITY)
+            .count()
     }
 }

@@ -4,7 +4,7 @@
 use rayon::prelude::*;
 
 use super::HitRecord;
-use crate::bvh::Bvh;
+use crate::bvh::{Bvh, RayTile};
 use crate::geometry::Ray;
 
 /// A ray tracing engine under test: built once, traced many times.
@@ -22,16 +22,43 @@ pub(super) trait Engine: Sync + Send {
     fn tile(&self) -> Option<u32> {
         None
     }
-    /// Closest hits of one tile's rays (packet engines).
-    fn closest_tile(&self, rays: &[Ray], out: &mut [HitRecord]) {
-        for (o, r) in out.iter_mut().zip(rays) {
-            *o = self.closest(r);
-        }
+    /// Closest hits of one tile's rays (packet engines): the tile of up to `tile()` rows of
+    /// up to `tile()` rays (fewer at the image's right edge) whose first ray is `band[x0]`,
+    /// rows `width` rays apart; each ray's record goes to the same index of `out`.
+    fn closest_tile(&self, band: &[Ray], width: usize, x0: usize, out: &mut [HitRecord]) {
+        for_each_in_tile(self, band.len(), width, x0, |at| {
+            out[at] = self.closest(&band[at])
+        });
     }
-    /// Occluded rays among one tile's rays (packet engines).
-    fn occluded_tile(&self, rays: &[Ray]) -> usize {
-        rays.iter().filter(|r| self.occluded(r)).count()
+    /// Occluded rays among one tile's rays (the tile as in [`Engine::closest_tile`]).
+    fn occluded_tile(&self, band: &[Ray], width: usize, x0: usize) -> usize {
+        let mut n = 0;
+        for_each_in_tile(self, band.len(), width, x0, |at| {
+            n += self.occluded(&band[at]) as usize
+        });
+        n
     }
+}
+
+/// Calls `f(at)` with the index of every ray of the tile whose first ray is `x0` of a band of
+/// `len` rays in rows `width` long, tiles being `engine.tile()` wide (one ray without one).
+fn for_each_in_tile(
+    engine: &(impl Engine + ?Sized),
+    len: usize,
+    width: usize,
+    x0: usize,
+    mut f: impl FnMut(usize),
+) {
+    let x1 = (x0 + engine.tile().unwrap_or(1) as usize).min(width);
+    for y in 0..len / width {
+        (x0..x1).for_each(|x| f(y * width + x));
+    }
+}
+
+/// Our BVH's tile of `tile` x `tile` rays (see [`Engine::closest_tile`]) as a [`RayTile`].
+pub(super) fn ray_tile(band: &[Ray], width: usize, x0: usize, tile: usize) -> RayTile<'_> {
+    let cols = tile.min(width - x0);
+    RayTile::new(&band[x0..], width, cols, band.len() / width).expect("a tile of the band")
 }
 
 impl Engine for Bvh {
@@ -63,53 +90,39 @@ impl Engine for Packets {
     fn tile(&self) -> Option<u32> {
         Some(8)
     }
-    fn occluded_tile(&self, rays: &[Ray]) -> usize {
-        let mut blocked = [false; crate::bvh::wide::packet::PACKET];
-        let blocked = &mut blocked[..rays.len()];
-        self.0.occluded_packet(rays, f32::INFINITY, blocked);
-        blocked.iter().filter(|&&b| b).count()
+    fn occluded_tile(&self, band: &[Ray], width: usize, x0: usize) -> usize {
+        let mut n = 0;
+        self.0
+            .occluded_tile(ray_tile(band, width, x0, 8), f32::INFINITY, |_, b| {
+                n += b as usize
+            });
+        n
     }
-    fn closest_tile(&self, rays: &[Ray], out: &mut [HitRecord]) {
-        let mut hits = [None; crate::bvh::wide::packet::PACKET];
-        let hits = &mut hits[..rays.len()];
-        self.0.intersect_packet(rays, f32::INFINITY, hits);
-        for (o, h) in out.iter_mut().zip(hits.iter()) {
-            *o = match h {
-                Some(h) => HitRecord {
-                    t: h.t,
-                    prim: h.prim,
-                },
-                None => HitRecord::MISS,
-            };
-        }
+    fn closest_tile(&self, band: &[Ray], width: usize, x0: usize, out: &mut [HitRecord]) {
+        let out = &mut out[x0..];
+        self.0
+            .intersect_tile(ray_tile(band, width, x0, 8), f32::INFINITY, |at, h| {
+                out[at] = match h {
+                    Some(h) => HitRecord {
+                        t: h.t,
+                        prim: h.prim,
+                    },
+                    None => HitRecord::MISS,
+                }
+            });
     }
 }
 
-/// Gathers the rays of each `tile x tile` block of one band of `tile` rows (a row-major image
-/// `width` rays wide) into a contiguous tile, as a renderer generating camera rays per tile
-/// would have them, and calls `f(tile_rays, x0, tile_width)`.
-fn for_each_tile_in_band(
-    band: &[Ray],
+/// Closest hits of all rays into `out` (one per ray) on the current rayon pool: one ray at a
+/// time, or tile by tile for a packet engine (`width` is the image width of the rays,
+/// row-major).
+pub(super) fn trace_closest(
+    engine: &dyn Engine,
+    rays: &[Ray],
     width: usize,
-    tile: usize,
-    mut f: impl FnMut(&[Ray], usize, usize),
+    out: &mut [HitRecord],
 ) {
-    let rows = band.len() / width;
-    let mut gathered = Vec::with_capacity(tile * tile);
-    for x0 in (0..width).step_by(tile) {
-        let x1 = (x0 + tile).min(width);
-        gathered.clear();
-        for y in 0..rows {
-            gathered.extend_from_slice(&band[y * width + x0..y * width + x1]);
-        }
-        f(&gathered, x0, x1 - x0);
-    }
-}
-
-/// Closest hits of all rays on the current rayon pool: one ray at a time, or tile by tile for
-/// a packet engine (`width` is the image width of the rays, row-major).
-pub(super) fn trace_closest(engine: &dyn Engine, rays: &[Ray], width: usize) -> Vec<HitRecord> {
-    let mut out = vec![HitRecord::MISS; rays.len()];
+    assert_eq!(rays.len(), out.len(), "one record per ray");
     match engine.tile() {
         None => out
             .par_chunks_mut(1024)
@@ -124,18 +137,12 @@ pub(super) fn trace_closest(engine: &dyn Engine, rays: &[Ray], width: usize) -> 
             out.par_chunks_mut(width * t)
                 .zip(rays.par_chunks(width * t))
                 .for_each(|(out, band)| {
-                    let mut hits = vec![HitRecord::MISS; t * t];
-                    for_each_tile_in_band(band, width, t, |tile, x0, tw| {
-                        let hits = &mut hits[..tile.len()];
-                        engine.closest_tile(tile, hits);
-                        for (y, row) in hits.chunks_exact(tw).enumerate() {
-                            out[y * width + x0..y * width + x0 + tw].copy_from_slice(row);
-                        }
-                    });
+                    for x0 in (0..width).step_by(t) {
+                        engine.closest_tile(band, width, x0, out);
+                    }
                 });
         }
     }
-    out
 }
 
 /// Number of occluded rays, traced like [`trace_closest`].
@@ -149,11 +156,10 @@ pub(super) fn trace_occluded(engine: &dyn Engine, rays: &[Ray], width: usize) ->
             let t = t as usize;
             rays.par_chunks(width * t)
                 .map(|band| {
-                    let mut n = 0;
-                    for_each_tile_in_band(band, width, t, |tile, _, _| {
-                        n += engine.occluded_tile(tile)
-                    });
-                    n
+                    (0..width)
+                        .step_by(t)
+                        .map(|x0| engine.occluded_tile(band, width, x0))
+                        .sum::<usize>()
                 })
                 .sum()
         }

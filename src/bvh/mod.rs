@@ -24,6 +24,7 @@ use glam::{Vec3, Vec3A};
 pub use reference::BruteForce;
 pub use stats::BvhStats;
 pub use traverse::{Hit, Visit};
+pub use wide::packet::RayTile;
 
 use crate::geometry::Aabb;
 

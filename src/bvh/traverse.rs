@@ -4,6 +4,7 @@
 
 use glam::Vec3;
 
+use super::wide::packet::{Bests, PACKET, RayTile};
 use super::{Bvh, BvhNode, MAX_DEPTH};
 use crate::geometry::{PreparedRay, Ray, intersect_triangle, intersect_triangle_t};
 
@@ -199,71 +200,84 @@ impl Bvh {
     }
 
     /// [`Bvh::intersect`] for many rays at once, `out[i]` for `rays[i]`: coherent rays (the
-    /// camera rays of a tile of pixels) are traced in packets of up to
-    /// [`super::wide::packet::PACKET`] that walk the tree together; rays a packet cannot take (other
-    /// direction octants, invalid) are traced one by one. Every ray gets exactly the hit
-    /// [`Bvh::intersect`] gives it.
+    /// camera rays of a tile of pixels) are traced in packets of up to [`PACKET`] that walk the
+    /// tree together (see [`Bvh::intersect_tile`]).
     pub fn intersect_packet(&self, rays: &[Ray], t_max: f32, out: &mut [Option<Hit>]) {
-        self.packets::<false, _>(
-            rays,
-            t_max,
-            out,
-            |b| {
-                (b.prim != u32::MAX && b.t < t_max).then_some(Hit {
-                    t: b.t,
-                    prim: b.prim,
-                    u: b.u,
-                    v: b.v,
-                })
-            },
-            |r| self.intersect(r, t_max),
-        );
-    }
-
-    /// [`Bvh::occluded`] for many rays at once, `out[i]` for `rays[i]`: coherent rays go in
-    /// packets of up to [`super::wide::packet::PACKET`] that walk the tree together, each ray leaving
-    /// at its first hit; rays a packet cannot take are traced one by one. Every ray gets
-    /// exactly the answer [`Bvh::occluded`] gives it.
-    pub fn occluded_packet(&self, rays: &[Ray], t_max: f32, out: &mut [bool]) {
-        self.packets::<true, _>(
-            rays,
-            t_max,
-            out,
-            |b| b.t < t_max,
-            |r| self.occluded(r, t_max),
-        );
-    }
-
-    /// The packet queries: `rays` in packets of up to [`super::wide::packet::PACKET`] (first hits
-    /// with `ANY`), each ray's answer made from its best hit by `answer`; a packet that cannot
-    /// go together is answered ray by ray by `alone`, and so is everything when nothing can be
-    /// hit (`alone` then answers "nothing" at once).
-    fn packets<const ANY: bool, T>(
-        &self,
-        rays: &[Ray],
-        t_max: f32,
-        out: &mut [T],
-        answer: impl Fn(&super::wide::traverse::Best) -> T,
-        alone: impl Fn(&Ray) -> T,
-    ) {
         assert_eq!(rays.len(), out.len(), "one result per ray");
-        let nothing = self.tris.is_empty() || t_max.is_nan() || t_max <= 0.0;
-        let mut best = [super::wide::traverse::Best::none(t_max); super::wide::packet::PACKET];
-        for (rays, out) in rays
-            .chunks(super::wide::packet::PACKET)
-            .zip(out.chunks_mut(super::wide::packet::PACKET))
-        {
-            let best = &mut best[..rays.len()];
-            if !nothing && self.wide.trace_packet::<ANY>(rays, t_max, best) {
-                for (o, b) in out.iter_mut().zip(best.iter()) {
-                    *o = answer(b);
-                }
-            } else {
-                for (o, r) in out.iter_mut().zip(rays) {
-                    *o = alone(r);
-                }
-            }
+        for (rays, out) in rays.chunks(PACKET).zip(out.chunks_mut(PACKET)) {
+            self.intersect_tile(RayTile::list(rays), t_max, |at, h| out[at] = h);
         }
+    }
+
+    /// [`Bvh::occluded`] for many rays at once, `out[i]` for `rays[i]`, in packets like
+    /// [`Bvh::intersect_packet`] (see [`Bvh::occluded_tile`]).
+    pub fn occluded_packet(&self, rays: &[Ray], t_max: f32, out: &mut [bool]) {
+        assert_eq!(rays.len(), out.len(), "one result per ray");
+        for (rays, out) in rays.chunks(PACKET).zip(out.chunks_mut(PACKET)) {
+            self.occluded_tile(RayTile::list(rays), t_max, |at, b| out[at] = b);
+        }
+    }
+
+    /// [`Bvh::intersect`] for a tile of coherent rays (the camera rays of up to 8 x 8 pixels,
+    /// read where they lie in the image of rays): one packet walks the tree for all of them;
+    /// a tile that cannot go together (other direction octants, invalid rays) is traced ray
+    /// by ray. `out(at, hit)` is called once per ray, `at` its index in the slice the tile
+    /// was made from. Every ray gets exactly the hit [`Bvh::intersect`] gives it.
+    #[inline]
+    pub fn intersect_tile(
+        &self,
+        tile: RayTile,
+        t_max: f32,
+        mut out: impl FnMut(usize, Option<Hit>),
+    ) {
+        self.packets::<false>(tile, t_max, |b, i, at| {
+            out(
+                at,
+                match b {
+                    Some(b) => (b.prim[i] != u32::MAX && b.t[i] < t_max).then_some(Hit {
+                        t: b.t[i],
+                        prim: b.prim[i],
+                        u: b.u[i],
+                        v: b.v[i],
+                    }),
+                    None => self.intersect(&tile.rays()[at], t_max),
+                },
+            )
+        });
+    }
+
+    /// [`Bvh::occluded`] for a tile of coherent rays, traced like [`Bvh::intersect_tile`],
+    /// each ray leaving the packet at its first hit: `out(at, blocked)` once per ray. Every
+    /// ray gets exactly the answer [`Bvh::occluded`] gives it.
+    #[inline]
+    pub fn occluded_tile(&self, tile: RayTile, t_max: f32, mut out: impl FnMut(usize, bool)) {
+        self.packets::<true>(tile, t_max, |b, i, at| {
+            out(
+                at,
+                match b {
+                    Some(b) => b.t[i] < t_max,
+                    None => self.occluded(&tile.rays()[at], t_max),
+                },
+            )
+        });
+    }
+
+    /// The packet queries: the tile traced as one packet (first hits with `ANY`), then
+    /// `answer(Some(bests), i, at)` for each ray (`i` its lane, `at` its index in the tile's
+    /// slice); `answer(None, i, at)` for every ray when the tile cannot go together or nothing
+    /// can be hit (the caller then traces the ray alone, which answers "nothing" at once).
+    #[inline(always)]
+    fn packets<const ANY: bool>(
+        &self,
+        tile: RayTile,
+        t_max: f32,
+        mut answer: impl FnMut(Option<&Bests>, usize, usize),
+    ) {
+        let nothing = self.tris.is_empty() || t_max.is_nan() || t_max <= 0.0;
+        let mut bests = Bests::none(t_max);
+        let traced = !nothing && self.wide.trace_packet::<ANY>(&tile, t_max, &mut bests);
+        let bests = traced.then_some(&bests);
+        tile.for_each(|i, at| answer(bests, i, at));
     }
 
     /// True when any triangle lies on the ray at `0 < t < t_max` (shadow rays).

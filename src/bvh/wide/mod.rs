@@ -302,27 +302,26 @@ impl WideBvh {
 }
 
 impl WideBvh {
-    /// Closest hits (with `ANY`, first hits: see [`packet::trace_packet`]) of up to
-    /// [`packet::PACKET`] rays traced together (see [`packet`]), into `best`; `false`
+    /// The tile's rays traced together as a packet (see [`packet`]), into `bests`; `false`
     /// (nothing written) when they cannot be (invalid rays among them included).
     #[inline]
     pub(crate) fn trace_packet<const ANY: bool>(
         &self,
-        rays: &[Ray],
+        tile: &packet::RayTile,
         t_max: f32,
-        best: &mut [traverse::Best],
+        bests: &mut packet::Bests,
     ) -> bool {
         match self.dispatch {
             Dispatch::Scalar => {
-                packet::trace_packet::<kernel::Scalar, ANY>(self, rays, t_max, best)
+                packet::trace_packet::<kernel::Scalar, ANY>(self, tile, t_max, bests)
             }
             #[cfg(target_arch = "x86_64")]
-            Dispatch::Sse2 => packet::trace_packet::<kernel::Sse2, ANY>(self, rays, t_max, best),
+            Dispatch::Sse2 => packet::trace_packet::<kernel::Sse2, ANY>(self, tile, t_max, bests),
             #[cfg(target_arch = "x86_64")]
-            Dispatch::Avx2(cpu) => kernel::avx2::trace_packet::<ANY>(cpu, self, rays, t_max, best),
+            Dispatch::Avx2(cpu) => kernel::avx2::trace_packet::<ANY>(cpu, self, tile, t_max, bests),
             #[cfg(target_arch = "x86_64")]
             Dispatch::Avx512(cpu) => {
-                kernel::avx512::trace_packet::<ANY>(cpu, self, rays, t_max, best)
+                kernel::avx512::trace_packet::<ANY>(cpu, self, tile, t_max, bests)
             }
         }
     }

@@ -25,6 +25,93 @@ use crate::geometry::{PreparedRay, Ray};
 /// Rays per packet: an 8 x 8 tile.
 pub const PACKET: usize = 64;
 
+/// Up to [`PACKET`] coherent rays as a renderer's tile holds them: `rows` rows of `cols` rays,
+/// row `y` starting at `rays[y * stride]` (a rectangle inside a row-major image of rays, or a
+/// plain list). The packet's ray `i` is the tile's row `i / cols`, column `i % cols`.
+#[derive(Clone, Copy, Debug)]
+pub struct RayTile<'a> {
+    rays: &'a [Ray],
+    stride: usize,
+    cols: usize,
+    rows: usize,
+    /// Number of rays: `cols * rows`, or fewer for a list whose last row is short.
+    n: usize,
+}
+
+impl<'a> RayTile<'a> {
+    /// The tile of `rows` rows of `cols` rays, row `y` starting at `rays[y * stride]`, or
+    /// `None` when that is not a tile of `rays` (empty, more than [`PACKET`] rays, rows wider
+    /// than `stride`, or past the end of `rays`).
+    pub fn new(rays: &'a [Ray], stride: usize, cols: usize, rows: usize) -> Option<Self> {
+        let fits = cols > 0
+            && rows > 0
+            && cols <= stride
+            && cols * rows <= PACKET
+            && (rows - 1) * stride + cols <= rays.len();
+        fits.then_some(RayTile {
+            rays,
+            stride,
+            cols,
+            rows,
+            n: cols * rows,
+        })
+    }
+
+    /// Up to [`PACKET`] rays of a list as one tile (rows of eight, the last one shorter).
+    pub fn list(rays: &'a [Ray]) -> Self {
+        assert!(
+            !rays.is_empty() && rays.len() <= PACKET,
+            "a packet holds 1 to {PACKET} rays"
+        );
+        RayTile {
+            rays,
+            stride: 8,
+            cols: rays.len().min(8),
+            rows: rays.len().div_ceil(8),
+            n: rays.len(),
+        }
+    }
+
+    /// Number of rays.
+    pub fn len(&self) -> usize {
+        self.n
+    }
+
+    /// Whether the tile holds no ray (never: tiles are made with at least one).
+    pub fn is_empty(&self) -> bool {
+        false
+    }
+
+    /// Calls `f(i, at)` for every ray in packet order: `i` its place in the packet, `at` its
+    /// index in the slice the tile was made from.
+    #[inline(always)]
+    pub fn for_each(&self, mut f: impl FnMut(usize, usize)) {
+        let mut i = 0;
+        for y in 0..self.rows {
+            for x in 0..self.cols {
+                if i == self.n {
+                    return;
+                }
+                f(i, y * self.stride + x);
+                i += 1;
+            }
+        }
+    }
+
+    /// The slice the tile was made from, its row stride, and whether the tile is eight full
+    /// rows of eight rays (the shape [`Lanes::load_rays`] loads directly).
+    #[inline(always)]
+    pub(crate) fn rows_of_eight(&self) -> Option<(&'a [Ray], usize)> {
+        (self.cols == 8 && self.rows == 8 && self.n == PACKET).then_some((self.rays, self.stride))
+    }
+
+    /// The slice the tile was made from.
+    #[inline(always)]
+    pub fn rays(&self) -> &'a [Ray] {
+        self.rays
+    }
+}
+
 /// The packet's rays, component by component.
 pub(crate) struct Rays {
     pub n: usize,
@@ -105,6 +192,17 @@ pub(crate) struct Bests {
 }
 
 impl Bests {
+    /// No hit yet for any ray: every distance `t_max`.
+    #[inline(always)]
+    pub fn none(t_max: f32) -> Self {
+        Bests {
+            t: [t_max; PACKET],
+            prim: [u32::MAX; PACKET],
+            u: [0.0; PACKET],
+            v: [0.0; PACKET],
+        }
+    }
+
     /// Keeps ray `i`'s hit `(t, prim)` when it is closer, or as close with a lower index.
     #[inline(always)]
     pub fn offer(&mut self, i: usize, t: f32, prim: u32, u: f32, v: f32) {
@@ -151,18 +249,22 @@ impl Rays {
     /// kernels this is inlined into). Lanes past the packet's end repeat its first ray, which
     /// changes no bound.
     #[inline(always)]
-    fn new<L: Lanes>(rays: &[Ray]) -> Option<Rays> {
-        let n = rays.len();
-        let first = rays.first()?;
+    fn new<L: Lanes>(tile: &RayTile) -> Option<Rays> {
+        let n = tile.len();
+        let first = tile.rays[0];
         let octant = Vec3A::from(first.dir).is_negative_bitmask();
         let mut r = Rays::zeroed(n, octant);
-        if !L::load_rays(rays, &mut r.origin, &mut r.dir) {
-            for (i, ray) in rays.iter().enumerate() {
+        let loaded = tile
+            .rows_of_eight()
+            .is_some_and(|(rays, stride)| L::load_rays(rays, stride, &mut r.origin, &mut r.dir));
+        if !loaded {
+            tile.for_each(|i, at| {
+                let ray = &tile.rays[at];
                 for a in 0..3 {
                     r.origin[a][i] = ray.origin[a];
                     r.dir[a][i] = ray.dir[a];
                 }
-            }
+            });
         }
         for i in n..PACKET {
             for a in 0..3 {
@@ -287,27 +389,20 @@ fn largest(limit: &[f32; PACKET]) -> f32 {
     m.max_element()
 }
 
-/// Closest hits of `rays` (at most [`PACKET`]) at `0 < t < t_max`, into `best`
-/// (one per ray), or `false` when the packet cannot be traced together (see the module docs)
-/// and nothing was written. With `ANY`, a ray stops at its first hit before `t_max` (shadow
-/// rays): `best[i].t < t_max` exactly when something lies on ray `i`, the hit itself being
-/// any one of them.
+/// Closest hits of the tile's rays at `0 < t < t_max`, into `bests` (lane `i` for the
+/// packet's ray `i`, see [`RayTile`]; `bests` starts as [`Bests::none`]), or `false` when the
+/// packet cannot be traced together (see the module docs) and nothing was written. With
+/// `ANY`, a ray stops at its first hit before `t_max` (shadow rays): `bests.t[i] < t_max`
+/// exactly when something lies on ray `i`, the hit itself being any one of them.
 #[inline(always)]
 pub(crate) fn trace_packet<L: Lanes, const ANY: bool>(
     w: &WideBvh,
-    rays: &[Ray],
+    tile: &RayTile,
     t_max: f32,
-    best: &mut [Best],
+    bests: &mut Bests,
 ) -> bool {
-    debug_assert!(rays.len() <= PACKET && best.len() == rays.len());
-    let Some(r) = Rays::new::<L>(rays) else {
+    let Some(r) = Rays::new::<L>(tile) else {
         return false;
-    };
-    let mut bests = Bests {
-        t: [t_max; PACKET],
-        prim: [u32::MAX; PACKET],
-        u: [0.0; PACKET],
-        v: [0.0; PACKET],
     };
     let mut tris = Tris {
         made: false,
@@ -318,18 +413,10 @@ pub(crate) fn trace_packet<L: Lanes, const ANY: bool>(
         if let Some((first, count)) = w.root_leaf {
             let all = u64::MAX >> (64 - r.n);
             tris.make(&r);
-            leaf_rays::<L>(w, first, count, &r, &tris, all, &mut bests);
+            leaf_rays::<L>(w, first, count, &r, &tris, all, bests);
         }
     } else {
-        walk::<L, ANY>(w, &r, &mut tris, t_max, &mut bests);
-    }
-    for (i, b) in best.iter_mut().enumerate() {
-        *b = Best {
-            t: bests.t[i],
-            prim: bests.prim[i],
-            u: bests.u[i],
-            v: bests.v[i],
-        };
+        walk::<L, ANY>(w, &r, &mut tris, t_max, bests);
     }
     true
 }

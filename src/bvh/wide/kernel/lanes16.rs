@@ -75,23 +75,25 @@ impl Lanes for Avx512 {
         Avx2::rays_entering(n, lane, r, limit)
     }
 
-    /// Sixteen rays at a time: six 512-bit loads hold their 96 floats; each component's
-    /// sixteen lanes are picked from rays 0-7 (the first three loads) and 8-15 (the last three)
-    /// by two permutations each, and the halves joined by a blend.
+    /// Sixteen rays (two rows of the tile) at a time: six 512-bit loads hold their 96 floats,
+    /// three per row; each component's sixteen lanes are picked from the first row's rays
+    /// (the first three loads) and the second's (the last three) by two permutations each, and
+    /// the halves joined by a blend.
     #[inline(always)]
     fn load_rays(
         rays: &[Ray],
+        stride: usize,
         origin: &mut [[f32; PACKET]; 3],
         dir: &mut [[f32; PACKET]; 3],
     ) -> bool {
-        if rays.len() != PACKET {
+        if rays.len() < 7 * stride + 8 {
             return false;
         }
         let floats = rays.as_ptr().cast::<f32>();
         // SAFETY: only reached inside the AVX-512 entry points; `Ray` is `repr(C)` of six
-        // `f32` (checked below), so `rays` is `6 * PACKET` contiguous floats, and every load
-        // reads 16 of them at an offset of at most `6 * PACKET - 16`; the stores write 16
-        // floats within one `[f32; PACKET]` row.
+        // `f32` (checked below), so row `y` is the 48 floats from `6 * y * stride`, inside
+        // `rays` for `y < 8` (checked above); every load reads 16 floats of one row; the
+        // stores write 16 floats within one `[f32; PACKET]` row.
         unsafe {
             let mut index = [[_mm512_setzero_si512(); 2]; 6];
             for (c, pair) in index.iter_mut().enumerate() {
@@ -99,14 +101,15 @@ impl Lanes for Avx512 {
                 pair[1] = _mm512_loadu_si512(TRANSPOSE[c][1].as_ptr().cast());
             }
             for chunk in 0..PACKET / 16 {
-                let base = floats.add(96 * chunk);
+                let first = floats.add(6 * 2 * chunk * stride);
+                let second = floats.add(6 * (2 * chunk + 1) * stride);
                 let z = [
-                    _mm512_loadu_ps(base),
-                    _mm512_loadu_ps(base.add(16)),
-                    _mm512_loadu_ps(base.add(32)),
-                    _mm512_loadu_ps(base.add(48)),
-                    _mm512_loadu_ps(base.add(64)),
-                    _mm512_loadu_ps(base.add(80)),
+                    _mm512_loadu_ps(first),
+                    _mm512_loadu_ps(first.add(16)),
+                    _mm512_loadu_ps(first.add(32)),
+                    _mm512_loadu_ps(second),
+                    _mm512_loadu_ps(second.add(16)),
+                    _mm512_loadu_ps(second.add(32)),
                 ];
                 for (c, [first, second]) in index.iter().enumerate() {
                     let lo = _mm512_permutex2var_ps(

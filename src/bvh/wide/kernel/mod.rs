@@ -236,12 +236,13 @@ pub(crate) trait Lanes: Sized {
         rays_entering_scalar(n, lane, r, limit)
     }
 
-    /// Copies a whole packet of rays ([`PACKET`] of them) component by component into `origin`
-    /// and `dir`, or returns `false` (the caller copies them) when this kernel has no faster
-    /// way or `rays` is not a whole packet.
+    /// Copies a whole packet of rays, eight rows of eight (row `y` at `rays[y * stride]`, every
+    /// row inside `rays`), component by component into `origin` and `dir`, or returns `false`
+    /// (the caller copies them) when this kernel has no faster way.
     #[inline(always)]
     fn load_rays(
         _rays: &[Ray],
+        _stride: usize,
         _origin: &mut [[f32; PACKET]; 3],
         _dir: &mut [[f32; PACKET]; 3],
     ) -> bool {

@@ -29,7 +29,7 @@ use std::arch::x86_64::*;
 
 use super::stack::Stack;
 use super::{BlockHits, G2, G3, G5, Lanes, NodeRay, TriRay};
-use crate::bvh::wide::packet::{Bests, Group, PACKET, Rays, Tris, group_exact, perm_of};
+use crate::bvh::wide::packet::{Bests, Group, PACKET, RayTile, Rays, Tris, group_exact, perm_of};
 use crate::bvh::wide::traverse::{self, Best};
 use crate::bvh::wide::{BLOCK, TriBlock, WIDTH, WideBvh, WideNode};
 use crate::geometry::Ray;
@@ -799,11 +799,11 @@ macro_rules! entry_points {
             #[target_feature(enable = $features)]
             fn trace_packet_inner<const ANY: bool>(
                 w: &WideBvh,
-                rays: &[Ray],
+                tile: &RayTile,
                 t_max: f32,
-                best: &mut [Best],
+                bests: &mut Bests,
             ) -> bool {
-                crate::bvh::wide::packet::trace_packet::<$lanes, ANY>(w, rays, t_max, best)
+                crate::bvh::wide::packet::trace_packet::<$lanes, ANY>(w, tile, t_max, bests)
             }
 
             /// Closest hit (see [`traverse::closest`]), the whole traversal compiled for this
@@ -838,12 +838,12 @@ macro_rules! entry_points {
             pub(crate) fn trace_packet<const ANY: bool>(
                 _cpu: $cpu,
                 w: &WideBvh,
-                rays: &[Ray],
+                tile: &RayTile,
                 t_max: f32,
-                best: &mut [Best],
+                bests: &mut Bests,
             ) -> bool {
                 // SAFETY: the proof exists only when the CPU has every feature enabled here.
-                unsafe { trace_packet_inner::<ANY>(w, rays, t_max, best) }
+                unsafe { trace_packet_inner::<ANY>(w, tile, t_max, bests) }
             }
         }
     };
