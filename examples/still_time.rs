@@ -39,13 +39,13 @@ fn main() -> Result<()> {
     let (mut headless, mut viewer) = (Vec::new(), Vec::new());
     for _ in 0..rounds {
         let t0 = Instant::now();
-        let out = render_with_plan(&scene, &bvh, &env, &settings, plan.clone(), &|_| {});
+        let out = render_with_plan(&scene, &bvh, &env, &settings, plan, &|_| {});
         headless.push(out.rays.total() as f64 / t0.elapsed().as_secs_f64() / 1e6);
 
         let mut film = Progressive::new(settings.width, settings.height);
         let t0 = Instant::now();
         while film.passes() < spp {
-            let tracer = Tracer::new(&scene, &bvh, plan.clone(), settings.max_depth, &env);
+            let tracer = Tracer::new(&scene, &bvh, plan, settings.max_depth, &env);
             film.step_shaded(
                 &tracer,
                 &cam,

@@ -55,9 +55,9 @@ fn for_each_in_tile(
     }
 }
 
-/// Our BVH's tile of `tile` x `tile` rays (see [`Engine::closest_tile`]) as a [`RayTile`].
-pub(super) fn ray_tile(band: &[Ray], width: usize, x0: usize, tile: usize) -> RayTile<'_> {
-    let cols = tile.min(width - x0);
+/// Our packets' tile (see [`Engine::closest_tile`]) as a [`RayTile`].
+fn ray_tile(band: &[Ray], width: usize, x0: usize) -> RayTile<'_> {
+    let cols = Packets::TILE.min(width - x0);
     RayTile::new(&band[x0..], width, cols, band.len() / width).expect("a tile of the band")
 }
 
@@ -80,6 +80,11 @@ impl Engine for Bvh {
 /// [`Bvh::occluded_packet`]).
 pub(super) struct Packets(pub Bvh);
 
+impl Packets {
+    /// Side of the tiles: one packet of 8 x 8 rays.
+    const TILE: usize = 8;
+}
+
 impl Engine for Packets {
     fn closest(&self, ray: &Ray) -> HitRecord {
         self.0.closest(ray)
@@ -88,12 +93,12 @@ impl Engine for Packets {
         Bvh::occluded(&self.0, ray, f32::INFINITY)
     }
     fn tile(&self) -> Option<u32> {
-        Some(8)
+        Some(Self::TILE as u32)
     }
     fn occluded_tile(&self, band: &[Ray], width: usize, x0: usize) -> usize {
         let mut n = 0;
         self.0
-            .occluded_tile(ray_tile(band, width, x0, 8), f32::INFINITY, |_, b| {
+            .occluded_tile(ray_tile(band, width, x0), f32::INFINITY, |_, b| {
                 n += b as usize
             });
         n
@@ -101,7 +106,7 @@ impl Engine for Packets {
     fn closest_tile(&self, band: &[Ray], width: usize, x0: usize, out: &mut [HitRecord]) {
         let out = &mut out[x0..];
         self.0
-            .intersect_tile(ray_tile(band, width, x0, 8), f32::INFINITY, |at, h| {
+            .intersect_tile(ray_tile(band, width, x0), f32::INFINITY, |at, h| {
                 out[at] = match h {
                     Some(h) => HitRecord {
                         t: h.t,
