@@ -98,8 +98,8 @@ impl<'a> RayTile<'a> {
         }
     }
 
-    /// The slice the tile was made from, its row stride, and whether the tile is eight full
-    /// rows of eight rays (the shape [`Lanes::load_rays`] loads directly).
+    /// The slice the tile was made from and its row stride, when the tile is eight full rows
+    /// of eight rays (the shape [`Lanes::load_rays`] loads directly); `None` otherwise.
     #[inline(always)]
     pub(crate) fn rows_of_eight(&self) -> Option<(&'a [Ray], usize)> {
         (self.cols == 8 && self.rows == 8 && self.n == PACKET).then_some((self.rays, self.stride))
