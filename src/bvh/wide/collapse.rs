@@ -129,12 +129,16 @@ impl Plan {
             &self.cost[nodes[i].first as usize],
             &self.cost[nodes[i].first as usize + 1],
         );
-        let best = opened(l, r)[k - 1];
-        // The same sums as `opened` makes, so one of them equals its least; none can only
-        // when the costs are NaN (a box of infinite extent), and any share makes a valid tree.
-        (1..k)
-            .find(|&j| l[j - 1] + r[k - j - 1] == best)
-            .unwrap_or(1)
+        // The first least of the sums `opened` takes its minimum over (a NaN cost, from a box
+        // of infinite extent, is never less: any share makes a valid tree).
+        let mut best = (f32::INFINITY, 1);
+        for j in 1..k {
+            let c = l[j - 1] + r[k - j - 1];
+            if c < best.0 {
+                best = (c, j);
+            }
+        }
+        best.1
     }
 
     /// Appends the lanes binary node `i` takes when given `k` of them.
