@@ -402,3 +402,54 @@ fn invalid_rays_get_no_hit_and_visit_no_node() {
             .is_some()
     );
 }
+
+/// Every binary leaf's triangles, read from the blocks of the traversal layout (the only copy
+/// the tree keeps), are the caller's triangles of its slots, each in exactly one leaf and
+/// inside that leaf's box; nothing comes from an inner node. Left-out triangles (non-finite,
+/// zero-area) appear nowhere.
+#[test]
+fn leaf_triangles_are_the_callers_triangles_of_each_slot() {
+    // A tree of many leaves, and one that is a single leaf (three triangles left).
+    for size in [3000, 5] {
+        let mut tris = shapes::random_soup(size, 0.2, 9);
+        tris[0] = [Vec3::splat(f32::NAN), Vec3::ONE, Vec3::ZERO];
+        tris[1] = [Vec3::ONE; 3];
+        let root_leaf = Bvh::build(&tris, &tracery::bvh::BuildOptions::sah()).nodes[0].is_leaf();
+        assert_eq!(root_leaf, size == 5);
+        leaf_triangles_match(&tris);
+    }
+}
+
+fn leaf_triangles_match(tris: &[[Vec3; 3]]) {
+    for (name, bvh) in common::all_bvhs(tris) {
+        let mut seen = vec![0u32; tris.len()];
+        for (i, n) in bvh.nodes.iter().enumerate() {
+            if i == 1 {
+                continue;
+            }
+            let leaf: Vec<_> = bvh.leaf_triangles(i as u32).collect();
+            if !n.is_leaf() {
+                assert!(leaf.is_empty(), "{name}: inner node {i}");
+                continue;
+            }
+            assert_eq!(leaf.len(), n.count as usize, "{name}: leaf {i}");
+            let b = n.aabb();
+            for (k, (prim, t)) in leaf.into_iter().enumerate() {
+                assert_eq!(prim, bvh.prim_ids[n.first as usize + k], "{name}: leaf {i}");
+                assert_eq!(
+                    t.map(Vec3::from),
+                    tris[prim as usize],
+                    "{name}: triangle {prim}"
+                );
+                assert!(
+                    t.iter()
+                        .all(|v| b.min.cmple(*v).all() && v.cmple(b.max).all())
+                );
+                seen[prim as usize] += 1;
+            }
+        }
+        for (p, &count) in seen.iter().enumerate() {
+            assert_eq!(count, u32::from(p > 1), "{name}: triangle {p}");
+        }
+    }
+}

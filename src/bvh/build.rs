@@ -91,16 +91,11 @@ pub(super) fn build(triangles: &[[Vec3; 3]], options: &BuildOptions) -> Bvh {
         .with_min_len(1 << 14)
         .map(PrimRef::id)
         .collect();
-    let tris: Vec<[Vec3A; 3]> = prim_ids
-        .par_iter()
-        .with_min_len(1 << 14)
-        .map(|&i| triangles[i as usize].map(Vec3A::from))
-        .collect();
-    let wide = super::wide::collapse(&nodes, &tris, &prim_ids);
+    let (wide, leaf_blocks) = super::wide::collapse(&nodes, triangles, &prim_ids);
     let mut bvh = Bvh {
         wide,
         nodes,
-        tris,
+        leaf_blocks,
         prim_ids,
         stats: BvhStats::default(),
         options,

@@ -8,10 +8,11 @@
 //!   reports every node entered and triangle tested, for debug drawing and cost heatmaps.
 //!
 //! Layout: node 0 is the root, slot 1 is unused, and the two children of an inner node sit side
-//! by side at an even index, so a pair of siblings shares one 64-byte cache line. Triangles are
-//! copied into leaf order; [`Bvh::prim_ids`] maps a leaf slot back to the caller's index. The
-//! queries walk a layout derived from this tree: 8-wide nodes with the triangles in blocks of
-//! four ([`wide`]).
+//! by side at an even index, so a pair of siblings shares one 64-byte cache line. A leaf's
+//! triangles are its slots `first..first + count`; [`Bvh::prim_ids`] maps a slot back to the
+//! caller's index. The queries walk a layout derived from this tree: 8-wide nodes with the
+//! triangles in blocks of four ([`wide`]), the only copy of the triangles the tree keeps
+//! ([`Bvh::leaf_triangles`] reads a binary leaf's).
 
 mod build;
 mod reference;
@@ -188,10 +189,12 @@ pub const MAX_DEPTH: usize = 96;
 pub struct Bvh {
     /// Flat node array: root at 0, slot 1 unused, sibling pairs from 2 on.
     pub nodes: Vec<BvhNode>,
-    /// Triangles in leaf order.
-    pub tris: Vec<[Vec3A; 3]>,
     /// For each leaf slot, the index of the triangle in the caller's list.
     pub prim_ids: Vec<u32>,
+    /// For each leaf of `nodes`, the first of the blocks in [`wide::WideBvh::blocks`] that
+    /// hold its triangles, four to a block in slot order (0 for inner nodes). The triangles
+    /// are kept there only; [`Bvh::leaf_triangles`] reads them.
+    pub leaf_blocks: Vec<u32>,
     /// The traversal layout derived from `nodes` (see [`wide`]).
     pub wide: wide::WideBvh,
     /// What the build produced and how long it took.
@@ -221,12 +224,29 @@ impl Bvh {
 
     /// Number of triangles in the tree (excluded ones not counted).
     pub fn triangle_count(&self) -> usize {
-        self.tris.len()
+        self.prim_ids.len()
+    }
+
+    /// True when the tree holds no triangle.
+    pub fn is_empty(&self) -> bool {
+        self.prim_ids.is_empty()
+    }
+
+    /// The triangles of leaf `node` (an index into [`Bvh::nodes`]) in slot order, each with
+    /// its index in the caller's list; nothing for an inner node.
+    pub fn leaf_triangles(&self, node: u32) -> impl Iterator<Item = (u32, [Vec3A; 3])> + '_ {
+        let n = &self.nodes[node as usize];
+        let first = self.leaf_blocks[node as usize] as usize;
+        (0..n.count as usize).map(move |i| {
+            let block = &self.wide.blocks[first + i / wide::BLOCK];
+            let lane = i % wide::BLOCK;
+            (block.prim[lane], block.triangle(lane))
+        })
     }
 
     /// Box around everything in the tree (empty for an empty tree).
     pub fn bounds(&self) -> Aabb {
-        if self.tris.is_empty() {
+        if self.is_empty() {
             Aabb::EMPTY
         } else {
             self.nodes[0].aabb()
@@ -235,7 +255,7 @@ impl Bvh {
 
     /// Visits every node of the tree with its depth (root at 0), parents before children.
     pub fn for_each_node(&self, mut f: impl FnMut(&BvhNode, u32)) {
-        if self.tris.is_empty() {
+        if self.is_empty() {
             return;
         }
         // Children are always stored after their parent, so one forward pass knows each

@@ -32,8 +32,8 @@ pub struct BvhStats {
     pub wide_nodes: usize,
     /// Triangle blocks (four triangles each) of the traversal layout.
     pub blocks: usize,
-    /// Bytes of the binary tree of record: its nodes, the triangles in leaf order and the map
-    /// back to the caller's indices.
+    /// Bytes of the binary tree of record: its nodes, the map from leaf slots back to the
+    /// caller's indices and each leaf's first block (its triangles are the wide layout's).
     pub binary_bytes: usize,
     /// Bytes of the traversal layout: 8-wide nodes and triangle blocks (which carry the
     /// caller's indices).
@@ -63,10 +63,10 @@ impl BvhStats {
             wide_nodes: bvh.wide.nodes.len(),
             blocks: bvh.wide.blocks.len(),
             binary_bytes: std::mem::size_of_val(&bvh.nodes[..])
-                + std::mem::size_of_val(&bvh.tris[..])
-                + std::mem::size_of_val(&bvh.prim_ids[..]),
+                + std::mem::size_of_val(&bvh.prim_ids[..])
+                + std::mem::size_of_val(&bvh.leaf_blocks[..]),
             wide_bytes: bvh.wide.bytes(),
-            triangles: bvh.tris.len(),
+            triangles: bvh.triangle_count(),
             excluded,
             degenerate,
             build_ms: build_time.as_secs_f64() * 1e3,

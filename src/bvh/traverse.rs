@@ -2,7 +2,7 @@
 //! ([`super::wide`]), and a visiting variant over the binary tree of record that reports what
 //! it touched.
 
-use glam::Vec3;
+use glam::{Vec3, Vec3A};
 
 use super::wide::packet::{Bests, PACKET, RayTile};
 use super::{Bvh, BvhNode, MAX_DEPTH};
@@ -60,7 +60,7 @@ impl Bvh {
     /// hits nothing and walks no tree.
     #[inline]
     pub fn intersect(&self, ray: &Ray, t_max: f32) -> Option<Hit> {
-        if self.tris.is_empty() || t_max.is_nan() || t_max <= 0.0 || !ray.is_valid() {
+        if self.is_empty() || t_max.is_nan() || t_max <= 0.0 || !ray.is_valid() {
             return None;
         }
         let best = self.wide.closest(ray, t_max);
@@ -75,29 +75,25 @@ impl Bvh {
         })
     }
 
-    /// Tests a leaf's triangles, keeping the closest (lowest index on ties), telling
+    /// Tests the triangles of leaf `node`, keeping the closest (lowest index on ties), telling
     /// `seen(prim, hit)` about every triangle tested.
     #[inline(always)]
     fn closest_in_leaf_seen(
         &self,
         ray: &PreparedRay,
-        first: u32,
-        count: u32,
+        node: u32,
         best: &mut Best,
         seen: &mut impl FnMut(u32, bool),
     ) {
         let limit = best.t.next_up();
-        for slot in first as usize..(first + count) as usize {
-            let t = intersect_triangle_t(ray, &self.tris[slot], limit);
+        for (id, tri) in self.leaf_triangles(node) {
+            let t = intersect_triangle_t(ray, &tri, limit);
             // Against the current best (it shrinks within the leaf); a miss (+inf) never
             // counts, even while the best is still +inf.
             let hit = t <= best.t && t != f32::INFINITY;
-            seen(self.prim_ids[slot], hit);
-            if hit {
-                let id = self.prim_ids[slot];
-                if t < best.t || id < best.id {
-                    *best = Best { t, slot, id };
-                }
+            seen(id, hit);
+            if hit && (t < best.t || id < best.id) {
+                *best = Best { t, tri, id };
             }
         }
     }
@@ -114,13 +110,13 @@ impl Bvh {
         mut visit: impl FnMut(Visit),
     ) -> Option<Hit> {
         // A zero, NaN or infinite ray has nowhere to go: no hit, and no node visited.
-        if self.tris.is_empty() || t_max.is_nan() || t_max <= 0.0 || !ray.is_valid() {
+        if self.is_empty() || t_max.is_nan() || t_max <= 0.0 || !ray.is_valid() {
             return None;
         }
         let ray = &PreparedRay::new(ray);
         let mut best = Best {
             t: t_max,
-            slot: usize::MAX,
+            tri: [Vec3A::ZERO; 3],
             id: u32::MAX,
         };
         let nodes = &self.nodes[..];
@@ -141,13 +137,9 @@ impl Bvh {
                 depth,
             });
             if node.is_leaf() {
-                self.closest_in_leaf_seen(
-                    ray,
-                    node.first,
-                    node.count,
-                    &mut best,
-                    &mut |prim, hit| visit(Visit::Triangle { prim, hit }),
-                );
+                self.closest_in_leaf_seen(ray, current, &mut best, &mut |prim, hit| {
+                    visit(Visit::Triangle { prim, hit })
+                });
             } else {
                 let cull = best.t * CULL_SLACK;
                 let first = node.first;
@@ -187,10 +179,10 @@ impl Bvh {
 
     /// The hit record of the best triangle, with its barycentric coordinates.
     fn finish(&self, ray: &PreparedRay, best: &Best, t_max: f32) -> Option<Hit> {
-        if best.slot == usize::MAX || best.t.is_nan() || best.t >= t_max {
+        if best.id == u32::MAX || best.t.is_nan() || best.t >= t_max {
             return None;
         }
-        let h = intersect_triangle(ray, &self.tris[best.slot], best.t.next_up())?;
+        let h = intersect_triangle(ray, &best.tri, best.t.next_up())?;
         Some(Hit {
             t: h.t,
             prim: best.id,
@@ -273,7 +265,7 @@ impl Bvh {
         t_max: f32,
         mut answer: impl FnMut(Option<&Bests>, usize, usize),
     ) {
-        let nothing = self.tris.is_empty() || t_max.is_nan() || t_max <= 0.0;
+        let nothing = self.is_empty() || t_max.is_nan() || t_max <= 0.0;
         let mut bests = Bests::none(t_max);
         let traced = !nothing && self.wide.trace_packet::<ANY>(&tile, t_max, &mut bests);
         let bests = traced.then_some(&bests);
@@ -311,7 +303,7 @@ impl Bvh {
     /// Calls `f(prim, t)` for every triangle hit at `0 < t < t_max`, in no particular order,
     /// until `f` returns false. A NaN, infinite or zero ray hits nothing.
     pub fn for_each_hit(&self, ray: &Ray, t_max: f32, mut f: impl FnMut(u32, f32) -> bool) {
-        if self.tris.is_empty() || t_max.is_nan() || t_max <= 0.0 || !ray.is_valid() {
+        if self.is_empty() || t_max.is_nan() || t_max <= 0.0 || !ray.is_valid() {
             return;
         }
         self.wide.each_hit(ray, t_max, &mut f);
@@ -321,6 +313,6 @@ impl Bvh {
 /// The best hit so far of the visiting traversal.
 struct Best {
     t: f32,
-    slot: usize,
+    tri: [Vec3A; 3],
     id: u32,
 }

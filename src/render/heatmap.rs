@@ -98,7 +98,7 @@ pub fn cost_summary(sums: &[Vec3]) -> (f32, f32) {
 /// Number of boxes at depth `level` (root 0) that `ray` passes through anywhere along its
 /// length, whatever it hits: where boxes of one level overlap, a ray crosses several.
 pub fn boxes_on_ray(bvh: &Bvh, ray: &Ray, level: u32) -> u32 {
-    if bvh.tris.is_empty() {
+    if bvh.is_empty() {
         return 0;
     }
     let ray = crate::geometry::PreparedRay::new(ray);

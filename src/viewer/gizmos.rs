@@ -74,7 +74,7 @@ impl BvhIndex {
         let mut leaves = Vec::new();
         let mut depth = vec![0u32; bvh.nodes.len()];
         let mut overlaps = vec![false; bvh.nodes.len()];
-        if !bvh.tris.is_empty() {
+        if !bvh.is_empty() {
             for (i, n) in bvh.nodes.iter().enumerate() {
                 if i == 1 {
                     continue; // the unused slot
@@ -245,7 +245,7 @@ fn draw_leaves(mut gizmos: Gizmos<LeafGizmos>, index: Res<BvhIndex>, view: Res<L
         Transform::IDENTITY,
         Color::srgb(0.3, 0.9, 1.0),
     );
-    for t in &bvh.tris[n.first as usize..(n.first + n.count) as usize] {
+    for (_, t) in bvh.leaf_triangles(i) {
         let [a, b, c] = t.map(Vec3::from);
         gizmos.linestrip([a, b, c, a], Color::srgb(1.0, 0.85, 0.2));
     }

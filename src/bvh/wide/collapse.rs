@@ -13,44 +13,45 @@
 //! nodes there, its cost 15.02 against 15.81 (node visits 11.24 against 12.03, block tests
 //! 3.78 either way).
 
-use glam::{Vec3A, Vec4};
+use glam::{Vec3, Vec4};
 
 use super::{BLOCK, Child, Kernel, TriBlock, WIDTH, WideBvh, WideNode};
 use crate::bvh::BvhNode;
 
-/// Collapses `nodes` (the binary tree, root at 0) over `tris` (leaf order) and `prim_ids`.
-pub fn collapse(nodes: &[BvhNode], tris: &[[Vec3A; 3]], prim_ids: &[u32]) -> WideBvh {
+/// Collapses `nodes` (the binary tree, root at 0) whose leaf slots hold the triangles
+/// `triangles[prim_ids[slot]]`. Also returns, for every binary leaf, the index of its first
+/// block (the blocks of a leaf are consecutive; 0 for inner nodes).
+pub fn collapse(
+    nodes: &[BvhNode],
+    triangles: &[[Vec3; 3]],
+    prim_ids: &[u32],
+) -> (WideBvh, Vec<u32>) {
     let mut out = WideBvh::default();
     out.set_kernel(Kernel::detect())
         .expect("the detected kernel runs here");
-    if tris.is_empty() {
-        return out;
+    let mut leaf_blocks = vec![0u32; nodes.len()];
+    if prim_ids.is_empty() {
+        return (out, leaf_blocks);
     }
-    let root = &nodes[0];
-    if root.is_leaf() {
+    if nodes[0].is_leaf() || prim_ids.len() > Child::MAX_FIRST_BLOCK as usize {
+        // One root leaf: the tree is one leaf, or it has more blocks than a leaf word can
+        // address (over 500 million triangles, hundreds of gigabytes): every binary leaf's
+        // blocks in slot order, tested one after the other, correct if slow.
         let mut sources = Vec::new();
-        push_blocks(&mut sources, root);
-        out.blocks = fill_blocks(&sources, tris, prim_ids);
+        let mut leaves: Vec<usize> = (0..nodes.len())
+            .filter(|&i| i != 1 && nodes[i].is_leaf())
+            .collect();
+        leaves.sort_by_key(|&i| nodes[i].first);
+        for i in leaves {
+            leaf_blocks[i] = push_blocks(&mut sources, &nodes[i]);
+        }
+        out.blocks = fill_blocks(&sources, triangles, prim_ids);
         out.root_leaf = Some((0, out.blocks.len() as u32));
-        return out;
+        return (out, leaf_blocks);
     }
-    if tris.len() > Child::MAX_FIRST_BLOCK as usize {
-        // More blocks than a leaf word can address (over 500 million triangles, hundreds of
-        // gigabytes): every triangle in one root leaf, correct if slow.
-        let all = BvhNode {
-            count: tris.len() as u32,
-            first: 0,
-            ..*root
-        };
-        let mut sources = Vec::new();
-        push_blocks(&mut sources, &all);
-        out.blocks = fill_blocks(&sources, tris, prim_ids);
-        out.root_leaf = Some((0, out.blocks.len() as u32));
-        return out;
-    }
-    out.nodes.reserve(nodes.len() / 4);
+    out.nodes.reserve(nodes.len() / 8);
     // Where each block's triangles come from; the blocks are made at the end, in parallel.
-    let mut sources: Vec<(u32, u32)> = Vec::with_capacity(tris.len() / BLOCK + nodes.len() / 8);
+    let mut sources: Vec<(u32, u32)> = Vec::with_capacity(prim_ids.len() / BLOCK + nodes.len() / 8);
     out.nodes.push(WideNode::EMPTY);
     // (wide node to fill, binary inner node it stands for)
     let mut stack = vec![(0usize, 0usize)];
@@ -70,6 +71,7 @@ pub fn collapse(nodes: &[BvhNode], tris: &[[Vec3A; 3]], prim_ids: &[u32]) -> Wid
             }
             node.child[lane] = if n.is_leaf() {
                 let first = push_blocks(&mut sources, n);
+                leaf_blocks[c] = first;
                 leaf_child(&mut out.nodes, n, first, sources.len() as u32 - first)
             } else {
                 let index = out.nodes.len();
@@ -85,8 +87,8 @@ pub fn collapse(nodes: &[BvhNode], tris: &[[Vec3A; 3]], prim_ids: &[u32]) -> Wid
         // Depth first, the first child next.
         stack.extend(inner[..inner_count].iter().rev());
     }
-    out.blocks = fill_blocks(&sources, tris, prim_ids);
-    out
+    out.blocks = fill_blocks(&sources, triangles, prim_ids);
+    (out, leaf_blocks)
 }
 
 /// The SAH-optimal collapse (after Ylitie, Karras and Laine 2017, with the binary leaves kept
@@ -270,7 +272,7 @@ fn push_blocks(sources: &mut Vec<(u32, u32)>, leaf: &BvhNode) -> u32 {
 }
 
 /// The blocks, each made from its `(first leaf slot, count)` source, on the rayon pool.
-fn fill_blocks(sources: &[(u32, u32)], tris: &[[Vec3A; 3]], prim_ids: &[u32]) -> Vec<TriBlock> {
+fn fill_blocks(sources: &[(u32, u32)], triangles: &[[Vec3; 3]], prim_ids: &[u32]) -> Vec<TriBlock> {
     use rayon::prelude::*;
     sources
         .par_iter()
@@ -279,7 +281,7 @@ fn fill_blocks(sources: &[(u32, u32)], tris: &[[Vec3A; 3]], prim_ids: &[u32]) ->
             let mut block = TriBlock::EMPTY;
             for lane in 0..count as usize {
                 let slot = first as usize + lane;
-                for (vertex, p) in tris[slot].iter().enumerate() {
+                for (vertex, p) in triangles[prim_ids[slot] as usize].iter().enumerate() {
                     for axis in 0..3 {
                         block.v[vertex][axis][lane] = p[axis];
                     }
