@@ -332,8 +332,8 @@ pub fn run(
 
     // Builds, interleaved, with each thread count. A peer's build time is its builder call
     // (plus putting its triangles in leaf order for obvhs; for Embree its scene's build, not
-    // the device's creation); ours includes copying the triangles into leaf order and the
-    // 8-wide layout. Each engine is dropped as soon as its build is timed: Embree builds on
+    // the device's creation); ours includes the 8-wide layout with its triangle blocks (the
+    // tree's one copy of the triangles). Each engine is dropped as soon as its build is timed: Embree builds on
     // as many threads as the live device asking for the most (`getMaxNumThreads` in its
     // `device.cpp`), so a two-thread device kept alive would make the next one-thread build
     // run on two threads.
