@@ -92,101 +92,91 @@ pub fn collapse(
 }
 
 /// The SAH-optimal collapse (after Ylitie, Karras and Laine 2017, with the binary leaves kept
-/// as they are): for every binary node and lane budget `k`, whether its subtree is best kept
-/// as one lane (a node of its own) or opened with its `k` lanes shared between its children,
-/// and how. The cost counts node visits (each node's surface area); the leaves' block tests
-/// are the same however the tree is collapsed.
-///
-/// The costs are worked out bottom up, each subtree's eight (one per budget) handed to its
-/// parent and then dropped, so only the choices are kept: four bytes a binary node.
+/// as they are): for every binary node and lane budget `k`, the least cost of its subtree as
+/// at most `k` lanes of its parent, kept as one lane (a node of its own) or opened and its
+/// lanes shared between its children. The cost counts node visits (each node's surface area);
+/// the leaves' block tests are the same however the tree is collapsed.
 struct Plan {
-    /// Per binary node, for `k` in 2..=WIDTH: bits `3 (k - 2)` to `3 (k - 2) + 2` hold the left
-    /// child's share of `k` lanes when the node is opened into them, bit `21 + k - 2` is set
-    /// when opening it costs less than keeping it as one lane.
-    choice: Vec<u32>,
-    /// The least cost of the whole tree: the root's node and everything below it.
-    #[cfg_attr(not(test), allow(dead_code))]
-    cost: f32,
+    /// `cost[i][k - 1]` for binary node `i`.
+    cost: Vec<[f32; WIDTH]>,
 }
 
 impl Plan {
     fn new(nodes: &[BvhNode]) -> Plan {
-        let mut choice = vec![0u32; nodes.len()];
-        let cost = Self::costs(nodes, 0, &mut choice)[0];
-        Plan { choice, cost }
+        let mut cost = vec![[0.0f32; WIDTH]; nodes.len()];
+        // Children are stored after their parents: one backward pass sees them first.
+        for i in (2..nodes.len()).rev().chain([0]) {
+            let n = &nodes[i];
+            let area = n.aabb().half_area() as f32;
+            cost[i] = if n.is_leaf() {
+                [area * n.count.div_ceil(BLOCK as u32) as f32; WIDTH]
+            } else {
+                let opened = opened(&cost[n.first as usize], &cost[n.first as usize + 1]);
+                // Kept as one lane: a node of its own, its children in up to WIDTH lanes.
+                let own = area + opened[WIDTH - 1];
+                let mut c = [own; WIDTH];
+                for k in 1..WIDTH {
+                    c[k] = if opened[k] < own { opened[k] } else { own };
+                }
+                c
+            };
+        }
+        Plan { cost }
     }
 
-    /// `[k - 1]`: the least cost of node `i`'s subtree in at most `k` lanes, its choices
-    /// recorded on the way (post order; the depth is bounded by the builders' MAX_DEPTH).
-    fn costs(nodes: &[BvhNode], i: usize, choice: &mut [u32]) -> [f32; WIDTH] {
-        let n = &nodes[i];
-        let area = n.aabb().half_area() as f32;
-        if n.is_leaf() {
-            return [area * n.count.div_ceil(BLOCK as u32) as f32; WIDTH];
-        }
-        let l = Self::costs(nodes, n.first as usize, choice);
-        let r = Self::costs(nodes, n.first as usize + 1, choice);
-        let (opened, share) = opened(&l, &r);
-        // Kept as one lane: a node of its own, its children in up to WIDTH lanes.
-        let own = area + opened[WIDTH - 1];
-        let mut cost = [own; WIDTH];
-        let mut bits = 0u32;
-        for k in 2..=WIDTH {
-            bits |= (share[k - 1] as u32) << (3 * (k - 2));
-            if opened[k - 1] < own {
-                cost[k - 1] = opened[k - 1];
-                bits |= 1 << (21 + k - 2);
+    /// How many of `k` lanes (2 or more) the left child of inner node `i` gets when `i` is
+    /// opened into them (the lowest count on ties).
+    fn share(&self, nodes: &[BvhNode], i: usize, k: usize) -> usize {
+        let (l, r) = (
+            &self.cost[nodes[i].first as usize],
+            &self.cost[nodes[i].first as usize + 1],
+        );
+        // The first least of the sums `opened` takes its minimum over (a NaN cost, from a box
+        // of infinite extent, is never less: any share makes a valid tree).
+        let mut best = (f32::INFINITY, 1);
+        for j in 1..k {
+            let c = l[j - 1] + r[k - j - 1];
+            if c < best.0 {
+                best = (c, j);
             }
         }
-        choice[i] = bits;
-        cost
-    }
-
-    /// How many of `k` lanes (2 to WIDTH) the left child of inner node `i` gets when `i` is
-    /// opened into them.
-    fn share(&self, i: usize, k: usize) -> usize {
-        (self.choice[i] >> (3 * (k - 2)) & 7) as usize
+        best.1
     }
 
     /// Appends the lanes binary node `i` takes when given `k` of them.
     fn lanes(&self, nodes: &[BvhNode], i: usize, k: usize, out: &mut Vec<usize>) {
         let n = &nodes[i];
         // Kept as one lane unless opening it into its `k` lanes costs less.
-        if k == 1 || n.is_leaf() || self.choice[i] >> (21 + k - 2) & 1 == 0 {
+        if k == 1 || n.is_leaf() || self.cost[i][k - 1] >= self.cost[i][0] {
             out.push(i);
             return;
         }
-        let j = self.share(i, k);
+        let j = self.share(nodes, i, k);
         self.lanes(nodes, n.first as usize, j, out);
         self.lanes(nodes, n.first as usize + 1, k - j, out);
     }
 
     /// The lanes of the node made for binary inner node `i`: its children in up to WIDTH.
     fn node_lanes(&self, nodes: &[BvhNode], i: usize, out: &mut Vec<usize>) {
-        let j = self.share(i, WIDTH);
+        let j = self.share(nodes, i, WIDTH);
         self.lanes(nodes, nodes[i].first as usize, j, out);
         self.lanes(nodes, nodes[i].first as usize + 1, WIDTH - j, out);
     }
 }
 
 /// `[k - 1]`: the least cost of two siblings (costs `l`, `r`) in `k` lanes, each in at least
-/// one (infinite for `k = 1`), and the left one's share of the lanes for it (the lowest on
-/// ties; 1 when no sum is less than infinity, as with a NaN cost from a box of infinite
-/// extent: any share makes a valid tree). Every share is summed and the least kept, with
-/// selects rather than branches.
+/// one (infinite for `k = 1`). Without branches: every share is summed and the least kept.
 #[inline(always)]
-fn opened(l: &[f32; WIDTH], r: &[f32; WIDTH]) -> ([f32; WIDTH], [u8; WIDTH]) {
+fn opened(l: &[f32; WIDTH], r: &[f32; WIDTH]) -> [f32; WIDTH] {
     let mut best = [f32::INFINITY; WIDTH];
-    let mut share = [1u8; WIDTH];
     for j in 1..WIDTH {
         for k in j + 1..=WIDTH {
             let c = l[j - 1] + r[k - j - 1];
-            let less = c < best[k - 1];
-            best[k - 1] = if less { c } else { best[k - 1] };
-            share[k - 1] = if less { j as u8 } else { share[k - 1] };
+            // `min` without `f32::min`'s NaN handling (costs are never NaN).
+            best[k - 1] = if c < best[k - 1] { c } else { best[k - 1] };
         }
     }
-    (best, share)
+    best
 }
 
 /// The child word of a binary leaf whose blocks are `first..first + count`: one leaf word, or
@@ -406,7 +396,7 @@ mod tests {
             let plan = Plan::new(&bvh.nodes);
             let root_area = bvh.nodes[0].aabb().half_area() as f32;
             let exhaustive = exhaustive_cost(&bvh.nodes);
-            let planned = plan.cost as f64;
+            let planned = plan.cost[0][0] as f64;
             let made = wide_cost(&bvh.wide, root_area);
             let tolerance = 1e-5 * exhaustive;
             assert!(
