@@ -274,10 +274,19 @@ fn push_blocks(sources: &mut Vec<(u32, u32)>, leaf: &BvhNode) -> u32 {
 /// The blocks, each made from its `(first leaf slot, count)` source, on the rayon pool.
 fn fill_blocks(sources: &[(u32, u32)], triangles: &[[Vec3; 3]], prim_ids: &[u32]) -> Vec<TriBlock> {
     use rayon::prelude::*;
-    sources
-        .par_iter()
+    // The triangles are read in leaf order, scattered over the caller's array: each block
+    // asks for the triangles of the block `AHEAD` of it, so that their cache misses overlap.
+    const AHEAD: usize = 8;
+    (0..sources.len())
+        .into_par_iter()
         .with_min_len(4096)
-        .map(|&(first, count)| {
+        .map(|b| {
+            if let Some(&(first, count)) = sources.get(b + AHEAD) {
+                for slot in first..first + count {
+                    super::kernel::prefetch(&triangles[prim_ids[slot as usize] as usize]);
+                }
+            }
+            let (first, count) = sources[b];
             let mut block = TriBlock::EMPTY;
             for lane in 0..count as usize {
                 let slot = first as usize + lane;

@@ -33,6 +33,16 @@ use super::{BLOCK, TriBlock, WIDTH, WideNode};
 use crate::geometry::{PreparedRay, Ray, gamma};
 use stack::Stack;
 
+/// Asks the CPU to bring the cache line holding `x` into its caches: a hint, with no other
+/// effect (nothing on targets without the instruction).
+#[inline(always)]
+pub(crate) fn prefetch<T>(x: &T) {
+    #[cfg(target_arch = "x86_64")]
+    x86::prefetch(x);
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = x;
+}
+
 /// Which implementation the traversal uses.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, serde::Serialize)]
 #[serde(rename_all = "lowercase")]

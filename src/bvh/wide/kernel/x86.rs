@@ -307,6 +307,14 @@ pub(crate) struct NodeRay8 {
     shift: __m256i,
 }
 
+/// Asks the CPU to bring the cache line holding `x` into its caches (see [`super::prefetch`]).
+#[inline(always)]
+pub(crate) fn prefetch<T>(x: &T) {
+    // SAFETY: the intrinsic needs SSE, which every x86-64 CPU has; a prefetch reads nothing
+    // the program sees and never faults, whatever the address.
+    unsafe { _mm_prefetch::<_MM_HINT_T0>((x as *const T).cast()) }
+}
+
 /// For each 8-bit mask, the positions of its set bits in increasing order (the rest 0): the
 /// permutation that packs the hit lanes to the front.
 static COMPACT: [[u32; WIDTH]; 256] = {
