@@ -13,7 +13,7 @@ use super::ensure_parent;
 
 #[derive(Args, Debug)]
 pub struct BenchArgs {
-    /// Meshes (OBJ, PLY) or scene files (TOML); the built-in Cornell box when left out.
+    /// Meshes (OBJ, PLY, glTF) or scene files (TOML); the built-in Cornell box when left out.
     meshes: Vec<PathBuf>,
     /// Threads for the all-threads figures (default: every core). One thread is always measured.
     #[arg(long)]

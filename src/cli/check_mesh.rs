@@ -11,7 +11,7 @@ use super::load_scene;
 
 #[derive(Args, Debug)]
 pub struct CheckMeshArgs {
-    /// Mesh (OBJ, PLY) or scene file (TOML: all its meshes together).
+    /// Mesh (OBJ, PLY, glTF) or scene file (TOML: all its meshes together).
     path: PathBuf,
     /// Print JSON instead of a table.
     #[arg(long)]

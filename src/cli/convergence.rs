@@ -14,7 +14,7 @@ use super::{ensure_parent, load_scene};
 
 #[derive(Args, Debug)]
 pub struct ConvergenceArgs {
-    /// Scene file, OBJ or PLY (the built-in Cornell box when left out).
+    /// Scene file, OBJ, PLY or glTF (the built-in Cornell box when left out).
     scene: Option<PathBuf>,
     /// Folder for convergence.csv and convergence.png.
     #[arg(long, default_value = "out/convergence")]

@@ -28,11 +28,11 @@ pub struct Cli {
 
 #[derive(Subcommand, Debug)]
 enum Command {
-    /// Open the real-time viewer on a scene file, OBJ or PLY (the built-in Cornell box by
+    /// Open the real-time viewer on a scene file, OBJ, PLY or glTF (the built-in Cornell box by
     /// default): fly the camera, watch the image refine, inspect the BVH.
     #[cfg(feature = "viewer")]
     View(Box<view::ViewArgs>),
-    /// Render a scene (TOML scene file, OBJ or PLY; the built-in Cornell box by default) to PNG, or
+    /// Render a scene (TOML scene file, OBJ, PLY or glTF; the built-in Cornell box by default) to PNG, or
     /// to EXR / HDR in linear radiance.
     Render(render::RenderArgs),
     /// Build the BVH of a mesh or scene and print its statistics (median and SAH side by side).

@@ -15,7 +15,7 @@ use super::{BvhArgs, ensure_parent, load_scene, set_threads};
 
 #[derive(Args, Debug)]
 pub struct RenderArgs {
-    /// Scene file (TOML), OBJ or PLY; the built-in Cornell box when left out.
+    /// Scene file (TOML), OBJ, PLY or glTF (`.gltf`, `.glb`); the built-in Cornell box when left out.
     scene: Option<PathBuf>,
     /// Output image: `.png` (tone mapped, after `--exposure`), `.exr` or `.hdr` (linear
     /// radiance, no exposure or tone mapping).

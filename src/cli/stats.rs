@@ -10,7 +10,7 @@ use super::load_scene;
 
 #[derive(Args, Debug)]
 pub struct StatsArgs {
-    /// Mesh (OBJ, PLY) or scene file (TOML); the built-in Cornell box when left out.
+    /// Mesh (OBJ, PLY, glTF) or scene file (TOML); the built-in Cornell box when left out.
     path: Option<PathBuf>,
     /// Only this split method (median or sah); both side by side when left out.
     #[arg(long)]

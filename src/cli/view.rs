@@ -14,7 +14,7 @@ use super::BvhArgs;
 
 #[derive(Args, Debug)]
 pub struct ViewArgs {
-    /// Scene file (TOML), OBJ or PLY; the built-in Cornell box when left out.
+    /// Scene file (TOML), OBJ, PLY or glTF (`.gltf`, `.glb`); the built-in Cornell box when left out.
     scene: Option<PathBuf>,
     /// Window width in pixels.
     #[arg(long, default_value_t = 1280)]

@@ -53,7 +53,7 @@ pub struct PanelWidth(pub u32);
 /// How the viewer starts.
 #[derive(Clone, Debug)]
 pub struct ViewOptions {
-    /// Scene file, OBJ or PLY (`None`: the built-in Cornell box).
+    /// Scene file, OBJ, PLY or glTF (`None`: the built-in Cornell box).
     pub scene: Option<PathBuf>,
     /// Window size in pixels.
     pub window: UVec2,

@@ -51,7 +51,7 @@ pub struct CurrentScene {
     pub generation: u64,
 }
 
-/// Asks for a scene file, OBJ or PLY to be opened.
+/// Asks for a scene file, OBJ, PLY or glTF to be opened.
 #[derive(Message, Clone, Debug)]
 pub struct LoadScene(pub PathBuf);
 
