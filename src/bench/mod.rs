@@ -11,6 +11,7 @@ pub mod embree;
 mod engines;
 #[cfg(feature = "peers")]
 mod obvhs;
+pub mod scaling;
 
 use std::io::{BufReader, BufWriter, Read, Write};
 use std::path::Path;

@@ -5,6 +5,7 @@ use std::time::Instant;
 
 use anyhow::Result;
 use clap::{Args, Subcommand};
+use tracery::bench::scaling::{self, ScalingRow, growth_per_doubling};
 use tracery::bench::{self, BenchConfig};
 use tracery::bvh::{BuildOptions, Bvh, SplitMethod};
 use tracery::render::{RenderSettings, render};
@@ -41,6 +42,9 @@ enum ReportKind {
         /// Repeat each measurement and keep the best.
         #[arg(long, default_value_t = 3)]
         repeat: usize,
+        /// Also draw build time against triangle count, log-log, to this PNG file.
+        #[arg(long)]
+        plot: Option<PathBuf>,
     },
     /// SAH bin counts against build ms, SAH cost and closest-hit Mrays/s (one thread).
     Bins {
@@ -63,7 +67,8 @@ pub fn run(a: ReportArgs) -> Result<()> {
             meshes,
             generated,
             repeat,
-        } => scaling(meshes, generated, repeat),
+            plot,
+        } => scaling(meshes, generated, repeat, plot),
     }
 }
 
@@ -199,7 +204,12 @@ fn build_ms<T: Send>(
     Ok(ms)
 }
 
-fn scaling(meshes: Vec<PathBuf>, generated: u32, repeat: usize) -> Result<()> {
+fn scaling(
+    meshes: Vec<PathBuf>,
+    generated: u32,
+    repeat: usize,
+    plot: Option<PathBuf>,
+) -> Result<()> {
     let cores = all_threads();
     let mut inputs: Vec<(String, Vec<[glam::Vec3; 3]>)> = Vec::new();
     for m in &meshes {
@@ -237,7 +247,7 @@ fn scaling(meshes: Vec<PathBuf>, generated: u32, repeat: usize) -> Result<()> {
         pool.map(|pool| (t, pool))
     });
     let pools = pools.into_iter().collect::<Result<Vec<_>, _>>()?;
-    let mut last: Option<(usize, f64, f64)> = None;
+    let mut rows: Vec<ScalingRow> = Vec::new();
     for (name, tris) in &inputs {
         eprintln!("{name}: {} triangles", tris.len());
         // Interleaved rounds, as in `tracery bench`: every engine on every pool once per
@@ -258,29 +268,37 @@ fn scaling(meshes: Vec<PathBuf>, generated: u32, repeat: usize) -> Result<()> {
                 let _ = threads;
             }
         }
-        let [[o1, on], [e1, en]] = best;
-        let growth = |prev: Option<(usize, f64)>, ms: f64| match prev {
-            Some((n, t)) if tris.len() > n => {
-                let doublings = (tris.len() as f64 / n as f64).log2();
-                format!("{:.2}x", (ms / t).powf(1.0 / doublings))
-            }
-            _ => "-".into(),
+        let row = ScalingRow {
+            name: name.clone(),
+            triangles: tris.len(),
+            ours: best[0],
+            embree: embree.then_some(best[1]),
         };
+        let last = rows.last();
+        let growth = |prev: Option<(usize, f64)>, ms: f64| {
+            prev.and_then(|p| growth_per_doubling(p, row.triangles, ms))
+                .map_or("-".into(), |g| format!("{g:.2}x"))
+        };
+        let [o1, on] = row.ours;
         print!(
             "| {name} | {} | {o1:.1} | {on:.1} | {} |",
-            tris.len(),
-            growth(last.map(|l| (l.0, l.1)), o1)
+            row.triangles,
+            growth(last.map(|l| (l.triangles, l.ours[0])), o1)
         );
-        if embree {
+        if let Some([e1, en]) = row.embree {
             print!(
                 " {e1:.1} | {en:.1} | {} | {:.2}x | {:.2}x |",
-                growth(last.map(|l| (l.0, l.2)), e1),
+                growth(last.and_then(|l| l.embree.map(|e| (l.triangles, e[0]))), e1),
                 o1 / e1,
                 on / en
             );
         }
         println!();
-        last = Some((tris.len(), o1, e1));
+        rows.push(row);
+    }
+    if let Some(path) = plot {
+        scaling::plot(&path, &rows, cores)?;
+        eprintln!("wrote {}", path.display());
     }
     Ok(())
 }
