@@ -65,3 +65,89 @@ fn the_scaling_plot_draws_each_engine_measured_and_no_other() {
     // Nothing to plot is an error, not an empty picture.
     assert!(plot(&dir.path().join("none.png"), &[], 2).is_err());
 }
+
+/// The lengths in pixels of the bars of colour `rgb` in `img`, longest first: runs of
+/// picture rows holding that colour, each run's widest first run from the left (the legend's
+/// swatch makes one too).
+fn bar_lengths(img: &image::RgbImage, rgb: [u8; 3]) -> Vec<usize> {
+    let like = |x: u32, y: u32| {
+        let p = img.get_pixel(x, y).0;
+        (0..3).all(|c| p[c].abs_diff(rgb[c]) <= 8)
+    };
+    // A row's first run of the colour from the left (a legend swatch further right on the
+    // same row is not part of the bar).
+    let width = |y: u32| {
+        (0..img.width())
+            .skip_while(|&x| !like(x, y))
+            .take_while(|&x| like(x, y))
+            .count()
+    };
+    let mut runs = Vec::new();
+    let mut current = 0;
+    for y in 0..img.height() {
+        match width(y) {
+            0 if current > 0 => {
+                runs.push(current);
+                current = 0;
+            }
+            w => current = current.max(w),
+        }
+    }
+    if current > 0 {
+        runs.push(current);
+    }
+    runs.sort_unstable_by(|a, b| b.cmp(a));
+    runs
+}
+
+#[test]
+fn the_bench_chart_has_a_bar_pair_per_one_thread_row_as_long_as_its_figure() {
+    use tracery::bench::EngineResult;
+    use tracery::bench::chart::{CLOSEST_COLOUR, OCCLUDED_COLOUR, plot};
+    let result = |engine: &str, threads: usize, closest: f64, occluded: f64| EngineResult {
+        engine: engine.into(),
+        mesh: "mesh".into(),
+        triangles: 1000,
+        threads,
+        build_ms: 1.0,
+        closest_mrays: closest,
+        occluded_mrays: occluded,
+        agreement: 1.0,
+        stats: None,
+    };
+    let results = [
+        result("fast", 1, 40.0, 20.0),
+        result("fast", 2, 80.0, 40.0),
+        result("slow", 1, 10.0, 5.0),
+    ];
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("bench.png");
+    plot(&path, &results).unwrap();
+    let img = image::open(&path).unwrap().to_rgb8();
+    // Two one-thread rows: the two-thread row is left out.
+    assert_eq!(img.dimensions(), (1000, 110 + 38 * 2));
+    // Each bar's length follows its figure: 40 against 10 for closest hits, 20 against 5 for
+    // occlusion (and the two queries share one scale: 40 against 20).
+    let closest = bar_lengths(&img, CLOSEST_COLOUR);
+    let occluded = bar_lengths(&img, OCCLUDED_COLOUR);
+    assert!(
+        closest.len() >= 2 && occluded.len() >= 2,
+        "{closest:?} {occluded:?}"
+    );
+    let ratio = |a: usize, b: usize| a as f64 / b as f64;
+    assert!(
+        (ratio(closest[0], closest[1]) - 4.0).abs() < 0.2,
+        "{closest:?}"
+    );
+    assert!(
+        (ratio(occluded[0], occluded[1]) - 4.0).abs() < 0.2,
+        "{occluded:?}"
+    );
+    assert!(
+        (ratio(closest[0], occluded[0]) - 2.0).abs() < 0.1,
+        "{closest:?} {occluded:?}"
+    );
+
+    // No one-thread row: an error, not an empty picture.
+    assert!(plot(&dir.path().join("none.png"), &results[1..2]).is_err());
+}

@@ -6,6 +6,7 @@
 //! Triangles with a NaN or infinite vertex are left out before any engine sees them (some
 //! peers would index out of bounds on them), and counted.
 
+pub mod chart;
 #[cfg(feature = "embree")]
 pub mod embree;
 mod engines;

@@ -42,6 +42,10 @@ pub struct BenchArgs {
     /// Write tracery-sah's closest hits to this file (suffixed like --rays-out).
     #[arg(long)]
     hits_out: Option<PathBuf>,
+    /// Also draw every engine's one-thread rays per second on every mesh as bars to this PNG
+    /// file.
+    #[arg(long)]
+    plot: Option<PathBuf>,
 }
 
 fn per_mesh(path: &Path, mesh: &str, several: bool) -> PathBuf {
@@ -138,6 +142,11 @@ pub fn run(a: BenchArgs) -> Result<()> {
     }
     if a.json {
         println!("{}", serde_json::to_string_pretty(&all_results)?);
+    }
+    if let Some(p) = &a.plot {
+        let p = ensure_parent(p)?;
+        bench::chart::plot(&p, &all_results)?;
+        eprintln!("wrote {}", p.display());
     }
     Ok(())
 }
