@@ -9,7 +9,7 @@
 
 use super::kernel::stack::{Slots, Stack};
 use super::kernel::{BlockHits, Lanes, NodeRay, TriRay};
-use super::{Child, TriBlock, WIDTH, WideBvh};
+use super::{BLOCK, Child, TriBlock, WIDTH, WideBvh};
 use crate::geometry::{PreparedRay, Ray, intersect_triangle, intersect_triangle_t};
 
 /// Boxes are culled only when they start clearly beyond the best hit so far: the slack keeps a
@@ -74,12 +74,12 @@ pub(crate) fn leaf_closest<L: Lanes>(
         let limit = next_up(best.t);
         let (mut hits, mut exact) = L::block(block, lr, limit, &mut out);
         while hits != 0 {
-            let k = hits.trailing_zeros() as usize;
+            let k = hits.trailing_zeros() as usize & (BLOCK - 1);
             hits &= hits - 1;
             best.offer(out.t[k], block.prim[k], out.u[k], out.v[k]);
         }
         while exact != 0 {
-            let k = exact.trailing_zeros() as usize;
+            let k = exact.trailing_zeros() as usize & (BLOCK - 1);
             exact &= exact - 1;
             if let Some(h) = intersect_triangle(&r.ray, &block.triangle(k), limit) {
                 best.offer(h.t, block.prim[k], h.u, h.v);
@@ -91,38 +91,42 @@ pub(crate) fn leaf_closest<L: Lanes>(
 /// Closest hit at `0 < t < t_max` (the best is `t_max` with no triangle when nothing is hit).
 #[inline(always)]
 pub(crate) fn closest<L: Lanes, const SAFE: bool>(w: &WideBvh, ray: &Ray, t_max: f32) -> Best {
-    let ray = &PreparedRay::new(ray);
     let mut best = Best::none(t_max);
     if let Some((first, count)) = w.root_leaf {
-        let tr = TriRay::new(ray);
+        let tr = TriRay::new(&PreparedRay::new(ray));
         leaf_closest::<L>(leaf(w, first, count), &tr, &L::tri_ray(&tr), &mut best);
         return best;
     }
     let Some(root) = w.nodes.first() else {
         return best;
     };
-    let nr = L::node_ray(&NodeRay::new(ray));
+    let nr = L::node_ray(&NodeRay::of(ray));
     let mut near = [0.0f32; WIDTH];
-    // The root first, before the triangle test's setup: many rays of an image enter none of
-    // its children and leave here.
+    // The root first, before the triangle test's setup (the axis permutation and shear): many
+    // rays of an image enter none of its children and leave here.
     if L::node::<SAFE>(root, &nr, t_max * CULL_SLACK, &mut near) == 0 {
         return best;
     }
-    let tr = TriRay::new(ray);
+    let tr = TriRay::new(&PreparedRay::new(ray));
     let lr = L::tri_ray(&tr);
     let mut slots = Slots::new();
     let mut stack = Stack::new(&mut slots);
     let mut current = 0u32;
+    // The cull distance, `best.t * CULL_SLACK`, kept beside the best hit: it changes only at a
+    // leaf.
+    let mut cull = t_max * CULL_SLACK;
+    // Lane indices masked to the node's width: the compiler then needs no bounds check.
+    let lane = |bits: u32| bits.trailing_zeros() as usize & (WIDTH - 1);
     'node: loop {
         let node = &w.nodes[current as usize];
-        let mask = L::node::<SAFE>(node, &nr, best.t * CULL_SLACK, &mut near);
+        let mask = L::node::<SAFE>(node, &nr, cull, &mut near);
         // The child to visit next, if this node gives one.
         let next = match mask.count_ones() {
             0 => None,
-            1 => Some(mask.trailing_zeros() as usize),
+            1 => Some(lane(mask)),
             2 => {
-                let a = mask.trailing_zeros() as usize;
-                let b = (mask & (mask - 1)).trailing_zeros() as usize;
+                let a = lane(mask);
+                let b = lane(mask & (mask - 1));
                 // Without a branch: which is nearer is as good as random.
                 let swap = (near[b] < near[a]) as usize;
                 let (n, f) = ([a, b][swap], [b, a][swap]);
@@ -142,13 +146,14 @@ pub(crate) fn closest<L: Lanes, const SAFE: bool>(w: &WideBvh, ray: &Ray, t_max:
             }
             let (first, count) = child.blocks();
             leaf_closest::<L>(leaf(w, first, count), &tr, &lr, &mut best);
+            cull = best.t * CULL_SLACK;
         }
         // Pop, skipping entries that now start beyond the best hit; leaves are tested here.
         loop {
             let Some((child, dist)) = stack.pop() else {
                 return best;
             };
-            if dist > best.t * CULL_SLACK {
+            if dist > cull {
                 continue;
             }
             let child = Child(child);
@@ -158,6 +163,7 @@ pub(crate) fn closest<L: Lanes, const SAFE: bool>(w: &WideBvh, ray: &Ray, t_max:
             }
             let (first, count) = child.blocks();
             leaf_closest::<L>(leaf(w, first, count), &tr, &lr, &mut best);
+            cull = best.t * CULL_SLACK;
         }
     }
 }
@@ -178,14 +184,14 @@ fn leaf_each<L: Lanes>(
         let block = &w.blocks[b as usize];
         let (mut hits, mut exact) = L::block(block, lr, t_max, &mut out);
         while hits != 0 {
-            let k = hits.trailing_zeros() as usize;
+            let k = hits.trailing_zeros() as usize & (BLOCK - 1);
             hits &= hits - 1;
             if !f(block.prim[k], out.t[k]) {
                 return false;
             }
         }
         while exact != 0 {
-            let k = exact.trailing_zeros() as usize;
+            let k = exact.trailing_zeros() as usize & (BLOCK - 1);
             exact &= exact - 1;
             let tk = intersect_triangle_t(&r.ray, &block.triangle(k), t_max);
             if tk < t_max && !f(block.prim[k], tk) {
@@ -229,7 +235,7 @@ pub(crate) fn each_hit<L: Lanes, const SAFE: bool>(
         // inner child is visited next, the others wait on the stack.
         let mut next = None;
         while mask != 0 {
-            let k = mask.trailing_zeros() as usize;
+            let k = mask.trailing_zeros() as usize & (WIDTH - 1);
             mask &= mask - 1;
             let child = Child(node.child[k]);
             if child.is_leaf() {

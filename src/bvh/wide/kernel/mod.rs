@@ -160,10 +160,27 @@ impl NodeRay {
     /// near planes by the sign bits.
     #[inline(always)]
     pub fn new(ray: &PreparedRay) -> Self {
-        let inv = ray.inv_dir.to_array();
-        let neg = ray.neg_mask.bitmask();
+        Self::from_parts(
+            ray.inv_dir.to_array(),
+            ray.neg_mask.bitmask(),
+            ray.origin.to_array(),
+        )
+    }
+
+    /// The same constants straight from a ray, before (or without) the triangle test's
+    /// setup: `1 / dir` as [`PreparedRay::new`] computes it, the sign bits of `dir`.
+    #[inline(always)]
+    pub fn of(ray: &Ray) -> Self {
+        let d = glam::Vec3A::from(ray.dir);
+        let inv = (glam::Vec3A::ONE / d).to_array();
+        let neg = d.is_negative_bitmask();
+        Self::from_parts(inv, neg, ray.origin.to_array())
+    }
+
+    #[inline(always)]
+    fn from_parts(inv: [f32; 3], neg: u32, origin: [f32; 3]) -> Self {
         Self {
-            origin: ray.origin.to_array(),
+            origin,
             inv,
             inv_far: inv.map(|i| i * FAR_SCALE),
             near: std::array::from_fn(|a| 2 * a + ((neg >> a) & 1) as usize),
@@ -172,28 +189,18 @@ impl NodeRay {
     }
 }
 
-/// What the triangle test needs of a ray.
+/// What the triangle test needs of a ray: the prepared ray itself (its origin, axis
+/// permutation and shear, and the scalar test's input).
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct TriRay {
     /// The ray, for the scalar test.
     pub ray: PreparedRay,
-    pub origin: [f32; 3],
-    /// The axis permutation `[kx, ky, kz]` of the watertight test.
-    pub k: [usize; 3],
-    /// `[sx, sy, sz]`.
-    pub shear: [f32; 3],
 }
 
 impl TriRay {
     #[inline(always)]
     pub fn new(ray: &PreparedRay) -> Self {
-        let ray = *ray;
-        Self {
-            ray,
-            origin: ray.origin.to_array(),
-            k: ray.k,
-            shear: ray.shear,
-        }
+        Self { ray: *ray }
     }
 }
 

@@ -48,10 +48,10 @@ pub(crate) struct TriRay4 {
 fn tri_ray4(r: &TriRay) -> TriRay4 {
     // SAFETY: `_mm_set1_ps` only needs SSE, part of the x86-64 baseline.
     let s = |x: f32| unsafe { _mm_set1_ps(x) };
-    let [sx, sy, sz] = r.shear;
+    let [sx, sy, sz] = r.ray.shear;
     TriRay4 {
-        origin: r.origin.map(s),
-        k: r.k,
+        origin: r.ray.origin.to_array().map(s),
+        k: r.ray.k,
         sx: s(sx),
         sy: s(sy),
         sz: s(sz),
