@@ -211,26 +211,29 @@ pub(crate) fn each_hit<L: Lanes, const SAFE: bool>(
     t_max: f32,
     f: &mut impl FnMut(u32, f32) -> bool,
 ) -> bool {
-    let ray = &PreparedRay::new(ray);
-    let tr = TriRay::new(ray);
-    let lr = L::tri_ray(&tr);
     if let Some((first, count)) = w.root_leaf {
-        return leaf_each::<L>(w, first, count, &tr, &lr, t_max, f);
+        let tr = TriRay::new(&PreparedRay::new(ray));
+        return leaf_each::<L>(w, first, count, &tr, &L::tri_ray(&tr), t_max, f);
     }
-    if w.nodes.is_empty() {
+    let Some(root) = w.nodes.first() else {
         return true;
-    }
-    let nr = L::node_ray(&NodeRay::new(ray));
+    };
+    let nr = L::node_ray(&NodeRay::of(ray));
     // Boxes are culled with the same slack as the closest-hit search: a hit on a box's face
     // just before `t_max` may have a computed entry distance just past it.
     let cull = t_max * CULL_SLACK;
+    let mut near = [0.0f32; WIDTH];
+    // The root first, before the triangle test's setup, as for the closest hit.
+    let mut mask = L::node::<SAFE>(root, &nr, cull, &mut near);
+    if mask == 0 {
+        return true;
+    }
+    let tr = TriRay::new(&PreparedRay::new(ray));
+    let lr = L::tri_ray(&tr);
     let mut slots = Slots::new();
     let mut stack = Stack::new(&mut slots);
-    let mut current = 0u32;
-    let mut near = [0.0f32; WIDTH];
+    let mut node = root;
     loop {
-        let node = &w.nodes[current as usize];
-        let mut mask = L::node::<SAFE>(node, &nr, cull, &mut near);
         // Leaves are tested as soon as they are found (a shadow ray may stop there); the first
         // inner child is visited next, the others wait on the stack.
         let mut next = None;
@@ -250,7 +253,10 @@ pub(crate) fn each_hit<L: Lanes, const SAFE: bool>(
             }
         }
         match next.or_else(|| stack.pop().map(|(c, _)| c)) {
-            Some(c) => current = c,
+            Some(c) => {
+                node = &w.nodes[c as usize];
+                mask = L::node::<SAFE>(node, &nr, cull, &mut near);
+            }
             None => return true,
         }
     }

@@ -156,31 +156,17 @@ pub(crate) struct NodeRay {
 }
 
 impl NodeRay {
-    /// The box test's constants of `ray`: the reciprocal direction (`+-inf` for `+-0`), the
-    /// near planes by the sign bits.
-    #[inline(always)]
-    pub fn new(ray: &PreparedRay) -> Self {
-        Self::from_parts(
-            ray.inv_dir.to_array(),
-            ray.neg_mask.bitmask(),
-            ray.origin.to_array(),
-        )
-    }
-
-    /// The same constants straight from a ray, before (or without) the triangle test's
-    /// setup: `1 / dir` as [`PreparedRay::new`] computes it, the sign bits of `dir`.
+    /// The box test's constants of `ray`, straight from the ray (before, or without, the
+    /// triangle test's setup): the reciprocal direction (`+-inf` for `+-0`) as
+    /// [`PreparedRay::new`] computes it, the near planes by the direction's sign bits (so `-0`
+    /// counts as negative).
     #[inline(always)]
     pub fn of(ray: &Ray) -> Self {
         let d = glam::Vec3A::from(ray.dir);
         let inv = (glam::Vec3A::ONE / d).to_array();
         let neg = d.is_negative_bitmask();
-        Self::from_parts(inv, neg, ray.origin.to_array())
-    }
-
-    #[inline(always)]
-    fn from_parts(inv: [f32; 3], neg: u32, origin: [f32; 3]) -> Self {
         Self {
-            origin,
+            origin: ray.origin.to_array(),
             inv,
             inv_far: inv.map(|i| i * FAR_SCALE),
             near: std::array::from_fn(|a| 2 * a + ((neg >> a) & 1) as usize),
