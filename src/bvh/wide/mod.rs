@@ -238,13 +238,19 @@ impl WideBvh {
         let safe = needs_nan_rule(ray);
         match (self.dispatch, safe) {
             (Dispatch::Scalar, false) => {
-                traverse::closest::<kernel::Scalar, false>(self, ray, t_max)
+                traverse::closest_apart::<kernel::Scalar, false>(self, ray, t_max)
             }
-            (Dispatch::Scalar, true) => traverse::closest::<kernel::Scalar, true>(self, ray, t_max),
+            (Dispatch::Scalar, true) => {
+                traverse::closest_apart::<kernel::Scalar, true>(self, ray, t_max)
+            }
             #[cfg(target_arch = "x86_64")]
-            (Dispatch::Sse2, false) => traverse::closest::<kernel::Sse2, false>(self, ray, t_max),
+            (Dispatch::Sse2, false) => {
+                traverse::closest_apart::<kernel::Sse2, false>(self, ray, t_max)
+            }
             #[cfg(target_arch = "x86_64")]
-            (Dispatch::Sse2, true) => traverse::closest::<kernel::Sse2, true>(self, ray, t_max),
+            (Dispatch::Sse2, true) => {
+                traverse::closest_apart::<kernel::Sse2, true>(self, ray, t_max)
+            }
             #[cfg(target_arch = "x86_64")]
             (Dispatch::Avx2(cpu), false) => kernel::avx2::closest::<false>(cpu, self, ray, t_max),
             #[cfg(target_arch = "x86_64")]
@@ -270,17 +276,19 @@ impl WideBvh {
         let safe = needs_nan_rule(ray);
         match (self.dispatch, safe) {
             (Dispatch::Scalar, false) => {
-                traverse::each_hit::<kernel::Scalar, false>(self, ray, t_max, f)
+                traverse::each_hit_apart::<kernel::Scalar, false, F>(self, ray, t_max, f)
             }
             (Dispatch::Scalar, true) => {
-                traverse::each_hit::<kernel::Scalar, true>(self, ray, t_max, f)
+                traverse::each_hit_apart::<kernel::Scalar, true, F>(self, ray, t_max, f)
             }
             #[cfg(target_arch = "x86_64")]
             (Dispatch::Sse2, false) => {
-                traverse::each_hit::<kernel::Sse2, false>(self, ray, t_max, f)
+                traverse::each_hit_apart::<kernel::Sse2, false, F>(self, ray, t_max, f)
             }
             #[cfg(target_arch = "x86_64")]
-            (Dispatch::Sse2, true) => traverse::each_hit::<kernel::Sse2, true>(self, ray, t_max, f),
+            (Dispatch::Sse2, true) => {
+                traverse::each_hit_apart::<kernel::Sse2, true, F>(self, ray, t_max, f)
+            }
             #[cfg(target_arch = "x86_64")]
             (Dispatch::Avx2(cpu), false) => {
                 kernel::avx2::each_hit::<false, F>(cpu, self, ray, t_max, f)

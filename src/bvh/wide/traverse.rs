@@ -261,3 +261,27 @@ pub(crate) fn each_hit<L: Lanes, const SAFE: bool>(
         }
     }
 }
+
+/// [`closest`] as a function of its own, for the dispatch's scalar and SSE2 arms: inlined
+/// there, its stack frame (the traversal stack's slots) made the dispatch push registers and
+/// probe its stack on every call, the AVX2 and AVX-512 arms included, which only jump to
+/// their kernels' own functions.
+#[inline(never)]
+pub(crate) fn closest_apart<L: Lanes, const SAFE: bool>(
+    w: &WideBvh,
+    ray: &Ray,
+    t_max: f32,
+) -> Best {
+    closest::<L, SAFE>(w, ray, t_max)
+}
+
+/// [`each_hit`] as a function of its own (see [`closest_apart`]).
+#[inline(never)]
+pub(crate) fn each_hit_apart<L: Lanes, const SAFE: bool, F: FnMut(u32, f32) -> bool>(
+    w: &WideBvh,
+    ray: &Ray,
+    t_max: f32,
+    f: &mut F,
+) -> bool {
+    each_hit::<L, SAFE>(w, ray, t_max, f)
+}
