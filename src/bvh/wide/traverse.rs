@@ -102,24 +102,24 @@ pub(crate) fn closest<L: Lanes, const SAFE: bool>(w: &WideBvh, ray: &Ray, t_max:
     };
     let nr = L::node_ray(&NodeRay::of(ray));
     let mut near = [0.0f32; WIDTH];
+    // The cull distance, `best.t * CULL_SLACK`, kept beside the best hit: it changes only at a
+    // leaf.
+    let mut cull = t_max * CULL_SLACK;
     // The root first, before the triangle test's setup (the axis permutation and shear): many
-    // rays of an image enter none of its children and leave here.
-    if L::node::<SAFE>(root, &nr, t_max * CULL_SLACK, &mut near) == 0 {
+    // rays of an image enter none of its children and leave here. The others go on from its
+    // answer (`node`, `mask`: the node being visited and the children the ray enters).
+    let mut node = root;
+    let mut mask = L::node::<SAFE>(root, &nr, cull, &mut near);
+    if mask == 0 {
         return best;
     }
     let tr = TriRay::new(&PreparedRay::new(ray));
     let lr = L::tri_ray(&tr);
     let mut slots = Slots::new();
     let mut stack = Stack::new(&mut slots);
-    let mut current = 0u32;
-    // The cull distance, `best.t * CULL_SLACK`, kept beside the best hit: it changes only at a
-    // leaf.
-    let mut cull = t_max * CULL_SLACK;
     // Lane indices masked to the node's width: the compiler then needs no bounds check.
     let lane = |bits: u32| bits.trailing_zeros() as usize & (WIDTH - 1);
     'node: loop {
-        let node = &w.nodes[current as usize];
-        let mask = L::node::<SAFE>(node, &nr, cull, &mut near);
         // The child to visit next, if this node gives one.
         let next = match mask.count_ones() {
             0 => None,
@@ -141,7 +141,8 @@ pub(crate) fn closest<L: Lanes, const SAFE: bool>(w: &WideBvh, ray: &Ray, t_max:
         if let Some(k) = next {
             let child = Child(node.child[k]);
             if !child.is_leaf() {
-                current = child.index();
+                node = &w.nodes[child.index() as usize];
+                mask = L::node::<SAFE>(node, &nr, cull, &mut near);
                 continue 'node;
             }
             let (first, count) = child.blocks();
@@ -158,7 +159,8 @@ pub(crate) fn closest<L: Lanes, const SAFE: bool>(w: &WideBvh, ray: &Ray, t_max:
             }
             let child = Child(child);
             if !child.is_leaf() {
-                current = child.index();
+                node = &w.nodes[child.index() as usize];
+                mask = L::node::<SAFE>(node, &nr, cull, &mut near);
                 continue 'node;
             }
             let (first, count) = child.blocks();
@@ -234,9 +236,11 @@ pub(crate) fn each_hit<L: Lanes, const SAFE: bool>(
     let mut stack = Stack::new(&mut slots);
     let mut node = root;
     loop {
-        // Leaves are tested as soon as they are found (a shadow ray may stop there); the first
-        // inner child is visited next, the others wait on the stack.
-        let mut next = None;
+        // Leaves are tested as soon as they are found (a shadow ray may stop there); the
+        // nearest inner child is visited next (fewer nodes before the first hit: 6.48 against
+        // 6.95 a hitting ray for the first in lane order, dragon 202k), the others wait on the
+        // stack.
+        let mut next: Option<(u32, f32)> = None;
         while mask != 0 {
             let k = mask.trailing_zeros() as usize & (WIDTH - 1);
             mask &= mask - 1;
@@ -246,12 +250,18 @@ pub(crate) fn each_hit<L: Lanes, const SAFE: bool>(
                 if !leaf_each::<L>(w, first, count, &tr, &lr, t_max, f) {
                     return false;
                 }
-            } else if next.is_none() {
-                next = Some(child.index());
             } else {
-                stack.push(child.0, 0.0);
+                match next {
+                    None => next = Some((child.index(), near[k])),
+                    Some((n, d)) if near[k] < d => {
+                        stack.push(n, 0.0);
+                        next = Some((child.index(), near[k]));
+                    }
+                    Some(_) => stack.push(child.0, 0.0),
+                }
             }
         }
+        let next = next.map(|(n, _)| n);
         match next.or_else(|| stack.pop().map(|(c, _)| c)) {
             Some(c) => {
                 node = &w.nodes[c as usize];
