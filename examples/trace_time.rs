@@ -5,9 +5,12 @@
 //! beside ours in one run is in `tracery bench --features embree`. `TRACERY_KERNEL` picks the
 //! kernel as everywhere.
 //!
-//! `cargo run --release --no-default-features --example trace_time -- MESH [ROUNDS] [QUERY]`
+//! `cargo run --release --no-default-features --example trace_time -- MESH [ROUNDS] [QUERY] [RAYS]`
 //!
-//! `QUERY` (`closest`, `occluded` or `packets`) times that query alone, for profiling.
+//! `QUERY` (`closest`, `occluded` or `packets`) times that query alone, for profiling. `RAYS`
+//! (`hits` or `misses`) keeps only the rays that hit the mesh, or only those that miss it, in
+//! image order (single rays only: packets need whole tiles), for example to count a hitting
+//! ray's instructions under `valgrind --tool=callgrind`.
 
 use std::path::PathBuf;
 use std::time::Instant;
@@ -26,14 +29,26 @@ fn main() -> Result<()> {
     let run = |q: &str| only.as_deref().is_none_or(|o| o == q);
     let scene = Scene::load(&path)?;
     let bvh = Bvh::build(&scene.mesh.triangles, &BuildOptions::sah());
-    let rays = canonical_rays(&bvh.bounds());
+    let mut rays = canonical_rays(&bvh.bounds());
+    if let Some(kind) = args.next() {
+        let want_hits = match kind.as_str() {
+            "hits" => true,
+            "misses" => false,
+            _ => anyhow::bail!("RAYS is `hits` or `misses`, not `{kind}`"),
+        };
+        anyhow::ensure!(
+            matches!(only.as_deref(), Some("closest" | "occluded")),
+            "RAYS needs QUERY `closest` or `occluded` (packets need whole tiles)"
+        );
+        rays.retain(|r| bvh.intersect(r, f32::INFINITY).is_some() == want_hits);
+    }
     let mut closest = Vec::with_capacity(rounds);
     let mut occluded = Vec::with_capacity(rounds);
     let mut packets = Vec::with_capacity(rounds);
     let (mut hits, mut blocked, mut packet_hits) = (0usize, 0usize, 0usize);
     // The rays of each 8 x 8 tile side by side, as the renderer makes them.
     let size = CANONICAL_SIZE as usize;
-    let tiles: Vec<Vec<Ray>> = (0..size / 8)
+    let tiles: Vec<Vec<Ray>> = (0..if run("packets") { size / 8 } else { 0 })
         .flat_map(|ty| (0..size / 8).map(move |tx| (ty, tx)))
         .map(|(ty, tx)| {
             (0..64)

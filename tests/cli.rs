@@ -179,6 +179,37 @@ fn bench_json_and_output_files_follow_the_formats() {
     let expected = canonical_rays(&scene.mesh.bounds());
     let read_back = tracery::bench::read_rays(&rays).unwrap();
     assert_eq!(read_back, expected);
+    // The one-thread rows of single-ray engines carry their rates on the rays that hit and
+    // those that miss apart, split as the hits file says.
+    let hit_count = (0..n)
+        .filter(|i| u32::from_le_bytes(hb[8 + 8 * i..12 + 8 * i].try_into().unwrap()) != u32::MAX)
+        .count();
+    assert!(
+        hit_count > 0 && hit_count < n,
+        "{hit_count} of {n} rays hit"
+    );
+    for r in rows {
+        let single = r["threads"] == 1 && r["engine"] != "tracery-packet";
+        if r["engine"]
+            .as_str()
+            .is_some_and(|e| e.ends_with("packet16"))
+            || !single
+        {
+            assert!(r.get("split").is_none(), "no split expected in {r}");
+            continue;
+        }
+        let s = &r["split"];
+        assert_eq!(s["hit_rays"], hit_count, "{r}");
+        assert_eq!(s["miss_rays"], n - hit_count, "{r}");
+        for key in [
+            "closest_hit_mrays",
+            "closest_miss_mrays",
+            "occluded_hit_mrays",
+            "occluded_miss_mrays",
+        ] {
+            assert!(s[key].as_f64().unwrap() > 0.0, "{key} in {r}");
+        }
+    }
     let bf = BruteForce::new(&scene.mesh.triangles);
     for i in (0..n).step_by(997) {
         let rec = &hb[4 + 8 * i..12 + 8 * i];

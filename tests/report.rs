@@ -114,6 +114,7 @@ fn the_bench_chart_has_a_bar_pair_per_one_thread_row_as_long_as_its_figure() {
         occluded_mrays: occluded,
         agreement: 1.0,
         stats: None,
+        split: None,
     };
     let results = [
         result("fast", 1, 40.0, 20.0),

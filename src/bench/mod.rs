@@ -137,6 +137,30 @@ pub struct EngineResult {
     /// Our BVH's statistics (only for our engines).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub stats: Option<BvhStats>,
+    /// One thread, single rays: the rates on the rays that hit the mesh and on those that miss
+    /// it, apart (the one-thread row of each single-ray engine; `None` for the others).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub split: Option<SplitRates>,
+}
+
+/// An engine's one-thread rates on the canonical rays split by whether they hit the mesh (as
+/// the first engine, `tracery-sah`, answers), in millions of rays per second. An image's rays
+/// are mostly of one kind or the other, and engines differ most on rays that leave at the
+/// root: this says which kind a whole-image figure is made of.
+#[derive(Clone, Copy, Debug, Serialize)]
+pub struct SplitRates {
+    /// Rays that hit the mesh.
+    pub hit_rays: usize,
+    /// Rays that miss it.
+    pub miss_rays: usize,
+    /// Closest hits of the rays that hit.
+    pub closest_hit_mrays: f64,
+    /// Closest hits of the rays that miss.
+    pub closest_miss_mrays: f64,
+    /// Occlusion of the rays that hit.
+    pub occluded_hit_mrays: f64,
+    /// Occlusion of the rays that miss.
+    pub occluded_miss_mrays: f64,
 }
 
 /// Settings of a benchmark run.
@@ -383,6 +407,32 @@ pub fn run(
     // Written in place each round: allocating (and faulting in) 8 MB of fresh records inside
     // the timed call cost every engine the same 2-3 ms, which pulled every ratio towards 1.
     let mut hits = vec![vec![HitRecord::MISS; rays.len()]; n];
+    // The rays the first engine hits and those it misses, each in image order, for the
+    // one-thread single-ray rates apart (`SplitRates`).
+    let one = pools.iter().position(|(t, _)| *t == 1);
+    let (hit_rays, miss_rays): (Vec<Ray>, Vec<Ray>) = match (one, entries.first()) {
+        (Some(p), Some(first)) => {
+            progress(&format!(
+                "{mesh_name}: splitting the rays into hits and misses"
+            ));
+            let mut first_hits = vec![HitRecord::MISS; rays.len()];
+            pools[p]
+                .1
+                .install(|| engines::trace_closest(&*first.engine, rays, width, &mut first_hits));
+            let (h, m): (Vec<_>, Vec<_>) = rays
+                .iter()
+                .zip(&first_hits)
+                .partition(|(_, h)| h.prim != HitRecord::MISS.prim);
+            (
+                h.into_iter().map(|(r, _)| *r).collect(),
+                m.into_iter().map(|(r, _)| *r).collect(),
+            )
+        }
+        _ => Default::default(),
+    };
+    // Per engine: best times of closest hit, closest miss, occluded hit, occluded miss.
+    let mut split = vec![[Duration::MAX; 4]; entries.len()];
+    let mut split_out = vec![HitRecord::MISS; hit_rays.len().max(miss_rays.len())];
     for round in 0..config.repeat.max(1) {
         progress(&format!("{mesh_name}: tracing, round {}", round + 1));
         for (e, entry) in entries.iter().enumerate() {
@@ -395,6 +445,20 @@ pub fn run(
                 let start = Instant::now();
                 pool.install(|| engines::trace_occluded(engine, rays, width));
                 occluded[k] = occluded[k].min(start.elapsed());
+            }
+            if let Some(p) = one
+                && entry.engine.tile().is_none()
+            {
+                let (engine, pool) = (&*entry.engine, &pools[p].1);
+                for (i, set) in [&hit_rays, &miss_rays].into_iter().enumerate() {
+                    let out = &mut split_out[..set.len()];
+                    let start = Instant::now();
+                    pool.install(|| engines::trace_closest(engine, set, width, out));
+                    split[e][i] = split[e][i].min(start.elapsed());
+                    let start = Instant::now();
+                    pool.install(|| engines::trace_occluded(engine, set, width));
+                    split[e][2 + i] = split[e][2 + i].min(start.elapsed());
+                }
             }
         }
     }
@@ -428,6 +492,21 @@ pub fn run(
                 occluded_mrays: rays.len() as f64 / occluded[k].as_secs_f64() / 1e6,
                 agreement: agreement(&reference, &map_back(&hits[k]), &copies),
                 stats,
+                split: (Some(p) == one
+                    && split[e][0] != Duration::MAX
+                    && !hit_rays.is_empty()
+                    && !miss_rays.is_empty())
+                .then(|| {
+                    let rate = |n: usize, d: Duration| n as f64 / d.as_secs_f64() / 1e6;
+                    SplitRates {
+                        hit_rays: hit_rays.len(),
+                        miss_rays: miss_rays.len(),
+                        closest_hit_mrays: rate(hit_rays.len(), split[e][0]),
+                        closest_miss_mrays: rate(miss_rays.len(), split[e][1]),
+                        occluded_hit_mrays: rate(hit_rays.len(), split[e][2]),
+                        occluded_miss_mrays: rate(miss_rays.len(), split[e][3]),
+                    }
+                }),
             });
         }
     }

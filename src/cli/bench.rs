@@ -5,7 +5,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::Result;
 use clap::Args;
-use tracery::bench::{self, BenchConfig, EngineResult};
+use tracery::bench::{self, BenchConfig, EngineResult, SplitRates};
 use tracery::bvh::BuildOptions;
 use tracery::scene::Scene;
 
@@ -221,6 +221,7 @@ fn print_table(mesh: &str, triangles: usize, excluded: usize, rows: &[EngineResu
             }
         }
     }
+    print_split(rows);
     if let (Some(one), Some(&t)) = (find("tracery-sah", 1), threads.last())
         && t > 1
         && let Some(all) = find("tracery-sah", t)
@@ -229,6 +230,47 @@ fn print_table(mesh: &str, triangles: usize, excluded: usize, rows: &[EngineResu
             "tracery-sah scaling, {t} threads over 1: closest {:.2}x, occluded {:.2}x",
             all.closest_mrays / one.closest_mrays,
             all.occluded_mrays / one.occluded_mrays
+        );
+    }
+}
+
+/// The one-thread single-ray rates on the rays that hit and on those that miss, apart, and
+/// tracery-sah's ratios to Embree on each.
+fn print_split(rows: &[EngineResult]) {
+    let split: Vec<(&str, SplitRates)> = rows
+        .iter()
+        .filter_map(|r| Some((r.engine.as_str(), r.split?)))
+        .collect();
+    let Some((_, first)) = split.first() else {
+        return;
+    };
+    println!(
+        "one thread, single rays, the {} rays that hit and the {} that miss apart (Mr/s):",
+        first.hit_rays, first.miss_rays
+    );
+    println!(
+        "{:<15} {:>12} {:>13} {:>13} {:>14}",
+        "engine", "closest hit", "closest miss", "occluded hit", "occluded miss"
+    );
+    for (engine, s) in &split {
+        println!(
+            "{:<15} {:>12.2} {:>13.2} {:>13.2} {:>14.2}",
+            engine,
+            s.closest_hit_mrays,
+            s.closest_miss_mrays,
+            s.occluded_hit_mrays,
+            s.occluded_miss_mrays
+        );
+    }
+    let find = |e: &str| split.iter().find(|(n, _)| *n == e).map(|(_, s)| s);
+    if let (Some(us), Some(them)) = (find("tracery-sah"), find("embree")) {
+        println!(
+            "tracery-sah / embree (1 thread): rays that hit: closest {:.2}x, occluded {:.2}x; \
+             rays that miss: closest {:.2}x, occluded {:.2}x",
+            us.closest_hit_mrays / them.closest_hit_mrays,
+            us.occluded_hit_mrays / them.occluded_hit_mrays,
+            us.closest_miss_mrays / them.closest_miss_mrays,
+            us.occluded_miss_mrays / them.occluded_miss_mrays
         );
     }
 }
