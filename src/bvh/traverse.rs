@@ -4,6 +4,7 @@
 
 use glam::{Vec3, Vec3A};
 
+use super::wide::kernel;
 use super::wide::packet::{Bests, PACKET, RayTile};
 use super::{Bvh, BvhNode, MAX_DEPTH};
 use crate::geometry::{PreparedRay, Ray, intersect_triangle, intersect_triangle_t};
@@ -60,10 +61,11 @@ impl Bvh {
     /// hits nothing and walks no tree.
     #[inline]
     pub fn intersect(&self, ray: &Ray, t_max: f32) -> Option<Hit> {
-        if self.is_empty() || t_max.is_nan() || t_max <= 0.0 || !ray.is_valid() {
+        if self.is_empty() || t_max.is_nan() || t_max <= 0.0 {
             return None;
         }
-        let best = self.wide.closest(ray, t_max);
+        let safe = kernel::check_ray(ray)?;
+        let best = self.wide.closest(ray, t_max, safe);
         if best.prim == u32::MAX || best.t.is_nan() || best.t >= t_max {
             return None;
         }
@@ -322,10 +324,13 @@ impl Bvh {
     /// Calls `f(prim, t)` for every triangle hit at `0 < t < t_max`, in no particular order,
     /// until `f` returns false. A NaN, infinite or zero ray hits nothing.
     pub fn for_each_hit(&self, ray: &Ray, t_max: f32, mut f: impl FnMut(u32, f32) -> bool) {
-        if self.is_empty() || t_max.is_nan() || t_max <= 0.0 || !ray.is_valid() {
+        if self.is_empty() || t_max.is_nan() || t_max <= 0.0 {
             return;
         }
-        self.wide.each_hit(ray, t_max, &mut f);
+        let Some(safe) = kernel::check_ray(ray) else {
+            return;
+        };
+        self.wide.each_hit(ray, t_max, safe, &mut f);
     }
 }
 

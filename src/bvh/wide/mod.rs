@@ -233,9 +233,10 @@ impl WideBvh {
     /// Closest hit at `0 < t < t_max`, by the chosen kernel. The ray is prepared inside the
     /// kernel, so its constants stay in registers (a prepared ray passed in memory was read
     /// back with wider loads than it was written with: a store-forwarding stall per ray).
+    ///
+    /// `safe`: the ray needs the box test's NaN rule ([`kernel::check_ray`]).
     #[inline]
-    pub(crate) fn closest(&self, ray: &Ray, t_max: f32) -> traverse::Best {
-        let safe = needs_nan_rule(ray);
+    pub(crate) fn closest(&self, ray: &Ray, t_max: f32, safe: bool) -> traverse::Best {
         match (self.dispatch, safe) {
             (Dispatch::Scalar, false) => {
                 traverse::closest_apart::<kernel::Scalar, false>(self, ray, t_max)
@@ -265,15 +266,15 @@ impl WideBvh {
     }
 
     /// Calls `f(prim, t)` for every hit at `0 < t < t_max` until it returns false; false when
-    /// it was stopped.
+    /// it was stopped. `safe` as for [`WideBvh::closest`].
     #[inline]
     pub(crate) fn each_hit<F: FnMut(u32, f32) -> bool>(
         &self,
         ray: &Ray,
         t_max: f32,
+        safe: bool,
         f: &mut F,
     ) -> bool {
-        let safe = needs_nan_rule(ray);
         match (self.dispatch, safe) {
             (Dispatch::Scalar, false) => {
                 traverse::each_hit_apart::<kernel::Scalar, false, F>(self, ray, t_max, f)
@@ -333,14 +334,6 @@ impl WideBvh {
             }
         }
     }
-}
-
-/// True when a reciprocal of the direction may be infinite (a component below `1 / f32::MAX`,
-/// with margin), so that the box test can meet `0 * inf`: such rays take the kernels' `SAFE`
-/// path, which maps NaN distances explicitly (see [`kernel`]). Every other ray can skip it.
-#[inline(always)]
-fn needs_nan_rule(ray: &Ray) -> bool {
-    ray.dir.abs().min_element() < 1e-37
 }
 
 pub(super) use collapse::collapse;

@@ -307,6 +307,31 @@ pub(crate) struct NodeRay8 {
     shift: __m256i,
 }
 
+/// [`super::check_ray`] in SSE2 (every x86-64 CPU): the six floats read as two overlapping
+/// groups of four, checked finite all at once, the direction's three checked for zero and for
+/// the NaN rule's tiny size together.
+#[inline(always)]
+pub(crate) fn check_ray(ray: &Ray) -> Option<bool> {
+    let p = (ray as *const Ray).cast::<f32>();
+    // SAFETY: `Ray` is `#[repr(C)]`, six `f32`s (origin then direction, 24 bytes): the loads
+    // read floats 0-3 and 2-5, inside it; the rest are SSE2 operations on registers.
+    let (finite, nonzero, tiny) = unsafe {
+        let a = _mm_loadu_ps(p);
+        let b = _mm_loadu_ps(p.add(2));
+        let abs = _mm_castsi128_ps(_mm_set1_epi32(i32::MAX));
+        let (a, b_abs) = (_mm_and_ps(a, abs), _mm_and_ps(b, abs));
+        let inf = _mm_set1_ps(f32::INFINITY);
+        let finite = _mm_and_ps(_mm_cmplt_ps(a, inf), _mm_cmplt_ps(b_abs, inf));
+        (
+            _mm_movemask_ps(finite) == 0b1111,
+            // Lanes 1-3 of `b` are the direction.
+            _mm_movemask_ps(_mm_cmpneq_ps(b, _mm_setzero_ps())) & 0b1110 != 0,
+            _mm_movemask_ps(_mm_cmplt_ps(b_abs, _mm_set1_ps(super::TINY_DIRECTION))) & 0b1110 != 0,
+        )
+    };
+    (finite && nonzero).then_some(tiny)
+}
+
 /// Asks the CPU to bring the cache line holding `x` into its caches (see [`super::prefetch`]).
 #[inline(always)]
 pub(crate) fn prefetch<T>(x: &T) {
