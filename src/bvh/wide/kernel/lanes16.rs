@@ -20,9 +20,10 @@
 
 use std::arch::x86_64::*;
 
+use super::floats;
 use super::stack::Stack;
 use super::x86::{Avx2, NodeRay8, TriRay4};
-use super::{BlockHits, G2, G3, G5, Lanes, NodeRay, TriRay};
+use super::{BlockHits, Lanes, NodeRay, TriRay};
 use crate::bvh::wide::packet::{Bests, Group, PACKET, Rays, Tris, group_exact, perm_of};
 use crate::bvh::wide::{BLOCK, TriBlock, WIDTH, WideNode};
 use crate::geometry::Ray;
@@ -261,49 +262,10 @@ fn next_up16(t: __m512) -> __m512 {
     }
 }
 
-/// `|x|` per lane, as `f32::abs`.
-#[inline(always)]
-fn abs16(x: __m512) -> __m512 {
-    // SAFETY: only reached inside the AVX-512 entry points (DQ provides the float `andnot`).
-    unsafe { _mm512_andnot_ps(_mm512_set1_ps(-0.0), x) }
-}
-
-/// `max(|a|, |b|, |c|)` per lane.
-#[inline(always)]
-fn max3_abs16(a: __m512, b: __m512, c: __m512) -> __m512 {
-    // SAFETY: only reached inside the AVX-512 entry points.
-    unsafe { _mm512_max_ps(_mm512_max_ps(abs16(a), abs16(b)), abs16(c)) }
-}
-
-/// One vertex of a triangle relative to sixteen rays' origins, then sheared by each ray's
-/// constants.
-#[inline(always)]
-fn sheared16(
-    b: &TriBlock,
-    tri: usize,
-    vertex: usize,
-    k: [usize; 3],
-    o: &[__m512; 3],
-    sx: __m512,
-    sy: __m512,
-) -> (__m512, __m512, __m512) {
-    // SAFETY: only reached inside the AVX-512 entry points.
-    unsafe {
-        let x = _mm512_sub_ps(_mm512_set1_ps(b.v[vertex][k[0]][tri]), o[0]);
-        let y = _mm512_sub_ps(_mm512_set1_ps(b.v[vertex][k[1]][tri]), o[1]);
-        let z = _mm512_sub_ps(_mm512_set1_ps(b.v[vertex][k[2]][tri]), o[2]);
-        (
-            _mm512_sub_ps(x, _mm512_mul_ps(sx, z)),
-            _mm512_sub_ps(y, _mm512_mul_ps(sy, z)),
-            z,
-        )
-    }
-}
-
-/// The watertight test of one triangle against sixteen rays sharing one axis permutation:
-/// returns the rays (lane bits, within `lanes`) hit at `0 < t < limit`, the rays the scalar
-/// test must decide, and per lane `t`, `u`, `v` (see [`super::x86`]'s eight-lane test, which
-/// this is lane for lane).
+/// The watertight test of one triangle against sixteen rays sharing one axis permutation
+/// ([`floats::triangle_rays`]): returns the rays (lane bits, within `lanes`) hit at
+/// `0 < t < limit` and the rays the scalar test must decide, with `t`, `u`, `v` per lane in
+/// `out` when some ray was hit.
 #[inline(always)]
 #[allow(clippy::too_many_arguments)]
 fn triangle_rays16(
@@ -316,95 +278,15 @@ fn triangle_rays16(
     lanes: u32,
     out: &mut [[f32; 16]; 3],
 ) -> (u32, u32) {
-    let [sx, sy, sz] = *shear;
-    // SAFETY: only reached inside the AVX-512 entry points; the stores write whole `[f32; 16]`s.
-    unsafe {
-        let (ax, ay, az) = sheared16(b, tri, 0, k, o, sx, sy);
-        let (bx, by, bz) = sheared16(b, tri, 1, k, o, sx, sy);
-        let (cx, cy, cz) = sheared16(b, tri, 2, k, o, sx, sy);
-        let u = _mm512_sub_ps(_mm512_mul_ps(cx, by), _mm512_mul_ps(cy, bx));
-        let v = _mm512_sub_ps(_mm512_mul_ps(ax, cy), _mm512_mul_ps(ay, cx));
-        let w = _mm512_sub_ps(_mm512_mul_ps(bx, ay), _mm512_mul_ps(by, ax));
-        let zero = _mm512_setzero_ps();
-        let exact = if cfg!(feature = "no-watertight-fallback") {
-            0
-        } else {
-            (_mm512_cmp_ps_mask::<_CMP_EQ_OQ>(u, zero)
-                | _mm512_cmp_ps_mask::<_CMP_EQ_OQ>(v, zero)
-                | _mm512_cmp_ps_mask::<_CMP_EQ_OQ>(w, zero)) as u32
-                & lanes
-        };
-        let neg = _mm512_cmp_ps_mask::<_CMP_LT_OQ>(_mm512_min_ps(_mm512_min_ps(u, v), w), zero);
-        let pos = _mm512_cmp_ps_mask::<_CMP_GT_OQ>(_mm512_max_ps(_mm512_max_ps(u, v), w), zero);
-        let inside = !((neg & pos) as u32) & lanes & !exact;
-        if inside == 0 {
-            return (0, exact);
-        }
-        let det = _mm512_add_ps(_mm512_add_ps(u, v), w);
-        let t_scaled = _mm512_mul_ps(
-            _mm512_add_ps(
-                _mm512_add_ps(_mm512_mul_ps(u, az), _mm512_mul_ps(v, bz)),
-                _mm512_mul_ps(w, cz),
-            ),
-            sz,
-        );
-        let inv = _mm512_div_ps(_mm512_set1_ps(1.0), det);
-        let t = _mm512_mul_ps(t_scaled, inv);
-        let in_range = _mm512_cmp_ps_mask::<_CMP_NEQ_UQ>(det, zero)
-            & _mm512_cmp_ps_mask::<_CMP_GT_OQ>(t, zero)
-            & _mm512_cmp_ps_mask::<_CMP_LT_OQ>(t, limit);
-        // The distance error bound, in the order of `t_error_bound`.
-        let abs_sx = abs16(sx);
-        let abs_sy = abs16(sy);
-        let max_z = max3_abs16(az, bz, cz);
-        let max_zt = _mm512_mul_ps(max_z, abs16(sz));
-        let max_x = max3_abs16(ax, bx, cx);
-        let max_y = max3_abs16(ay, by, cy);
-        let delta_z = _mm512_mul_ps(_mm512_set1_ps(G3), max_zt);
-        let delta_x = _mm512_mul_ps(
-            _mm512_set1_ps(G5),
-            _mm512_add_ps(max_x, _mm512_mul_ps(_mm512_add_ps(abs_sx, abs_sx), max_z)),
-        );
-        let delta_y = _mm512_mul_ps(
-            _mm512_set1_ps(G5),
-            _mm512_add_ps(max_y, _mm512_mul_ps(_mm512_add_ps(abs_sy, abs_sy), max_z)),
-        );
-        let delta_e = _mm512_mul_ps(
-            _mm512_set1_ps(2.0),
-            _mm512_add_ps(
-                _mm512_add_ps(
-                    _mm512_mul_ps(_mm512_mul_ps(_mm512_set1_ps(G2), max_x), max_y),
-                    _mm512_mul_ps(delta_y, max_x),
-                ),
-                _mm512_mul_ps(delta_x, max_y),
-            ),
-        );
-        let max_e = max3_abs16(u, v, w);
-        let bound = _mm512_mul_ps(
-            _mm512_mul_ps(
-                _mm512_set1_ps(3.0),
-                _mm512_add_ps(
-                    _mm512_add_ps(
-                        _mm512_mul_ps(_mm512_mul_ps(_mm512_set1_ps(G3), max_e), max_zt),
-                        _mm512_mul_ps(delta_e, max_zt),
-                    ),
-                    _mm512_mul_ps(delta_z, max_e),
-                ),
-            ),
-            abs16(inv),
-        );
-        let ok = in_range & _mm512_cmp_ps_mask::<_CMP_NLE_UQ>(t, bound);
-        // Infinite or NaN distance or bound: to the scalar test's f64 path.
-        let inf = _mm512_set1_ps(f32::INFINITY);
-        let big = _mm512_cmp_ps_mask::<_CMP_NLT_UQ>(abs16(t_scaled), inf)
-            | _mm512_cmp_ps_mask::<_CMP_NLT_UQ>(bound, inf);
-        let overflow = big as u32 & inside;
-        let hits = ok as u32 & inside & !overflow;
-        if hits != 0 {
+    let found = floats::triangle_rays(b, tri, k, o, shear, limit, lanes);
+    if let (true, Some([t, u, v])) = (found.hits != 0, found.tuv) {
+        // SAFETY: only reached inside the AVX-512 entry points; the stores write whole
+        // `[f32; 16]`s.
+        unsafe {
             _mm512_storeu_ps(out[0].as_mut_ptr(), t);
-            _mm512_storeu_ps(out[1].as_mut_ptr(), _mm512_mul_ps(v, inv));
-            _mm512_storeu_ps(out[2].as_mut_ptr(), _mm512_mul_ps(w, inv));
+            _mm512_storeu_ps(out[1].as_mut_ptr(), u);
+            _mm512_storeu_ps(out[2].as_mut_ptr(), v);
         }
-        (hits, exact | overflow)
     }
+    (found.hits, found.exact)
 }

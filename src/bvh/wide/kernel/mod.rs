@@ -6,6 +6,8 @@
 //!   readable specification and the fallback on any target.
 //! - `x86` (x86-64 only): SSE2, which every x86-64 CPU has, and AVX2 + FMA, chosen at run time,
 //!   the latter also compiled with AVX-512 enabled for CPUs that have it (32 vector registers).
+//!   Their triangle tests, four, eight and sixteen lanes wide, are one generic function
+//!   (`floats::watertight`) over the three register widths.
 //!
 //! The rules every implementation keeps, written out rather than left to what an instruction
 //! does with NaN:
@@ -21,6 +23,8 @@
 //!   test's; lanes where an edge function is exactly zero, or whose distance or its error
 //!   bound overflowed f32, are handed to the scalar test (its f64 path and tie rule).
 
+#[cfg(target_arch = "x86_64")]
+mod floats;
 #[cfg(target_arch = "x86_64")]
 mod lanes16;
 mod scalar;

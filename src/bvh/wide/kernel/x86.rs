@@ -2,7 +2,8 @@
 //! AVX-512 CPUs (chosen at run time).
 //!
 //! Both share the triangle test ([`block_sse`], 4 lanes in 128-bit registers, VEX-encoded
-//! inside the AVX2 functions). The box test is 8 lanes in one 256-bit register with AVX2, two
+//! inside the AVX2 functions), which is [`super::floats::watertight`] on a block's lanes, as
+//! the packets' eight-ray test ([`triangle_rays8`]) is on eight rays' lanes. The box test is 8 lanes in one 256-bit register with AVX2, two
 //! 128-bit halves with SSE2. The traversal loops are the generic ones of
 //! [`super::super::traverse`], instantiated inside `#[target_feature]` entry points so that
 //! the whole loop, helpers and intrinsics included, is compiled for the kernel's instruction
@@ -27,8 +28,9 @@
 
 use std::arch::x86_64::*;
 
+use super::floats::{self, Floats};
 use super::stack::Stack;
-use super::{BlockHits, G2, G3, G5, Lanes, NodeRay, TriRay};
+use super::{BlockHits, Lanes, NodeRay, TriRay};
 use crate::bvh::wide::packet::{Bests, Group, PACKET, RayTile, Rays, Tris, group_exact, perm_of};
 use crate::bvh::wide::traverse::{self, Best};
 use crate::bvh::wide::{BLOCK, TriBlock, WIDTH, WideBvh, WideNode};
@@ -58,147 +60,48 @@ fn tri_ray4(r: &TriRay) -> TriRay4 {
     }
 }
 
-/// `|x|` per lane, as `f32::abs` (clears the sign bit).
+/// One vertex of the block's four triangles, in the ray's axis order, sheared for the ray.
 #[inline(always)]
-fn abs4(x: __m128) -> __m128 {
-    // SAFETY: SSE2 baseline operations on registers.
-    unsafe { _mm_andnot_ps(_mm_set1_ps(-0.0), x) }
-}
-
-/// `max(|a|, |b|, |c|)` per lane (the operands are never NaN where the result is used: a NaN
-/// coordinate makes the lane's `t` NaN, which fails its range test first).
-#[inline(always)]
-fn max3_abs(a: __m128, b: __m128, c: __m128) -> __m128 {
-    // SAFETY: SSE baseline operations on registers.
-    unsafe { _mm_max_ps(_mm_max_ps(abs4(a), abs4(b)), abs4(c)) }
-}
-
-/// One vertex of the block's four triangles relative to the origin, then sheared:
-/// `a = v - o`, `(a[kx] - sx a[kz], a[ky] - sy a[kz], a[kz])`.
-#[inline(always)]
-fn sheared4(b: &TriBlock, r: &TriRay4, vertex: usize) -> (__m128, __m128, __m128) {
+fn sheared4(b: &TriBlock, r: &TriRay4, vertex: usize) -> [__m128; 3] {
     let [kx, ky, kz] = r.k;
-    // SAFETY: SSE2 baseline operations; the loads read whole `[f32; 4]` rows of the block.
-    unsafe {
-        let x = _mm_sub_ps(_mm_loadu_ps(b.v[vertex][kx].as_ptr()), r.origin[kx]);
-        let y = _mm_sub_ps(_mm_loadu_ps(b.v[vertex][ky].as_ptr()), r.origin[ky]);
-        let z = _mm_sub_ps(_mm_loadu_ps(b.v[vertex][kz].as_ptr()), r.origin[kz]);
-        (
-            _mm_sub_ps(x, _mm_mul_ps(r.sx, z)),
-            _mm_sub_ps(y, _mm_mul_ps(r.sy, z)),
-            z,
-        )
-    }
+    let row = &b.v[vertex];
+    // SAFETY: SSE2 baseline loads of whole `[f32; 4]` rows of the block.
+    let v = unsafe {
+        [
+            _mm_loadu_ps(row[kx].as_ptr()),
+            _mm_loadu_ps(row[ky].as_ptr()),
+            _mm_loadu_ps(row[kz].as_ptr()),
+        ]
+    };
+    floats::sheared(v, &[r.origin[kx], r.origin[ky], r.origin[kz]], r.sx, r.sy)
 }
 
 /// The watertight test on a block's four lanes (see [`Lanes::block`]).
 #[inline(always)]
 fn block_sse(b: &TriBlock, r: &TriRay4, limit: f32, out: &mut BlockHits) -> (u32, u32) {
-    // SAFETY: SSE2 baseline operations; the load reads the whole `[u32; 4]` of indices and the
-    // stores write whole `[f32; 4]` outputs.
-    unsafe {
+    // SAFETY: SSE2 baseline operations; the load reads the whole `[u32; 4]` of indices.
+    let valid = unsafe {
         // Lanes holding a triangle: index not u32::MAX.
         let empty = _mm_cmpeq_epi32(_mm_loadu_si128(b.prim.as_ptr().cast()), _mm_set1_epi32(-1));
-        let valid = !(_mm_movemask_ps(_mm_castsi128_ps(empty)) as u32) & 0xf;
-        let (ax, ay, az) = sheared4(b, r, 0);
-        let (bx, by, bz) = sheared4(b, r, 1);
-        let (cx, cy, cz) = sheared4(b, r, 2);
-        let u = _mm_sub_ps(_mm_mul_ps(cx, by), _mm_mul_ps(cy, bx));
-        let v = _mm_sub_ps(_mm_mul_ps(ax, cy), _mm_mul_ps(ay, cx));
-        let w = _mm_sub_ps(_mm_mul_ps(bx, ay), _mm_mul_ps(by, ax));
-        let zero = _mm_setzero_ps();
-        let exact = if cfg!(feature = "no-watertight-fallback") {
-            0
-        } else {
-            let z = _mm_or_ps(
-                _mm_or_ps(_mm_cmpeq_ps(u, zero), _mm_cmpeq_ps(v, zero)),
-                _mm_cmpeq_ps(w, zero),
-            );
-            _mm_movemask_ps(z) as u32 & valid
-        };
-        // Some edge function negative and some positive: outside. As min < 0 and max > 0
-        // (a NaN lane may decide differently from the scalar test's comparisons here, but its
-        // distance is NaN, so it misses either way).
-        let neg = _mm_cmplt_ps(_mm_min_ps(_mm_min_ps(u, v), w), zero);
-        let pos = _mm_cmpgt_ps(_mm_max_ps(_mm_max_ps(u, v), w), zero);
-        let inside = !(_mm_movemask_ps(_mm_and_ps(neg, pos)) as u32) & valid & !exact & 0xf;
-        if inside == 0 {
-            return (0, exact);
+        !(_mm_movemask_ps(_mm_castsi128_ps(empty)) as u32) & 0xf
+    };
+    let found = floats::watertight(
+        sheared4(b, r, 0),
+        sheared4(b, r, 1),
+        sheared4(b, r, 2),
+        [r.sx, r.sy, r.sz],
+        __m128::splat(limit),
+        valid,
+    );
+    if let Some([t, u, v]) = found.tuv {
+        // SAFETY: SSE2 baseline stores of whole `[f32; 4]` outputs.
+        unsafe {
+            _mm_storeu_ps(out.t.as_mut_ptr(), t);
+            _mm_storeu_ps(out.u.as_mut_ptr(), u);
+            _mm_storeu_ps(out.v.as_mut_ptr(), v);
         }
-        let det = _mm_add_ps(_mm_add_ps(u, v), w);
-        let t_scaled = _mm_mul_ps(
-            _mm_add_ps(
-                _mm_add_ps(_mm_mul_ps(u, az), _mm_mul_ps(v, bz)),
-                _mm_mul_ps(w, cz),
-            ),
-            r.sz,
-        );
-        let inv = _mm_div_ps(_mm_set1_ps(1.0), det);
-        let t = _mm_mul_ps(t_scaled, inv);
-        let in_range = _mm_and_ps(
-            _mm_cmpneq_ps(det, zero),
-            _mm_and_ps(_mm_cmpgt_ps(t, zero), _mm_cmplt_ps(t, _mm_set1_ps(limit))),
-        );
-        // The distance error bound, in the order of `t_error_bound`.
-        let max_z = max3_abs(az, bz, cz);
-        // `|sz|`, `2 |sx|`, `2 |sy|` (doubling is exact): made here, not kept per ray, to
-        // spare registers.
-        let abs_sx = abs4(r.sx);
-        let abs_sy = abs4(r.sy);
-        let max_zt = _mm_mul_ps(max_z, abs4(r.sz));
-        let max_x = max3_abs(ax, bx, cx);
-        let max_y = max3_abs(ay, by, cy);
-        let delta_z = _mm_mul_ps(_mm_set1_ps(G3), max_zt);
-        let delta_x = _mm_mul_ps(
-            _mm_set1_ps(G5),
-            _mm_add_ps(max_x, _mm_mul_ps(_mm_add_ps(abs_sx, abs_sx), max_z)),
-        );
-        let delta_y = _mm_mul_ps(
-            _mm_set1_ps(G5),
-            _mm_add_ps(max_y, _mm_mul_ps(_mm_add_ps(abs_sy, abs_sy), max_z)),
-        );
-        let delta_e = _mm_mul_ps(
-            _mm_set1_ps(2.0),
-            _mm_add_ps(
-                _mm_add_ps(
-                    _mm_mul_ps(_mm_mul_ps(_mm_set1_ps(G2), max_x), max_y),
-                    _mm_mul_ps(delta_y, max_x),
-                ),
-                _mm_mul_ps(delta_x, max_y),
-            ),
-        );
-        let max_e = max3_abs(u, v, w);
-        let bound = _mm_mul_ps(
-            _mm_mul_ps(
-                _mm_set1_ps(3.0),
-                _mm_add_ps(
-                    _mm_add_ps(
-                        _mm_mul_ps(_mm_mul_ps(_mm_set1_ps(G3), max_e), max_zt),
-                        _mm_mul_ps(delta_e, max_zt),
-                    ),
-                    _mm_mul_ps(delta_z, max_e),
-                ),
-            ),
-            abs4(inv),
-        );
-        // Kept unless `t <= bound`.
-        let ok = _mm_and_ps(in_range, _mm_cmpnle_ps(t, bound));
-        // A distance or bound that is infinite or NaN (products beyond f32's range): the
-        // scalar test's f64 path decides, as it does in the scalar test.
-        let inf = _mm_set1_ps(f32::INFINITY);
-        let big = _mm_or_ps(
-            _mm_cmpnlt_ps(abs4(t_scaled), inf),
-            _mm_cmpnlt_ps(bound, inf),
-        );
-        let overflow = _mm_movemask_ps(big) as u32 & inside;
-        _mm_storeu_ps(out.t.as_mut_ptr(), t);
-        _mm_storeu_ps(out.u.as_mut_ptr(), _mm_mul_ps(v, inv));
-        _mm_storeu_ps(out.v.as_mut_ptr(), _mm_mul_ps(w, inv));
-        (
-            _mm_movemask_ps(ok) as u32 & inside & !overflow,
-            exact | overflow,
-        )
     }
+    (found.hits, found.exact)
 }
 
 /// SSE2: each node as two 4-wide halves.
@@ -611,49 +514,10 @@ fn ld8(a: &[f32; PACKET], base: usize) -> __m256 {
     unsafe { _mm256_loadu_ps(a[base..base + 8].as_ptr()) }
 }
 
-/// `|x|` per lane, as `f32::abs`.
-#[inline(always)]
-fn abs8(x: __m256) -> __m256 {
-    // SAFETY: only reached inside the AVX2 and AVX-512 entry points.
-    unsafe { _mm256_andnot_ps(_mm256_set1_ps(-0.0), x) }
-}
-
-/// `max(|a|, |b|, |c|)` per lane (see [`max3_abs`]).
-#[inline(always)]
-fn max3_abs8(a: __m256, b: __m256, c: __m256) -> __m256 {
-    // SAFETY: only reached inside the AVX2 and AVX-512 entry points.
-    unsafe { _mm256_max_ps(_mm256_max_ps(abs8(a), abs8(b)), abs8(c)) }
-}
-
-/// One vertex of a triangle relative to eight rays' origins, then sheared by each ray's
-/// constants (the operations of [`sheared4`], lanes being rays instead of triangles).
-#[inline(always)]
-fn sheared8(
-    b: &TriBlock,
-    tri: usize,
-    vertex: usize,
-    k: [usize; 3],
-    o: &[__m256; 3],
-    sx: __m256,
-    sy: __m256,
-) -> (__m256, __m256, __m256) {
-    // SAFETY: only reached inside the AVX2 and AVX-512 entry points.
-    unsafe {
-        let x = _mm256_sub_ps(_mm256_set1_ps(b.v[vertex][k[0]][tri]), o[0]);
-        let y = _mm256_sub_ps(_mm256_set1_ps(b.v[vertex][k[1]][tri]), o[1]);
-        let z = _mm256_sub_ps(_mm256_set1_ps(b.v[vertex][k[2]][tri]), o[2]);
-        (
-            _mm256_sub_ps(x, _mm256_mul_ps(sx, z)),
-            _mm256_sub_ps(y, _mm256_mul_ps(sy, z)),
-            z,
-        )
-    }
-}
-
-/// The watertight test of one triangle against eight rays sharing one axis permutation, in
-/// the operations and order of [`crate::geometry::intersect_triangle`] per lane: returns the
-/// rays (lane bits, within `lanes`) hit at `0 < t < limit`, the rays the scalar test must
-/// decide, and per lane `t`, `u`, `v`.
+/// The watertight test of one triangle against eight rays sharing one axis permutation
+/// ([`floats::triangle_rays`]): returns the rays (lane bits, within `lanes`) hit at
+/// `0 < t < limit` and the rays the scalar test must decide, with `t`, `u`, `v` per lane in
+/// `out` when some ray was hit.
 #[inline(always)]
 #[allow(clippy::too_many_arguments)]
 fn triangle_rays8(
@@ -666,107 +530,17 @@ fn triangle_rays8(
     lanes: u32,
     out: &mut [[f32; 8]; 3],
 ) -> (u32, u32) {
-    let [sx, sy, sz] = *shear;
-    // SAFETY: only reached inside the AVX2 and AVX-512 entry points; the stores write whole `[f32; 8]`s.
-    unsafe {
-        let (ax, ay, az) = sheared8(b, tri, 0, k, o, sx, sy);
-        let (bx, by, bz) = sheared8(b, tri, 1, k, o, sx, sy);
-        let (cx, cy, cz) = sheared8(b, tri, 2, k, o, sx, sy);
-        let u = _mm256_sub_ps(_mm256_mul_ps(cx, by), _mm256_mul_ps(cy, bx));
-        let v = _mm256_sub_ps(_mm256_mul_ps(ax, cy), _mm256_mul_ps(ay, cx));
-        let w = _mm256_sub_ps(_mm256_mul_ps(bx, ay), _mm256_mul_ps(by, ax));
-        let zero = _mm256_setzero_ps();
-        let exact = if cfg!(feature = "no-watertight-fallback") {
-            0
-        } else {
-            let z = _mm256_or_ps(
-                _mm256_or_ps(
-                    _mm256_cmp_ps::<_CMP_EQ_OQ>(u, zero),
-                    _mm256_cmp_ps::<_CMP_EQ_OQ>(v, zero),
-                ),
-                _mm256_cmp_ps::<_CMP_EQ_OQ>(w, zero),
-            );
-            _mm256_movemask_ps(z) as u32 & lanes
-        };
-        let neg = _mm256_cmp_ps::<_CMP_LT_OQ>(_mm256_min_ps(_mm256_min_ps(u, v), w), zero);
-        let pos = _mm256_cmp_ps::<_CMP_GT_OQ>(_mm256_max_ps(_mm256_max_ps(u, v), w), zero);
-        let inside = !(_mm256_movemask_ps(_mm256_and_ps(neg, pos)) as u32) & lanes & !exact;
-        if inside == 0 {
-            return (0, exact);
-        }
-        let det = _mm256_add_ps(_mm256_add_ps(u, v), w);
-        let t_scaled = _mm256_mul_ps(
-            _mm256_add_ps(
-                _mm256_add_ps(_mm256_mul_ps(u, az), _mm256_mul_ps(v, bz)),
-                _mm256_mul_ps(w, cz),
-            ),
-            sz,
-        );
-        let inv = _mm256_div_ps(_mm256_set1_ps(1.0), det);
-        let t = _mm256_mul_ps(t_scaled, inv);
-        let in_range = _mm256_and_ps(
-            _mm256_cmp_ps::<_CMP_NEQ_UQ>(det, zero),
-            _mm256_and_ps(
-                _mm256_cmp_ps::<_CMP_GT_OQ>(t, zero),
-                _mm256_cmp_ps::<_CMP_LT_OQ>(t, limit),
-            ),
-        );
-        // The distance error bound, in the order of `t_error_bound`.
-        let abs_sx = abs8(sx);
-        let abs_sy = abs8(sy);
-        let max_z = max3_abs8(az, bz, cz);
-        let max_zt = _mm256_mul_ps(max_z, abs8(sz));
-        let max_x = max3_abs8(ax, bx, cx);
-        let max_y = max3_abs8(ay, by, cy);
-        let delta_z = _mm256_mul_ps(_mm256_set1_ps(G3), max_zt);
-        let delta_x = _mm256_mul_ps(
-            _mm256_set1_ps(G5),
-            _mm256_add_ps(max_x, _mm256_mul_ps(_mm256_add_ps(abs_sx, abs_sx), max_z)),
-        );
-        let delta_y = _mm256_mul_ps(
-            _mm256_set1_ps(G5),
-            _mm256_add_ps(max_y, _mm256_mul_ps(_mm256_add_ps(abs_sy, abs_sy), max_z)),
-        );
-        let delta_e = _mm256_mul_ps(
-            _mm256_set1_ps(2.0),
-            _mm256_add_ps(
-                _mm256_add_ps(
-                    _mm256_mul_ps(_mm256_mul_ps(_mm256_set1_ps(G2), max_x), max_y),
-                    _mm256_mul_ps(delta_y, max_x),
-                ),
-                _mm256_mul_ps(delta_x, max_y),
-            ),
-        );
-        let max_e = max3_abs8(u, v, w);
-        let bound = _mm256_mul_ps(
-            _mm256_mul_ps(
-                _mm256_set1_ps(3.0),
-                _mm256_add_ps(
-                    _mm256_add_ps(
-                        _mm256_mul_ps(_mm256_mul_ps(_mm256_set1_ps(G3), max_e), max_zt),
-                        _mm256_mul_ps(delta_e, max_zt),
-                    ),
-                    _mm256_mul_ps(delta_z, max_e),
-                ),
-            ),
-            abs8(inv),
-        );
-        let ok = _mm256_and_ps(in_range, _mm256_cmp_ps::<_CMP_NLE_UQ>(t, bound));
-        // Infinite or NaN distance or bound: to the scalar test's f64 path (see `block_sse`).
-        let inf = _mm256_set1_ps(f32::INFINITY);
-        let big = _mm256_or_ps(
-            _mm256_cmp_ps::<_CMP_NLT_UQ>(abs8(t_scaled), inf),
-            _mm256_cmp_ps::<_CMP_NLT_UQ>(bound, inf),
-        );
-        let overflow = _mm256_movemask_ps(big) as u32 & inside;
-        let hits = _mm256_movemask_ps(ok) as u32 & inside & !overflow;
-        if hits != 0 {
+    let found = floats::triangle_rays(b, tri, k, o, shear, limit, lanes);
+    if let (true, Some([t, u, v])) = (found.hits != 0, found.tuv) {
+        // SAFETY: only reached inside the AVX2 and AVX-512 entry points; the stores write
+        // whole `[f32; 8]`s.
+        unsafe {
             _mm256_storeu_ps(out[0].as_mut_ptr(), t);
-            _mm256_storeu_ps(out[1].as_mut_ptr(), _mm256_mul_ps(v, inv));
-            _mm256_storeu_ps(out[2].as_mut_ptr(), _mm256_mul_ps(w, inv));
+            _mm256_storeu_ps(out[1].as_mut_ptr(), u);
+            _mm256_storeu_ps(out[2].as_mut_ptr(), v);
         }
-        (hits, exact | overflow)
     }
+    (found.hits, found.exact)
 }
 
 /// Proof that this CPU has AVX2 and FMA (and POPCNT, BMI1 and LZCNT, which every AVX2 CPU
