@@ -127,11 +127,18 @@ pub(crate) fn closest<L: Lanes, const SAFE: bool>(w: &WideBvh, ray: &Ray, t_max:
             2 => {
                 let a = lane(mask);
                 let b = lane(mask & (mask - 1));
-                // Without a branch: which is nearer is as good as random.
-                let swap = (near[b] < near[a]) as usize;
-                let (n, f) = ([a, b][swap], [b, a][swap]);
-                stack.push(node.child[f], near[f]);
-                Some(n)
+                // A branch, not a select: rays traced in image order take the same side at
+                // the same node as their neighbours, so the branch is mostly predicted and the
+                // next node's loads start before the distances are compared (a select put the
+                // comparison, on distances just stored, in the chain from node to node:
+                // hitting rays 3-5% slower).
+                if near[b] < near[a] {
+                    stack.push(node.child[a], near[a]);
+                    Some(b)
+                } else {
+                    stack.push(node.child[b], near[b]);
+                    Some(a)
+                }
             }
             _ => {
                 L::push_in_order(node, &nr, mask, &near, &mut stack);
