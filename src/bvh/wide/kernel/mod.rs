@@ -238,10 +238,11 @@ pub(crate) trait Lanes: Sized {
         near: &mut [f32; WIDTH],
     ) -> u32;
 
-    /// Pushes the children in `mask` (with their distances from `near`) in the node's visiting
-    /// order for the ray's octant, farthest first, so the nearest ends on top.
+    /// Pushes the children in `mask` (with their distances from `near`) but the nearest, in
+    /// the node's visiting order for the ray's octant, farthest first: the walk goes on to the
+    /// nearest (the last hit lane in that order), and the next nearest ends on top.
     #[inline(always)]
-    fn push_in_order(
+    fn push_others_in_order(
         n: &WideNode,
         r: &Self::NodeRay,
         mask: u32,
@@ -249,10 +250,12 @@ pub(crate) trait Lanes: Sized {
         stack: &mut Stack<'_>,
     ) {
         let octant = Self::octant(r);
+        let mut left = mask.count_ones() - 1;
         for i in 0..WIDTH {
             let lane = n.lane_in_order(octant, i);
-            if mask >> lane & 1 == 1 {
+            if left > 0 && mask >> lane & 1 == 1 {
                 stack.push(n.child[lane], near[lane]);
+                left -= 1;
             }
         }
     }

@@ -343,28 +343,26 @@ impl Lanes for Avx2 {
     }
 
     /// Without a branch per child: the hit lanes are put in the octant's order and packed to
-    /// the front with two lane permutations, and pushed with two stores.
+    /// the front with two lane permutations, and all but the last (the nearest) pushed with
+    /// two stores.
     #[inline(always)]
-    fn push_in_order(
+    fn push_others_in_order(
         n: &WideNode,
         r: &NodeRay8,
         mask: u32,
         near: &[f32; WIDTH],
         stack: &mut Stack<'_>,
     ) {
-        // SAFETY: only reached inside the AVX2 and AVX-512 entry points (see `node_ray`); the loads read
-        // whole `[u32; 8]` / `[f32; 8]` rows; the transmutes reinterpret 32-byte vectors as
-        // 32-byte arrays of the same lane type.
+        // SAFETY: only reached inside the AVX2 and AVX-512 entry points (see `node_ray`); the
+        // loads read whole `[u32; 8]` / `[f32; 8]` rows; the transmutes reinterpret 32-byte
+        // vectors as 32-byte arrays of the same lane type.
         unsafe {
-            // Lane indices in this octant's order (vpermd reads the low 3 bits of each).
             let order = _mm256_srlv_epi32(_mm256_loadu_si256(n.order.as_ptr().cast()), r.shift);
-            // The hit mask as lanes, reordered.
             let bits = _mm256_setr_epi32(1, 2, 4, 8, 16, 32, 64, 128);
             let hit =
                 _mm256_cmpeq_epi32(_mm256_and_si256(_mm256_set1_epi32(mask as i32), bits), bits);
             let hit_in_order = _mm256_permutevar8x32_epi32(hit, order);
             let m = _mm256_movemask_ps(_mm256_castsi256_ps(hit_in_order)) as usize;
-            // The hit positions packed to the front, then the lanes they name.
             let packed = _mm256_loadu_si256(COMPACT[m].as_ptr().cast());
             let lanes = _mm256_permutevar8x32_epi32(order, packed);
             let child =
@@ -373,7 +371,7 @@ impl Lanes for Avx2 {
             stack.push8(
                 std::mem::transmute::<__m256i, [u32; WIDTH]>(child),
                 std::mem::transmute::<__m256, [f32; WIDTH]>(dist),
-                m.count_ones() as usize,
+                m.count_ones() as usize - 1,
             );
         }
     }
