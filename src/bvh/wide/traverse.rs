@@ -11,13 +11,14 @@
 //!
 //! `closest` goes to the nearest child entered; the others are pushed, farthest first (one
 //! with a scalar push, more in one vector push). A popped entry that starts beyond the best hit
-//! so far is skipped, a popped leaf is tested on the spot. `each_hit` tests the leaves a node
-//! leads to as it meets them, goes to the nearest inner child and pushes the others, until the
-//! caller asks to stop.
+//! so far is skipped, a popped leaf is tested on the spot. `each_hit` walks the same way without
+//! culling (a leaf tested when reached or popped) until the caller asks to stop: for shadow
+//! rays, depth first along the nearest path finds a blocker sooner than testing each node's
+//! leaves at once (occlusion 1.5-2% faster on the canonical camera).
 
 use super::kernel::stack::{Slots, Stack};
 use super::kernel::{BlockHits, Lanes, NodeRay, TriRay};
-use super::{BLOCK, Child, TriBlock, WIDTH, WideBvh};
+use super::{BLOCK, Child, TriBlock, WIDTH, WideBvh, WideNode};
 use crate::geometry::{PreparedRay, Ray, intersect_triangle, intersect_triangle_t};
 
 /// Boxes are culled only when they start clearly beyond the best hit so far: the slack keeps a
@@ -96,6 +97,44 @@ pub(crate) fn leaf_closest<L: Lanes>(
     }
 }
 
+/// The lane of `node` to visit next among the children `mask` entered (`None` if none): the
+/// nearest in the node's order for the ray's octant, found by a scan from the nearest end
+/// whose exit is a predicted branch (see the module docs). The others are pushed, farthest
+/// first (one by a scalar push, more by the kernel's vector push).
+#[inline(always)]
+fn next_child<L: Lanes>(
+    node: &WideNode,
+    nr: &L::NodeRay,
+    mask: u32,
+    near: &[f32; WIDTH],
+    stack: &mut Stack<'_>,
+) -> Option<usize> {
+    if mask == 0 {
+        return None;
+    }
+    // Lane indices masked to the node's width: the compiler then needs no bounds check.
+    let lane = |bits: u32| bits.trailing_zeros() as usize & (WIDTH - 1);
+    let q = L::octant(nr);
+    // (The scan always finds a lane: every node's order lists all its lanes.)
+    let mut k = lane(mask);
+    for i in (0..WIDTH).rev() {
+        let l = node.lane_in_order(q, i);
+        if mask >> l & 1 == 1 {
+            k = l;
+            break;
+        }
+    }
+    match mask.count_ones() {
+        1 => {}
+        2 => {
+            let f = lane(mask & !(1 << k));
+            stack.push(node.child[f], near[f]);
+        }
+        _ => L::push_others_in_order(node, nr, mask, near, stack),
+    }
+    Some(k)
+}
+
 /// Closest hit at `0 < t < t_max` (the best is `t_max` with no triangle when nothing is hit).
 #[inline(always)]
 pub(crate) fn closest<L: Lanes, const SAFE: bool>(w: &WideBvh, ray: &Ray, t_max: f32) -> Best {
@@ -125,35 +164,8 @@ pub(crate) fn closest<L: Lanes, const SAFE: bool>(w: &WideBvh, ray: &Ray, t_max:
     let lr = L::tri_ray(&tr);
     let mut slots = Slots::new();
     let mut stack = Stack::new(&mut slots);
-    // Lane indices masked to the node's width: the compiler then needs no bounds check.
-    let lane = |bits: u32| bits.trailing_zeros() as usize & (WIDTH - 1);
     'node: loop {
-        // The child to visit next: the nearest lane entered, in the octant's order, found by a
-        // scan whose exit is a predicted branch (see the module docs); the others pushed,
-        // farthest first.
-        let next = if mask == 0 {
-            None
-        } else {
-            let q = L::octant(&nr);
-            // (The scan always finds a lane: every node's order lists all its lanes.)
-            let mut k = lane(mask);
-            for i in (0..WIDTH).rev() {
-                let l = node.lane_in_order(q, i);
-                if mask >> l & 1 == 1 {
-                    k = l;
-                    break;
-                }
-            }
-            match mask.count_ones() {
-                1 => {}
-                2 => {
-                    let f = lane(mask & !(1 << k));
-                    stack.push(node.child[f], near[f]);
-                }
-                _ => L::push_others_in_order(node, &nr, mask, &near, &mut stack),
-            }
-            Some(k)
-        };
+        let next = next_child::<L>(node, &nr, mask, &near, &mut stack);
         if let Some(k) = next {
             let child = Child(node.child[k]);
             if !child.is_leaf() {
@@ -251,40 +263,35 @@ pub(crate) fn each_hit<L: Lanes, const SAFE: bool>(
     let mut slots = Slots::new();
     let mut stack = Stack::new(&mut slots);
     let mut node = root;
-    loop {
-        // The children entered, nearest first in the octant's order (a scan whose branches
-        // are predicted, see the module docs): leaves are tested as they come (a shadow ray
-        // may stop there), the nearest inner child is visited next, the others wait on the
-        // stack.
-        let mut next: Option<u32> = None;
-        let q = L::octant(&nr);
-        let mut left = mask;
-        let mut i = WIDTH;
-        while left != 0 && i > 0 {
-            i -= 1;
-            let l = node.lane_in_order(q, i);
-            if left >> l & 1 == 0 {
-                continue;
+    // Depth first, nearest child first, as the closest hit walks (no culling: any hit will
+    // do); a leaf is tested when reached or popped, and the walk stops when the caller asks.
+    'node: loop {
+        if let Some(k) = next_child::<L>(node, &nr, mask, &near, &mut stack) {
+            let child = Child(node.child[k]);
+            if !child.is_leaf() {
+                node = &w.nodes[child.index() as usize];
+                mask = L::node::<SAFE>(node, &nr, cull, &mut near);
+                continue 'node;
             }
-            left &= !(1 << l);
-            let child = Child(node.child[l]);
-            if child.is_leaf() {
-                let (first, count) = child.blocks();
-                if !leaf_each::<L>(w, first, count, &tr, &lr, t_max, f) {
-                    return false;
-                }
-            } else if next.is_none() {
-                next = Some(child.index());
-            } else {
-                stack.push(child.0, 0.0);
+            let (first, count) = child.blocks();
+            if !leaf_each::<L>(w, first, count, &tr, &lr, t_max, f) {
+                return false;
             }
         }
-        match next.or_else(|| stack.pop().map(|(c, _)| c)) {
-            Some(c) => {
-                node = &w.nodes[c as usize];
+        loop {
+            let Some((child, _)) = stack.pop() else {
+                return true;
+            };
+            let child = Child(child);
+            if !child.is_leaf() {
+                node = &w.nodes[child.index() as usize];
                 mask = L::node::<SAFE>(node, &nr, cull, &mut near);
+                continue 'node;
             }
-            None => return true,
+            let (first, count) = child.blocks();
+            if !leaf_each::<L>(w, first, count, &tr, &lr, t_max, f) {
+                return false;
+            }
         }
     }
 }
