@@ -26,6 +26,7 @@ pub use reference::BruteForce;
 pub use stats::BvhStats;
 pub use traverse::{Hit, Visit};
 pub use wide::packet::RayTile;
+pub use wide::traverse::Visits;
 
 use crate::geometry::Aabb;
 
@@ -85,8 +86,9 @@ pub mod sah {
 pub struct BuildOptions {
     /// Median split or binned SAH.
     pub split: SplitMethod,
-    /// SAH bins per axis (2..=64). More bins find better splits but cost build time; the
-    /// README's table shows the trade-off on the dragon. Ignored by the median split.
+    /// SAH bins per axis (2..=64) for ranges of 256 triangles or more (smaller ranges use at
+    /// most 12). More bins find better splits but cost build time; the README's table shows
+    /// the trade-off on the dragon. Ignored by the median split.
     pub bins: u32,
     /// Largest number of triangles a leaf may hold (1..=255). The SAH builder may stop earlier
     /// when a leaf is cheaper than any split; the median builder splits down to this size.
@@ -95,7 +97,7 @@ pub struct BuildOptions {
 
 impl BuildOptions {
     /// Default SAH bin count (see the README's bins table).
-    pub const DEFAULT_BINS: u32 = 12;
+    pub const DEFAULT_BINS: u32 = 32;
     /// Default maximum leaf size.
     pub const DEFAULT_LEAF_SIZE: u32 = 4;
 

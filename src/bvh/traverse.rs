@@ -6,6 +6,7 @@ use glam::{Vec3, Vec3A};
 
 use super::wide::kernel;
 use super::wide::packet::{Bests, PACKET, RayTile};
+use super::wide::traverse::{Best as Best8, Visits};
 use super::{Bvh, BvhNode, MAX_DEPTH};
 use crate::geometry::{PreparedRay, Ray, intersect_triangle, intersect_triangle_t};
 
@@ -20,6 +21,22 @@ pub struct Hit {
     pub u: f32,
     /// Barycentric weight of the triangle's third vertex.
     pub v: f32,
+}
+
+impl Hit {
+    /// The hit a closest-hit walk found, if any.
+    #[inline(always)]
+    fn of(best: Best8, t_max: f32) -> Option<Hit> {
+        if best.prim == u32::MAX || best.t.is_nan() || best.t >= t_max {
+            return None;
+        }
+        Some(Hit {
+            t: best.t,
+            prim: best.prim,
+            u: best.u,
+            v: best.v,
+        })
+    }
 }
 
 /// One step of a traversal, as reported by [`Bvh::intersect_visit`].
@@ -65,16 +82,18 @@ impl Bvh {
             return None;
         }
         let safe = kernel::check_ray(ray)?;
-        let best = self.wide.closest(ray, t_max, safe);
-        if best.prim == u32::MAX || best.t.is_nan() || best.t >= t_max {
+        Hit::of(self.wide.closest(ray, t_max, safe), t_max)
+    }
+
+    /// [`Bvh::intersect`], adding to `visits` the nodes and triangle blocks its walk tested:
+    /// a measure of the tree's quality for a set of rays that, unlike a time, does not depend
+    /// on the machine or its load. Every kernel walks the same way; this runs the scalar one.
+    pub fn intersect_counted(&self, ray: &Ray, t_max: f32, visits: &mut Visits) -> Option<Hit> {
+        if self.is_empty() || t_max.is_nan() || t_max <= 0.0 {
             return None;
         }
-        Some(Hit {
-            t: best.t,
-            prim: best.prim,
-            u: best.u,
-            v: best.v,
-        })
+        let safe = kernel::check_ray(ray)?;
+        Hit::of(self.wide.closest_counted(ray, t_max, safe, visits), t_max)
     }
 
     /// Tests the triangles of leaf `node`, keeping the closest (lowest index on ties), telling

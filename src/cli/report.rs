@@ -7,7 +7,7 @@ use anyhow::Result;
 use clap::{Args, Subcommand};
 use tracery::bench::scaling::{self, ScalingRow, growth_per_doubling};
 use tracery::bench::{self, BenchConfig};
-use tracery::bvh::{BuildOptions, Bvh, SplitMethod};
+use tracery::bvh::{BuildOptions, Bvh, SplitMethod, Visits};
 use tracery::render::{RenderSettings, render};
 use tracery::scene::Scene;
 
@@ -46,12 +46,14 @@ enum ReportKind {
         #[arg(long)]
         plot: Option<PathBuf>,
     },
-    /// SAH bin counts against build ms, SAH cost and closest-hit Mrays/s (one thread).
+    /// SAH bin counts against build ms, SAH cost, closest-hit Mrays/s (one thread) and the
+    /// nodes and triangle blocks a canonical ray's closest-hit walk tests (counts that do not
+    /// depend on the machine's load).
     Bins {
         /// Mesh or scene file.
         mesh: PathBuf,
         /// Bin counts to compare.
-        #[arg(long, value_delimiter = ',', default_value = "4,8,12,16,32")]
+        #[arg(long, value_delimiter = ',', default_value = "4,8,12,16,32,64")]
         bins: Vec<u32>,
         /// Repeat each measurement and keep the best.
         #[arg(long, default_value_t = 5)]
@@ -180,16 +182,56 @@ fn bins_table(mesh: PathBuf, bins: Vec<u32>, repeat: usize) -> Result<()> {
         packets: false,
     };
     let out = measure(&scene, &config)?;
-    println!("| bins | build ms | SAH cost | levels | leaves | closest Mrays/s (1 thread) |");
-    println!("|---:|---:|---:|---:|---:|---:|");
-    for (b, r) in bins.iter().zip(&out.results) {
+    println!(
+        "| bins | build ms | SAH cost | levels | leaves | closest Mrays/s (1 thread) | nodes / ray | blocks / ray | nodes / hit | blocks / hit |"
+    );
+    println!("|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|");
+    for ((b, r), (_, options)) in bins.iter().zip(&out.results).zip(&config.ours) {
         let s = r.stats.expect("our engines report stats");
+        let v = canonical_visits(&Bvh::build(&scene.mesh.triangles, options));
         println!(
-            "| {b} | {:.1} | {:.2} | {} | {} | {:.2} |",
-            r.build_ms, s.sah_cost, s.levels, s.leaves, r.closest_mrays
+            "| {b} | {:.1} | {:.2} | {} | {} | {:.2} | {:.3} | {:.3} | {:.3} | {:.3} |",
+            r.build_ms,
+            s.sah_cost,
+            s.levels,
+            s.leaves,
+            r.closest_mrays,
+            v.all.nodes as f64 / v.rays.max(1) as f64,
+            v.all.blocks as f64 / v.rays.max(1) as f64,
+            v.hits.nodes as f64 / v.hit_rays.max(1) as f64,
+            v.hits.blocks as f64 / v.hit_rays.max(1) as f64,
         );
     }
     Ok(())
+}
+
+/// What the closest-hit walks of the canonical rays tested, over all of them and over those
+/// that hit.
+struct CanonicalVisits {
+    rays: u64,
+    hit_rays: u64,
+    all: Visits,
+    hits: Visits,
+}
+
+fn canonical_visits(bvh: &Bvh) -> CanonicalVisits {
+    let rays = bench::canonical_rays(&bvh.bounds());
+    let mut v = CanonicalVisits {
+        rays: rays.len() as u64,
+        hit_rays: 0,
+        all: Visits::default(),
+        hits: Visits::default(),
+    };
+    for ray in &rays {
+        let mut one = Visits::default();
+        let hit = bvh.intersect_counted(ray, f32::INFINITY, &mut one);
+        v.all += one;
+        if hit.is_some() {
+            v.hit_rays += 1;
+            v.hits += one;
+        }
+    }
+    v
 }
 
 /// Time in ms of one `build` on `pool`; what it built is dropped after the clock stops.

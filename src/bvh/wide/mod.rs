@@ -265,6 +265,21 @@ impl WideBvh {
         }
     }
 
+    /// [`WideBvh::closest`] by the scalar kernel, adding what it tested to `visits`.
+    pub(crate) fn closest_counted(
+        &self,
+        ray: &Ray,
+        t_max: f32,
+        safe: bool,
+        visits: &mut traverse::Visits,
+    ) -> traverse::Best {
+        if safe {
+            traverse::closest_tallied::<kernel::Scalar, true>(self, ray, t_max, visits)
+        } else {
+            traverse::closest_tallied::<kernel::Scalar, false>(self, ray, t_max, visits)
+        }
+    }
+
     /// Calls `f(prim, t)` for every hit at `0 < t < t_max` until it returns false; false when
     /// it was stopped. `safe` as for [`WideBvh::closest`].
     #[inline]

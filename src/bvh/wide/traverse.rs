@@ -135,12 +135,66 @@ fn next_child<L: Lanes>(
     Some(k)
 }
 
+/// What closest-hit walks did: the nodes whose child boxes they tested and the triangle blocks
+/// they tested. Every kernel computes the same box and triangle tests, so every kernel walks
+/// the same way and these are the same whichever kernel runs.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Visits {
+    /// Nodes whose eight child boxes were tested against the ray.
+    pub nodes: u64,
+    /// Blocks of four triangles tested against the ray.
+    pub blocks: u64,
+}
+
+impl std::ops::AddAssign for Visits {
+    fn add_assign(&mut self, other: Visits) {
+        self.nodes += other.nodes;
+        self.blocks += other.blocks;
+    }
+}
+
+/// Counting for [`closest`]: `()` counts nothing (and compiles to nothing), [`Visits`] counts.
+pub(crate) trait Tally {
+    fn node(&mut self);
+    fn blocks(&mut self, count: u32);
+}
+
+impl Tally for () {
+    #[inline(always)]
+    fn node(&mut self) {}
+    #[inline(always)]
+    fn blocks(&mut self, _: u32) {}
+}
+
+impl Tally for Visits {
+    #[inline(always)]
+    fn node(&mut self) {
+        self.nodes += 1;
+    }
+    #[inline(always)]
+    fn blocks(&mut self, count: u32) {
+        self.blocks += count as u64;
+    }
+}
+
 /// Closest hit at `0 < t < t_max` (the best is `t_max` with no triangle when nothing is hit).
 #[inline(always)]
 pub(crate) fn closest<L: Lanes, const SAFE: bool>(w: &WideBvh, ray: &Ray, t_max: f32) -> Best {
+    closest_tallied::<L, SAFE>(w, ray, t_max, &mut ())
+}
+
+/// [`closest`], telling `tally` about every node and block it tests.
+#[inline(always)]
+pub(crate) fn closest_tallied<L: Lanes, const SAFE: bool>(
+    w: &WideBvh,
+    ray: &Ray,
+    t_max: f32,
+    tally: &mut impl Tally,
+) -> Best {
     let mut best = Best::none(t_max);
     if let Some((first, count)) = w.root_leaf {
         let tr = TriRay::new(&PreparedRay::new(ray));
+        tally.blocks(count);
         leaf_closest::<L>(leaf(w, first, count), &tr, &L::tri_ray(&tr), &mut best);
         return best;
     }
@@ -156,6 +210,7 @@ pub(crate) fn closest<L: Lanes, const SAFE: bool>(w: &WideBvh, ray: &Ray, t_max:
     // rays of an image enter none of its children and leave here. The others go on from its
     // answer (`node`, `mask`: the node being visited and the children the ray enters).
     let mut node = root;
+    tally.node();
     let mut mask = L::node::<SAFE>(root, &nr, cull, &mut near);
     if mask == 0 {
         return best;
@@ -170,10 +225,12 @@ pub(crate) fn closest<L: Lanes, const SAFE: bool>(w: &WideBvh, ray: &Ray, t_max:
             let child = Child(node.child[k]);
             if !child.is_leaf() {
                 node = &w.nodes[child.index() as usize];
+                tally.node();
                 mask = L::node::<SAFE>(node, &nr, cull, &mut near);
                 continue 'node;
             }
             let (first, count) = child.blocks();
+            tally.blocks(count);
             leaf_closest::<L>(leaf(w, first, count), &tr, &lr, &mut best);
             cull = best.t * CULL_SLACK;
         }
@@ -188,10 +245,12 @@ pub(crate) fn closest<L: Lanes, const SAFE: bool>(w: &WideBvh, ray: &Ray, t_max:
             let child = Child(child);
             if !child.is_leaf() {
                 node = &w.nodes[child.index() as usize];
+                tally.node();
                 mask = L::node::<SAFE>(node, &nr, cull, &mut near);
                 continue 'node;
             }
             let (first, count) = child.blocks();
+            tally.blocks(count);
             leaf_closest::<L>(leaf(w, first, count), &tr, &lr, &mut best);
             cull = best.t * CULL_SLACK;
         }
