@@ -355,6 +355,27 @@ fn bench_leaves_out_non_finite_triangles_before_any_engine_sees_them() {
     }
 }
 
+/// On two threads the text output ends with every engine's scaling from one thread, so that
+/// ours reads against the others' measured in the same rounds.
+#[test]
+fn bench_prints_every_engines_scaling() {
+    let o = tracery(&["bench", "--repeat", "1", "--threads", "2", "--no-peers"]);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let out = text(&o.stdout);
+    let line = out
+        .lines()
+        .find(|l| l.starts_with("every engine's scaling, 2 threads over 1 (closest / occluded): "))
+        .unwrap_or_else(|| panic!("no scaling line: {out}"));
+    for engine in ["tracery-sah", "tracery-median", "tracery-packet"] {
+        assert!(
+            line.contains(&format!("{engine} ")),
+            "{engine} missing: {line}"
+        );
+    }
+    let ratios = line.matches("x / ").count();
+    assert_eq!(ratios, 3, "one closest / occluded pair per engine: {line}");
+}
+
 /// Every command that takes a mesh takes a glTF (the fetched textured box, a GLB with an
 /// embedded PNG): `render` writes its picture, `stats` and `check-mesh` count its 12
 /// triangles, `bench` traces it.

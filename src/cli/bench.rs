@@ -231,6 +231,25 @@ fn print_table(mesh: &str, triangles: usize, excluded: usize, rows: &[EngineResu
             all.closest_mrays / one.closest_mrays,
             all.occluded_mrays / one.occluded_mrays
         );
+        // Every engine's, in the same rounds: on a shared machine the second core's load
+        // moves them all, and a figure of ours reads against the others'.
+        let mut engines: Vec<&str> = rows.iter().map(|r| r.engine.as_str()).collect();
+        engines.dedup();
+        let each: Vec<String> = engines
+            .iter()
+            .filter_map(|&e| {
+                let (one, all) = (find(e, 1)?, find(e, t)?);
+                Some(format!(
+                    "{e} {:.2}x / {:.2}x",
+                    all.closest_mrays / one.closest_mrays,
+                    all.occluded_mrays / one.occluded_mrays
+                ))
+            })
+            .collect();
+        println!(
+            "every engine's scaling, {t} threads over 1 (closest / occluded): {}",
+            each.join(", ")
+        );
     }
 }
 
