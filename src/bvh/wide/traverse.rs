@@ -101,8 +101,11 @@ pub(crate) fn leaf_closest<L: Lanes>(
 /// nearest in the node's order for the ray's octant, found by a scan from the nearest end
 /// whose exit is a predicted branch (see the module docs). The others are pushed, farthest
 /// first (one by a scalar push, more by the kernel's vector push).
+///
+/// With `DIST` false the others are pushed without their distances (the any-hit walk, which
+/// pops with [`Stack::pop_child`]).
 #[inline(always)]
-fn next_child<L: Lanes>(
+fn next_child<L: Lanes, const DIST: bool>(
     node: &WideNode,
     nr: &L::NodeRay,
     mask: u32,
@@ -128,9 +131,13 @@ fn next_child<L: Lanes>(
         1 => {}
         2 => {
             let f = lane(mask & !(1 << k));
-            stack.push(node.child[f], near[f]);
+            if DIST {
+                stack.push(node.child[f], near[f]);
+            } else {
+                stack.push_child(node.child[f]);
+            }
         }
-        _ => L::push_others_in_order(node, nr, mask, near, stack),
+        _ => L::push_others_in_order::<DIST>(node, nr, mask, near, stack),
     }
     Some(k)
 }
@@ -220,7 +227,7 @@ pub(crate) fn closest_tallied<L: Lanes, const SAFE: bool>(
     let mut slots = Slots::new();
     let mut stack = Stack::new(&mut slots);
     'node: loop {
-        let next = next_child::<L>(node, &nr, mask, &near, &mut stack);
+        let next = next_child::<L, true>(node, &nr, mask, &near, &mut stack);
         if let Some(k) = next {
             let child = Child(node.child[k]);
             if !child.is_leaf() {
@@ -325,7 +332,7 @@ pub(crate) fn each_hit<L: Lanes, const SAFE: bool>(
     // Depth first, nearest child first, as the closest hit walks (no culling: any hit will
     // do); a leaf is tested when reached or popped, and the walk stops when the caller asks.
     'node: loop {
-        if let Some(k) = next_child::<L>(node, &nr, mask, &near, &mut stack) {
+        if let Some(k) = next_child::<L, false>(node, &nr, mask, &near, &mut stack) {
             let child = Child(node.child[k]);
             if !child.is_leaf() {
                 node = &w.nodes[child.index() as usize];
@@ -338,7 +345,7 @@ pub(crate) fn each_hit<L: Lanes, const SAFE: bool>(
             }
         }
         loop {
-            let Some((child, _)) = stack.pop() else {
+            let Some(child) = stack.pop_child() else {
                 return true;
             };
             let child = Child(child);

@@ -56,14 +56,14 @@ impl Lanes for Avx512 {
     }
 
     #[inline(always)]
-    fn push_others_in_order(
+    fn push_others_in_order<const DIST: bool>(
         n: &WideNode,
         r: &NodeRay8,
         mask: u32,
         near: &[f32; WIDTH],
         stack: &mut Stack<'_>,
     ) {
-        Avx2::push_others_in_order(n, r, mask, near, stack)
+        Avx2::push_others_in_order::<DIST>(n, r, mask, near, stack)
     }
 
     #[inline(always)]

@@ -241,8 +241,10 @@ pub(crate) trait Lanes: Sized {
     /// Pushes the children in `mask` (with their distances from `near`) but the nearest, in
     /// the node's visiting order for the ray's octant, farthest first: the walk goes on to the
     /// nearest (the last hit lane in that order), and the next nearest ends on top.
+    /// With `DIST` false only the child words are pushed (for walks that pop with
+    /// [`Stack::pop_child`]).
     #[inline(always)]
-    fn push_others_in_order(
+    fn push_others_in_order<const DIST: bool>(
         n: &WideNode,
         r: &Self::NodeRay,
         mask: u32,
@@ -254,7 +256,11 @@ pub(crate) trait Lanes: Sized {
         for i in 0..WIDTH {
             let lane = n.lane_in_order(octant, i);
             if left > 0 && mask >> lane & 1 == 1 {
-                stack.push(n.child[lane], near[lane]);
+                if DIST {
+                    stack.push(n.child[lane], near[lane]);
+                } else {
+                    stack.push_child(n.child[lane]);
+                }
                 left -= 1;
             }
         }

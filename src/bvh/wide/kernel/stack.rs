@@ -78,6 +78,38 @@ impl<'a> Stack<'a> {
         self.len += 1;
     }
 
+    /// [`Stack::push8`] of child words alone, for walks that never read the distances back
+    /// ([`Stack::pop_child`]).
+    #[inline(always)]
+    pub fn push8_children(&mut self, child: [u32; WIDTH], count: usize) {
+        let top = self.len;
+        let c = &mut self.slots.child[top..top + WIDTH];
+        for k in 0..WIDTH {
+            c[k].write(child[k]);
+        }
+        self.len = top + count.min(WIDTH);
+    }
+
+    /// Pushes a child word without a distance (see [`Stack::push8_children`]).
+    #[inline(always)]
+    pub fn push_child(&mut self, child: u32) {
+        self.slots.child[self.len].write(child);
+        self.len += 1;
+    }
+
+    /// Pops the top entry's child word. A stack that was pushed without distances must be
+    /// popped with this alone.
+    #[inline(always)]
+    pub fn pop_child(&mut self) -> Option<u32> {
+        if self.len == 0 {
+            return None;
+        }
+        self.len -= 1;
+        // SAFETY: every child slot below the old `len` was written by a push (each writes the
+        // child slots it keeps), and `len` only grows through them.
+        Some(unsafe { self.slots.child[self.len].assume_init() })
+    }
+
     /// Pops the top entry.
     #[inline(always)]
     pub fn pop(&mut self) -> Option<(u32, f32)> {

@@ -346,7 +346,7 @@ impl Lanes for Avx2 {
     /// the front with two lane permutations, and all but the last (the nearest) pushed with
     /// two stores.
     #[inline(always)]
-    fn push_others_in_order(
+    fn push_others_in_order<const DIST: bool>(
         n: &WideNode,
         r: &NodeRay8,
         mask: u32,
@@ -367,12 +367,17 @@ impl Lanes for Avx2 {
             let lanes = _mm256_permutevar8x32_epi32(order, packed);
             let child =
                 _mm256_permutevar8x32_epi32(_mm256_loadu_si256(n.child.as_ptr().cast()), lanes);
-            let dist = _mm256_permutevar8x32_ps(_mm256_loadu_ps(near.as_ptr()), lanes);
-            stack.push8(
-                std::mem::transmute::<__m256i, [u32; WIDTH]>(child),
-                std::mem::transmute::<__m256, [f32; WIDTH]>(dist),
-                m.count_ones() as usize - 1,
-            );
+            let child = std::mem::transmute::<__m256i, [u32; WIDTH]>(child);
+            if DIST {
+                let dist = _mm256_permutevar8x32_ps(_mm256_loadu_ps(near.as_ptr()), lanes);
+                stack.push8(
+                    child,
+                    std::mem::transmute::<__m256, [f32; WIDTH]>(dist),
+                    m.count_ones() as usize - 1,
+                );
+            } else {
+                stack.push8_children(child, m.count_ones() as usize - 1);
+            }
         }
     }
 
