@@ -58,24 +58,18 @@ impl<'a> Stack<'a> {
     /// builders rules out.
     #[inline(always)]
     pub fn push8(&mut self, child: [u32; WIDTH], dist: [f32; WIDTH], count: usize) {
-        let top = self.len;
-        let (c, d) = (
-            &mut self.slots.child[top..top + WIDTH],
-            &mut self.slots.dist[top..top + WIDTH],
-        );
+        let d = &mut self.slots.dist[self.len..self.len + WIDTH];
         for k in 0..WIDTH {
-            c[k].write(child[k]);
             d[k].write(dist[k]);
         }
-        self.len = top + count.min(WIDTH);
+        self.push8_children(child, count);
     }
 
     /// Pushes one entry.
     #[inline(always)]
     pub fn push(&mut self, child: u32, dist: f32) {
-        self.slots.child[self.len].write(child);
         self.slots.dist[self.len].write(dist);
-        self.len += 1;
+        self.push_child(child);
     }
 
     /// [`Stack::push8`] of child words alone, for walks that never read the distances back
