@@ -321,6 +321,8 @@ pub(crate) struct BlockHits {
 }
 
 pub(crate) use scalar::Scalar;
+#[cfg(all(test, target_arch = "x86_64"))]
+pub(crate) use x86::take_denormal_flag;
 #[cfg(target_arch = "x86_64")]
 pub(crate) use x86::{Avx2Cpu, Avx512Cpu, Sse2, avx2, avx512};
 

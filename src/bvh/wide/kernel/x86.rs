@@ -243,6 +243,29 @@ pub(crate) fn prefetch<T>(x: &T) {
     unsafe { _mm_prefetch::<_MM_HINT_T0>((x as *const T).cast()) }
 }
 
+/// Whether an SSE or AVX instruction of this thread took a denormal operand since the last
+/// call: the MXCSR's sticky denormal flag (DE, bit 1), which this clears. Arithmetic on
+/// denormals costs Intel CPUs a microcode assist per instruction (a hundred cycles or more),
+/// so tests check that the fast paths never take one (the flag is architectural: AMD CPUs,
+/// which take no such penalty, set it too, so the tests catch it on either).
+#[cfg(test)]
+pub(crate) fn take_denormal_flag() -> bool {
+    const DE: u32 = 1 << 1;
+    let mut csr = 0u32;
+    // SAFETY: `stmxcsr` stores the 32-bit MXCSR (SSE, part of the x86-64 baseline) to `csr`, a
+    // live local; it reads and writes nothing else.
+    unsafe {
+        std::arch::asm!("stmxcsr [{}]", in(reg) &raw mut csr, options(nostack, preserves_flags))
+    };
+    let cleared = csr & !DE;
+    // SAFETY: `ldmxcsr` loads the register back with only the sticky DE flag cleared: the
+    // rounding mode, exception masks and flush modes stay what they were.
+    unsafe {
+        std::arch::asm!("ldmxcsr [{}]", in(reg) &raw const cleared, options(nostack, preserves_flags))
+    };
+    csr & DE != 0
+}
+
 /// For each 8-bit mask, the positions of its set bits in increasing order (the rest 0): the
 /// permutation that packs the hit lanes to the front.
 static COMPACT: [[u32; WIDTH]; 256] = {
