@@ -324,6 +324,15 @@ pub(crate) use scalar::Scalar;
 #[cfg(all(test, target_arch = "x86_64"))]
 pub(crate) use x86::take_denormal_flag;
 #[cfg(target_arch = "x86_64")]
+pub(crate) use x86::with_denormals_flushed;
+
+/// Runs `f` (elsewhere than on x86-64, as it is: the flush modes are x86's).
+#[cfg(not(target_arch = "x86_64"))]
+#[inline]
+pub(crate) fn with_denormals_flushed<R>(f: impl FnOnce() -> R) -> R {
+    f()
+}
+#[cfg(target_arch = "x86_64")]
 pub(crate) use x86::{Avx2Cpu, Avx512Cpu, Sse2, avx2, avx512};
 
 /// The constants of the distance error bound of [`crate::geometry::intersect_triangle`].

@@ -243,6 +243,55 @@ pub(crate) fn prefetch<T>(x: &T) {
     unsafe { _mm_prefetch::<_MM_HINT_T0>((x as *const T).cast()) }
 }
 
+/// The MXCSR of this thread (SSE, part of the x86-64 baseline).
+#[inline(always)]
+fn read_mxcsr() -> u32 {
+    let mut csr = 0u32;
+    // SAFETY: `stmxcsr` stores the 32-bit MXCSR to `csr`, a live local; it reads and writes
+    // nothing else.
+    unsafe {
+        std::arch::asm!("stmxcsr [{}]", in(reg) &raw mut csr, options(nostack, preserves_flags))
+    };
+    csr
+}
+
+/// Loads `csr` into this thread's MXCSR.
+///
+/// # Safety
+/// `csr` must be a valid MXCSR value: one read by [`read_mxcsr`], with at most its flags
+/// cleared or its flush-to-zero (bit 15) and denormals-are-zero (bit 6) modes set, which
+/// every x86-64 CPU supports (setting a reserved bit would fault).
+#[inline(always)]
+unsafe fn write_mxcsr(csr: u32) {
+    // SAFETY: the caller passes a valid MXCSR value; `ldmxcsr` reads only `csr`.
+    unsafe {
+        std::arch::asm!("ldmxcsr [{}]", in(reg) &raw const csr, options(nostack, preserves_flags))
+    };
+}
+
+/// Runs `f` with this thread's flush-to-zero and denormals-are-zero modes on (MXCSR bits 15
+/// and 6), and puts the register back afterwards, on unwinding too. Inside, a denormal
+/// operand reads as zero and a denormal result is written as zero, so no instruction takes
+/// the microcode assist Intel CPUs need for denormals; the compiler's vector code for
+/// three-float arithmetic computes spare lanes of whatever the registers and the stack held,
+/// often a denormal (see [`crate::render::Tracer::radiance_from_hit`]).
+#[inline]
+pub(crate) fn with_denormals_flushed<R>(f: impl FnOnce() -> R) -> R {
+    const FTZ_DAZ: u32 = (1 << 15) | (1 << 6);
+    struct Restore(u32);
+    impl Drop for Restore {
+        fn drop(&mut self) {
+            // SAFETY: the value read on entry.
+            unsafe { write_mxcsr(self.0) }
+        }
+    }
+    let saved = read_mxcsr();
+    let _restore = Restore(saved);
+    // SAFETY: the value read, with the two modes every x86-64 CPU has set.
+    unsafe { write_mxcsr(saved | FTZ_DAZ) };
+    f()
+}
+
 /// Whether an SSE or AVX instruction of this thread took a denormal operand since the last
 /// call: the MXCSR's sticky denormal flag (DE, bit 1), which this clears. Arithmetic on
 /// denormals costs Intel CPUs a microcode assist per instruction (a hundred cycles or more),
@@ -251,18 +300,10 @@ pub(crate) fn prefetch<T>(x: &T) {
 #[cfg(test)]
 pub(crate) fn take_denormal_flag() -> bool {
     const DE: u32 = 1 << 1;
-    let mut csr = 0u32;
-    // SAFETY: `stmxcsr` stores the 32-bit MXCSR (SSE, part of the x86-64 baseline) to `csr`, a
-    // live local; it reads and writes nothing else.
-    unsafe {
-        std::arch::asm!("stmxcsr [{}]", in(reg) &raw mut csr, options(nostack, preserves_flags))
-    };
-    let cleared = csr & !DE;
-    // SAFETY: `ldmxcsr` loads the register back with only the sticky DE flag cleared: the
-    // rounding mode, exception masks and flush modes stay what they were.
-    unsafe {
-        std::arch::asm!("ldmxcsr [{}]", in(reg) &raw const cleared, options(nostack, preserves_flags))
-    };
+    let csr = read_mxcsr();
+    // SAFETY: the value read, with only the sticky DE flag cleared: the rounding mode,
+    // exception masks and flush modes stay what they were.
+    unsafe { write_mxcsr(csr & !DE) };
     csr & DE != 0
 }
 
