@@ -644,55 +644,58 @@ impl RenderCache {
         let chunks: Vec<(Vec<Sample>, RayCounts)> = pixels
             .par_chunks(PACKET)
             .map(|chunk| {
-                let rays: Vec<Ray> = chunk
-                    .iter()
-                    .map(|&i| {
-                        let (x, y) = rows.xy(i);
-                        cam.pinhole(x as f32 + 0.5, y as f32 + 0.5)
-                    })
-                    .collect();
-                let mut hits = [None; PACKET];
-                if is_dense(chunk, rows) {
-                    tracer
-                        .bvh
-                        .intersect_packet(&rays, f32::INFINITY, &mut hits[..rays.len()]);
-                } else {
-                    for (hit, ray) in hits.iter_mut().zip(&rays) {
-                        *hit = tracer.bvh.intersect(ray, f32::INFINITY);
+                // Denormals flushed, as for the renderer's tiles (`Tracer::radiance_from_hit`).
+                crate::bvh::wide::kernel::with_denormals_flushed(|| {
+                    let rays: Vec<Ray> = chunk
+                        .iter()
+                        .map(|&i| {
+                            let (x, y) = rows.xy(i);
+                            cam.pinhole(x as f32 + 0.5, y as f32 + 0.5)
+                        })
+                        .collect();
+                    let mut hits = [None; PACKET];
+                    if is_dense(chunk, rows) {
+                        tracer
+                            .bvh
+                            .intersect_packet(&rays, f32::INFINITY, &mut hits[..rays.len()]);
+                    } else {
+                        for (hit, ray) in hits.iter_mut().zip(&rays) {
+                            *hit = tracer.bvh.intersect(ray, f32::INFINITY);
+                        }
                     }
-                }
-                // The chunk's rays counted together, not one count per sample.
-                let mut counts = RayCounts {
-                    camera: chunk.len() as u64,
-                    ..Default::default()
-                };
-                let samples = chunk
-                    .iter()
-                    .zip(rays)
-                    .zip(hits)
-                    .map(|((&i, ray), hit)| {
-                        let sampler =
-                            PixelSampler::new(SamplerKind::Random, 0x5eed, i as u64, index);
-                        let l = tracer.radiance_from_hit(
-                            &ray,
-                            hit,
-                            &mut PathSampler::new(sampler),
-                            &mut counts,
-                        );
-                        let point = hit.map_or(ray.origin + ray.dir * FAR, |h| ray.at(h.t));
-                        let normal = hit.map_or(NO_NORMAL, |h| {
-                            let tri = &tracer.scene.mesh.triangles[h.prim as usize];
-                            pack_normal(face_normal(tri))
-                        });
-                        let colour = if l.is_finite() && point.is_finite() {
-                            encode_pixel(l, k)
-                        } else {
-                            NO_COLOUR
-                        };
-                        (i, point.into(), normal, colour)
-                    })
-                    .collect();
-                (samples, counts)
+                    // The chunk's rays counted together, not one count per sample.
+                    let mut counts = RayCounts {
+                        camera: chunk.len() as u64,
+                        ..Default::default()
+                    };
+                    let samples = chunk
+                        .iter()
+                        .zip(rays)
+                        .zip(hits)
+                        .map(|((&i, ray), hit)| {
+                            let sampler =
+                                PixelSampler::new(SamplerKind::Random, 0x5eed, i as u64, index);
+                            let l = tracer.radiance_from_hit(
+                                &ray,
+                                hit,
+                                &mut PathSampler::new(sampler),
+                                &mut counts,
+                            );
+                            let point = hit.map_or(ray.origin + ray.dir * FAR, |h| ray.at(h.t));
+                            let normal = hit.map_or(NO_NORMAL, |h| {
+                                let tri = &tracer.scene.mesh.triangles[h.prim as usize];
+                                pack_normal(face_normal(tri))
+                            });
+                            let colour = if l.is_finite() && point.is_finite() {
+                                encode_pixel(l, k)
+                            } else {
+                                NO_COLOUR
+                            };
+                            (i, point.into(), normal, colour)
+                        })
+                        .collect();
+                    (samples, counts)
+                })
             })
             .collect();
         let mut total = RayCounts::default();

@@ -235,8 +235,8 @@ pub fn trace_rows(
             for (k, s) in sums[..tw * height].iter_mut().enumerate() {
                 *s = before[at(x0, tw, k)];
             }
-            // Denormals flushed for the camera rays too (the thin lens' disk sample took
-            // them); see `Tracer::radiance_from_hit`.
+            // Denormals flushed for the tile's camera rays and shading (the thin lens' disk
+            // sample took them too); see `Tracer::radiance_from_hit`.
             let (rays, rejected) = crate::bvh::wide::kernel::with_denormals_flushed(|| {
                 trace_tile(
                     tracer,
@@ -351,9 +351,8 @@ mod tests {
     /// assist on Intel CPUs; the compiler's vector code for three-float arithmetic computes
     /// spare lanes of stale data): the project's scenes with the direct and path integrators,
     /// a thin lens among them, on a pool of one thread whose MXCSR the check reads. Fails with
-    /// the flush taken off shading and the tiles (checked: the Cornell box); the tiles' own
-    /// flush covers the camera rays, whose lens sample took denormals in one build of a probe
-    /// and not in this test's.
+    /// the tiles' flush taken off (checked: the Cornell box); the flush covers the camera rays
+    /// too, whose lens sample took denormals in one build of a probe and not in this test's.
     #[test]
     fn rendering_takes_no_denormal_operand_outside_the_flush() {
         let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("assets/scenes");

@@ -103,18 +103,21 @@ impl<'a> Tracer<'a> {
             return FALLBACK;
         }
         let hit = self.bvh.intersect(ray, f32::INFINITY);
-        self.radiance_from_hit(ray, hit, rng, counts)
+        crate::bvh::wide::kernel::with_denormals_flushed(|| {
+            self.radiance_from_hit(ray, hit, rng, counts)
+        })
     }
 
     /// [`Tracer::radiance`] of a ray whose closest hit is already known (`hit` is what
     /// `self.bvh.intersect(ray, f32::INFINITY)` gives, as a packet traced it).
     ///
-    /// Shading runs with denormals flushed to zero: the compiler computes three-float
-    /// arithmetic in four-lane (or two in four) vector instructions whose spare lanes hold
-    /// whatever the registers and the stack held, often a denormal, and each such
-    /// instruction cost Intel CPUs a microcode assist: the Cornell box rendered in 0.6x the
-    /// time with the flush on (session 22, Intel Xeon). Values that small are far below
-    /// anything a pixel shows.
+    /// Callers run it inside [`crate::bvh::wide::kernel::with_denormals_flushed`], once per
+    /// batch of samples (a tile, a chunk of the viewer's cache, [`Tracer::radiance`]): the
+    /// compiler computes three-float arithmetic in four-lane (or two in four) vector
+    /// instructions whose spare lanes hold whatever the registers and the stack held, often a
+    /// denormal, and each such instruction cost Intel CPUs a microcode assist: the Cornell box
+    /// rendered in 0.6x the time with the flush on (session 22, Intel Xeon). Values that small
+    /// are far below anything a pixel shows.
     pub fn radiance_from_hit(
         &self,
         ray: &Ray,
@@ -125,13 +128,13 @@ impl<'a> Tracer<'a> {
         if !ray.is_valid() {
             return FALLBACK;
         }
-        crate::bvh::wide::kernel::with_denormals_flushed(|| match self.plan.integrator {
+        match self.plan.integrator {
             Integrator::Direct => self.shade(ray, hit, 0, rng, counts),
             Integrator::Path => {
                 let a = Arrival::Specular;
                 self.path(ray, hit, 0, a, Vec3::ONE, rng, counts)
             }
-        })
+        }
     }
 
     pub(super) fn background(&self, dir: Vec3) -> Vec3 {
