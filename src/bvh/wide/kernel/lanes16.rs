@@ -184,12 +184,44 @@ const TRANSPOSE: [[[i32; 16]; 2]; 6] = {
     t
 };
 
-/// Sixteen lanes of a packet array, lane `j` from the group's `j`-th ray.
+/// Where [`gather16`] takes its lanes from: the group's ray indices (each below [`PACKET`], 64)
+/// as sixteen 32-bit lanes, and the lanes whose ray lies in the packet's upper half.
+struct Picks {
+    idx: __m512i,
+    upper: __mmask16,
+}
+
+impl Picks {
+    #[inline(always)]
+    fn of(g: &Group) -> Picks {
+        debug_assert!(g.idx.iter().all(|&i| i < PACKET));
+        // SAFETY: only reached inside the AVX-512 entry points; each load reads eight of the
+        // sixteen `usize` indices (64 bytes).
+        unsafe {
+            let lo = _mm512_cvtepi64_epi32(_mm512_loadu_si512(g.idx.as_ptr().cast()));
+            let hi = _mm512_cvtepi64_epi32(_mm512_loadu_si512(g.idx[8..].as_ptr().cast()));
+            let idx = _mm512_inserti64x4::<1>(_mm512_castsi256_si512(lo), hi);
+            let upper = _mm512_test_epi32_mask(idx, _mm512_set1_epi32(32));
+            Picks { idx, upper }
+        }
+    }
+}
+
+/// Sixteen lanes of a packet array, lane `j` from the group's `j`-th ray: each half of the
+/// array (32 floats, two registers) permuted by the indices' low five bits, and the halves
+/// blended by their sixth. Copying the floats one by one through memory, as `array::from_fn`
+/// did, compiled to a function the AVX-512 kernel called fourteen times per group (each call
+/// behind a `vzeroupper`, its vector registers saved around it).
 #[inline(always)]
-fn gather16(a: &[f32; PACKET], g: &Group) -> __m512 {
-    let v: [f32; 16] = std::array::from_fn(|j| a[g.idx[j]]);
-    // SAFETY: only reached inside the AVX-512 entry points; `v` holds sixteen floats.
-    unsafe { _mm512_loadu_ps(v.as_ptr()) }
+fn gather16(a: &[f32; PACKET], p: &Picks) -> __m512 {
+    // SAFETY: only reached inside the AVX-512 entry points; the four loads read floats
+    // 0-15, 16-31, 32-47 and 48-63 of the 64.
+    unsafe {
+        let at = |k: usize| _mm512_loadu_ps(a[16 * k..16 * k + 16].as_ptr());
+        let lo = _mm512_permutex2var_ps(at(0), p.idx, at(1));
+        let hi = _mm512_permutex2var_ps(at(2), p.idx, at(3));
+        _mm512_mask_blend_ps(p.upper, lo, hi)
+    }
 }
 
 /// Each triangle against the group's rays at once, one ray per lane (lanes past the group's
@@ -197,21 +229,22 @@ fn gather16(a: &[f32; PACKET], g: &Group) -> __m512 {
 #[inline(always)]
 fn group_blocks16(blocks: &[TriBlock], r: &Rays, tris: &Tris, g: &Group, bests: &mut Bests) {
     let k = perm_of(g.perm);
+    let picks = Picks::of(g);
     let o = [
-        gather16(&r.origin[k[0]], g),
-        gather16(&r.origin[k[1]], g),
-        gather16(&r.origin[k[2]], g),
+        gather16(&r.origin[k[0]], &picks),
+        gather16(&r.origin[k[1]], &picks),
+        gather16(&r.origin[k[2]], &picks),
     ];
     let shear = [
-        gather16(&tris.shear[0], g),
-        gather16(&tris.shear[1], g),
-        gather16(&tris.shear[2], g),
+        gather16(&tris.shear[0], &picks),
+        gather16(&tris.shear[1], &picks),
+        gather16(&tris.shear[2], &picks),
     ];
     let lanes = ((1u64 << g.n) - 1) as u32;
     let mut out = [[0.0f32; 16]; 3];
     // The rays' best distances, kept in a register from triangle to triangle (a hit is never
     // farther than the best it beats or ties), read back after the scalar test decided a lane.
-    let mut best = gather16(&bests.t, g);
+    let mut best = gather16(&bests.t, &picks);
     for b in blocks {
         for tri in 0..BLOCK {
             if b.prim[tri] == u32::MAX {
@@ -240,7 +273,7 @@ fn group_blocks16(blocks: &[TriBlock], r: &Rays, tris: &Tris, g: &Group, bests: 
             // SAFETY: only reached inside the AVX-512 entry points; `limit` holds sixteen floats.
             unsafe { _mm512_storeu_ps(limit.as_mut_ptr(), limit16) };
             group_exact(b, tri, g, exact, &limit, r, tris, bests);
-            best = gather16(&bests.t, g);
+            best = gather16(&bests.t, &picks);
         }
     }
 }
