@@ -643,7 +643,13 @@ impl BinPlan {
     /// the axis), writing each one's bin to `keys`. Large ranges are binned as two halves side
     /// by side into two rows, merged at the end: neighbouring triangles mostly share a bin, and
     /// with one row each update waited for the store of the one before.
-    #[inline(always)]
+    ///
+    /// Kept out of line, like [`partition`]: inlined into [`Builder::split`], the loops over
+    /// every reference had their registers allocated together with the whole split's (the
+    /// partition compared each slot against a length reloaded from the stack). Session 23,
+    /// `examples/build_time`, fastest of 30, alternating: dragon 202k 34.5-36.3 -> 31.8-35.4
+    /// ms (faster in 6 pairs of 6), bunny 10.2-10.5 -> 9.7-10.3 (3 of 3); the same trees.
+    #[inline(never)]
     fn fill<const AXIS: usize>(
         &self,
         refs: &[PrimRef],
@@ -704,8 +710,9 @@ const TWO_ROWS_MIN: usize = 64;
 
 /// Writes the references of `src` whose bin (`keys`) is below `p` to the front of `dst` and
 /// the others after them (from `left_count`), each side in its order in `src`: every
-/// reference is read once and written once, to a slot chosen without a branch.
-#[inline(always)]
+/// reference is read once and written once, to a slot chosen without a branch. Out of line
+/// (see [`BinPlan::fill`]).
+#[inline(never)]
 fn partition(src: &[PrimRef], keys: &[u8], p: u8, dst: &mut [PrimRef], left_count: usize) {
     let (mut left, mut right) = (0, left_count);
     for (r, &key) in src.iter().zip(keys) {
