@@ -5,7 +5,12 @@
 //! them, compare within a session). Embree's build time, beside ours in one run, is in
 //! `tracery bench` (`--features embree`).
 //!
-//! `cargo run --release --no-default-features --example build_time -- MESH [BUILDS] [THREADS]`
+//! `cargo run --release --no-default-features --example build_time -- MESH [BUILDS] [THREADS] [cold]`
+//!
+//! With `cold`, 64 MB are allocated, written and freed before each build, as another engine's
+//! build does between ours in `tracery bench`: the build then finds its memory out of the
+//! caches, as the one build a scene load makes does. Without it, each build reuses the memory
+//! the one before it left warm.
 
 use std::path::PathBuf;
 
@@ -24,6 +29,11 @@ fn main() -> Result<()> {
         .next()
         .map_or(Ok(1), |s| s.parse())
         .context("THREADS")?;
+    let cold = match args.next().as_deref() {
+        None => false,
+        Some("cold") => true,
+        Some(other) => anyhow::bail!("the fourth argument is `cold` or nothing, not `{other}`"),
+    };
     let scene = Scene::load(&path)?;
     let tris = &scene.mesh.triangles;
     let pool = rayon::ThreadPoolBuilder::new()
@@ -34,6 +44,10 @@ fn main() -> Result<()> {
     let mut last = None;
     pool.install(|| {
         for _ in 0..builds {
+            if cold {
+                // Another workload's memory, written and freed.
+                std::hint::black_box(&vec![1u8; 64 << 20]);
+            }
             let start = std::time::Instant::now();
             let bvh = Bvh::build(tris, &BuildOptions::sah());
             calls.push(start.elapsed().as_secs_f64() * 1e3);
@@ -45,9 +59,10 @@ fn main() -> Result<()> {
     calls.sort_by(f64::total_cmp);
     let s = &last.context("no build")?.stats;
     println!(
-        "{} ({} triangles), {threads} thread(s), {builds} builds: fastest {:.1} ms, median {:.1} ms (the whole call, statistics included, as `tracery bench` times it: fastest {:.1} ms, median {:.1} ms); SAH cost {:.2}, {} leaves, {} levels, {} wide nodes, {} blocks",
+        "{} ({} triangles), {threads} thread(s), {builds} builds{}: fastest {:.1} ms, median {:.1} ms (the whole call, statistics included, as `tracery bench` times it: fastest {:.1} ms, median {:.1} ms); SAH cost {:.2}, {} leaves, {} levels, {} wide nodes, {} blocks",
         path.display(),
         tris.len(),
+        if cold { " (cold)" } else { "" },
         ours[0],
         ours[builds / 2],
         calls[0],
