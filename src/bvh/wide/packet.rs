@@ -240,7 +240,8 @@ impl Rays {
         }
     }
 
-    /// The packet, or `None` when its rays do not share an octant, some reciprocal is
+    /// Fills `r` (made by [`Rays::zeroed`] with the tile's length and its first ray's octant)
+    /// with the tile's rays; `false` when its rays do not share an octant, some reciprocal is
     /// infinite, or some ray is not valid (a non-finite origin or direction).
     ///
     /// The rays are copied component by component first (by the kernel's
@@ -248,12 +249,14 @@ impl Rays {
     /// [`PACKET`] lanes with no branch (eight or sixteen lanes per instruction in the SIMD
     /// kernels this is inlined into). Lanes past the packet's end repeat its first ray, which
     /// changes no bound.
+    ///
+    /// Filled in place in the caller's frame: returned by value (in an `Option`), the 3 KB
+    /// packet was copied by a `memcpy` call per packet, behind a `vzeroupper`.
     #[inline(always)]
-    fn new<L: Lanes>(tile: &RayTile) -> Option<Rays> {
+    fn fill<L: Lanes>(r: &mut Rays, tile: &RayTile) -> bool {
         let n = tile.len();
         let first = tile.rays[0];
-        let octant = Vec3A::from(first.dir).is_negative_bitmask();
-        let mut r = Rays::zeroed(n, octant);
+        let octant = r.octant;
         let loaded = tile
             .rows_of_eight()
             .is_some_and(|(rays, stride)| L::load_rays(rays, stride, &mut r.origin, &mut r.dir));
@@ -295,7 +298,7 @@ impl Rays {
             // An infinite reciprocal could meet 0 * inf.
             bad |= !(r.inv_lo[a].is_finite() && r.inv_hi[a].is_finite());
         }
-        (!bad).then_some(r)
+        !bad
     }
 }
 
@@ -401,9 +404,11 @@ pub(crate) fn trace_packet<L: Lanes, const ANY: bool>(
     t_max: f32,
     bests: &mut Bests,
 ) -> bool {
-    let Some(r) = Rays::new::<L>(tile) else {
+    let octant = Vec3A::from(tile.rays[0].dir).is_negative_bitmask();
+    let mut r = Rays::zeroed(tile.len(), octant);
+    if !Rays::fill::<L>(&mut r, tile) {
         return false;
-    };
+    }
     let mut tris = Tris {
         made: false,
         perm: [0; PACKET],
@@ -637,7 +642,7 @@ mod tests {
             let rays: Vec<Ray> = (0..PACKET)
                 .map(|i| Ray::new(Vec3::new(i as f32, 0.5, -2.0), *d))
                 .collect();
-            // Zero components have infinite reciprocals, which `Rays::new` refuses: the
+            // Zero components have infinite reciprocals, which `Rays::fill` refuses: the
             // constants are made from the reciprocals directly then.
             let mut r = Rays::zeroed(PACKET, 0);
             for (i, ray) in rays.iter().enumerate() {
