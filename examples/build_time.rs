@@ -1,11 +1,12 @@
 //! Times the SAH build alone: `BUILDS` builds of a mesh on a pool of `THREADS` threads, and
-//! prints the fastest, the median (of the build as it times itself, and of the whole call as `tracery
-//! bench` times it, statistics included) and the tree (SAH cost, leaves, levels), so two builders can
-//! be compared by running their binaries one after the other (the machines are noisy: alternate
-//! them, compare within a session). Embree's build time, beside ours in one run, is in
-//! `tracery bench` (`--features embree`).
+//! prints the fastest and the median (of the build as it times itself, and of the whole call as
+//! `tracery bench` times it, statistics included) and the tree (SAH cost, leaves, levels), so
+//! two builders can be compared by running their binaries one after the other (the machines
+//! are noisy: alternate them, compare within a session). Embree's build time, beside ours in
+//! one run, is in `tracery bench` (`--features embree`).
 //!
-//! `cargo run --release --no-default-features --example build_time -- MESH [BUILDS] [THREADS] [cold]`
+//! `cargo run --release --no-default-features --example build_time -- MESH [BUILDS] [THREADS]
+//! [cold]`
 //!
 //! With `cold`, 64 MB are allocated, written and freed before each build, as another engine's
 //! build does between ours in `tracery bench`: the build then finds its memory out of the

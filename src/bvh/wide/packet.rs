@@ -240,9 +240,9 @@ impl Rays {
         }
     }
 
-    /// Fills `r` (made by [`Rays::zeroed`] with the tile's length and its first ray's octant)
-    /// with the tile's rays; `false` when its rays do not share an octant, some reciprocal is
-    /// infinite, or some ray is not valid (a non-finite origin or direction).
+    /// Fills the packet (made by [`Rays::zeroed`] with the tile's length and its first ray's
+    /// octant) with the tile's rays; `false` when they do not share an octant, some reciprocal
+    /// is infinite, or some ray is not valid (a non-finite origin or direction).
     ///
     /// The rays are copied component by component first (by the kernel's
     /// [`Lanes::load_rays`] where it has one); every other step then runs over whole arrays of
@@ -253,7 +253,8 @@ impl Rays {
     /// Filled in place in the caller's frame: returned by value (in an `Option`), the 3 KB
     /// packet was copied by a `memcpy` call per packet, behind a `vzeroupper`.
     #[inline(always)]
-    fn fill<L: Lanes>(r: &mut Rays, tile: &RayTile) -> bool {
+    fn fill<L: Lanes>(&mut self, tile: &RayTile) -> bool {
+        let r = self;
         let n = tile.len();
         let first = tile.rays[0];
         let octant = r.octant;
@@ -406,7 +407,7 @@ pub(crate) fn trace_packet<L: Lanes, const ANY: bool>(
 ) -> bool {
     let octant = Vec3A::from(tile.rays[0].dir).is_negative_bitmask();
     let mut r = Rays::zeroed(tile.len(), octant);
-    if !Rays::fill::<L>(&mut r, tile) {
+    if !r.fill::<L>(tile) {
         return false;
     }
     let mut tris = Tris {
