@@ -120,10 +120,14 @@ fn next_child<L: Lanes, const DIST: bool>(
     let q = L::octant(nr);
     // (The scan always finds a lane: every node's order lists all its lanes.)
     let mut k = lane(mask);
+    // The mask in each of its word's four bytes: an order field shifted down keeps the two low
+    // bits of the next octant's field above its three, and they only pick a copy, so the test
+    // needs no masking of the field (a shift takes its amount modulo 32, as `bt` does).
+    let copies = mask * 0x0101_0101;
     for i in (0..WIDTH).rev() {
-        let l = node.lane_in_order(q, i);
-        if mask >> l & 1 == 1 {
-            k = l;
+        let field = node.order[i] >> (3 * q);
+        if copies >> (field & 31) & 1 == 1 {
+            k = (field & 7) as usize;
             break;
         }
     }

@@ -11,8 +11,9 @@
 //!
 //! The AVX-512 kernel is the AVX2 one ([`Avx2`], the same intrinsics in the same order, so the
 //! same bits) compiled with AVX-512 F, VL, BW and DQ enabled: 32 vector registers instead of
-//! 16, so the ray's constants stay in registers instead of being reloaded from the stack at
-//! every node, and EVEX encodings. On session 13's Zen 4 it traced the dragon's canonical
+//! 16, and EVEX encodings. (More registers did not keep the box test's ray constants in
+//! registers: the closest-hit walk still reads them from the stack at every node, as memory
+//! operands of its arithmetic, in both kernels; session 24's disassembly.) On session 13's Zen 4 it traced the dragon's canonical
 //! rays 2-4% faster (closest, occlusion and packets; `examples/trace_time`, three pairs). Its
 //! one part of its own, a packet's rays tested against a triangle sixteen at a time, is in
 //! [`super::lanes16`].
@@ -36,11 +37,14 @@ use crate::bvh::wide::traverse::{self, Best};
 use crate::bvh::wide::{BLOCK, TriBlock, WIDTH, WideBvh, WideNode};
 use crate::geometry::Ray;
 
-/// The triangle test's ray data, broadcast to 4 lanes.
+/// The triangle test's ray data, broadcast to 4 lanes, in the test's axis order.
 #[derive(Clone, Copy)]
 pub(crate) struct TriRay4 {
+    /// The origin's coordinates along the axes `k` (x, y, z of the sheared frame).
     origin: [__m128; 3],
-    k: [usize; 3],
+    /// Byte offsets of the rows `k` within a vertex's `[[f32; 4]; 3]`: `16 * k`, each 0, 16
+    /// or 32 (taken modulo 3, so whatever `k` held).
+    row: [usize; 3],
     sx: __m128,
     sy: __m128,
     sz: __m128,
@@ -51,9 +55,11 @@ fn tri_ray4(r: &TriRay) -> TriRay4 {
     // SAFETY: `_mm_set1_ps` only needs SSE, part of the x86-64 baseline.
     let s = |x: f32| unsafe { _mm_set1_ps(x) };
     let [sx, sy, sz] = r.ray.shear;
+    let o = r.ray.origin.to_array();
+    let k = r.ray.k.map(|k| k % 3);
     TriRay4 {
-        origin: r.ray.origin.to_array().map(s),
-        k: r.ray.k,
+        origin: k.map(|k| s(o[k])),
+        row: k.map(|k| 16 * k),
         sx: s(sx),
         sy: s(sy),
         sz: s(sz),
@@ -63,17 +69,18 @@ fn tri_ray4(r: &TriRay) -> TriRay4 {
 /// One vertex of the block's four triangles, in the ray's axis order, sheared for the ray.
 #[inline(always)]
 fn sheared4(b: &TriBlock, r: &TriRay4, vertex: usize) -> [__m128; 3] {
-    let [kx, ky, kz] = r.k;
-    let row = &b.v[vertex];
-    // SAFETY: SSE2 baseline loads of whole `[f32; 4]` rows of the block.
+    let row = b.v[vertex].as_ptr().cast::<u8>();
+    // SAFETY: SSE2 baseline loads of whole `[f32; 4]` rows of the vertex's `[[f32; 4]; 3]`
+    // (48 bytes): each offset is 0, 16 or 32 (`tri_ray4`), so every load reads 16 bytes inside
+    // it.
     let v = unsafe {
         [
-            _mm_loadu_ps(row[kx].as_ptr()),
-            _mm_loadu_ps(row[ky].as_ptr()),
-            _mm_loadu_ps(row[kz].as_ptr()),
+            _mm_loadu_ps(row.add(r.row[0]).cast()),
+            _mm_loadu_ps(row.add(r.row[1]).cast()),
+            _mm_loadu_ps(row.add(r.row[2]).cast()),
         ]
     };
-    floats::sheared(v, &[r.origin[kx], r.origin[ky], r.origin[kz]], r.sx, r.sy)
+    floats::sheared(v, &r.origin, r.sx, r.sy)
 }
 
 /// The watertight test on a block's four lanes (see [`Lanes::block`]).
@@ -204,7 +211,9 @@ pub(crate) struct NodeRay8 {
     origin: [__m256; 3],
     inv: [__m256; 3],
     inv_far: [__m256; 3],
-    near: [usize; 3],
+    /// Per axis, the byte offsets in [`WideNode::planes`] of the near and the far plane rows
+    /// (`32 * near` and `32 * (near ^ 1)`, each below 192): no shift per row and node.
+    rows: [(usize, usize); 3],
     octant: u32,
     /// `3 * octant` in every lane: shifts a node's order words to this octant's lane indices.
     shift: __m256i,
@@ -332,11 +341,14 @@ static COMPACT: [[u32; WIDTH]; 256] = {
 /// it happens to be inlined).
 #[inline(always)]
 fn slab8<const SAFE: bool>(n: &WideNode, r: &NodeRay8, a: usize) -> (__m256, __m256) {
-    // SAFETY: only reached inside the AVX2 and AVX-512 entry points (see `Avx2::node_ray`); the loads read
-    // whole `[f32; 8]` plane rows.
+    // SAFETY: only reached inside the AVX2 and AVX-512 entry points (see `Avx2::node_ray`); the
+    // loads read whole `[f32; 8]` plane rows: the offsets are multiples of 32 below 192
+    // (`Avx2::node_ray`), inside the six rows.
     unsafe {
-        let lo = _mm256_loadu_ps(n.planes[r.near[a]].as_ptr());
-        let hi = _mm256_loadu_ps(n.planes[r.near[a] ^ 1].as_ptr());
+        let planes = n.planes.as_ptr().cast::<u8>();
+        let (near, far) = r.rows[a];
+        let lo = _mm256_loadu_ps(planes.add(near).cast());
+        let hi = _mm256_loadu_ps(planes.add(far).cast());
         let mut lo = _mm256_mul_ps(_mm256_sub_ps(lo, r.origin[a]), r.inv[a]);
         let mut hi = _mm256_mul_ps(_mm256_sub_ps(hi, r.origin[a]), r.inv_far[a]);
         if SAFE {
@@ -362,7 +374,10 @@ impl Lanes for Avx2 {
             origin: r.origin.map(s),
             inv: r.inv.map(s),
             inv_far: r.inv_far.map(s),
-            near: r.near,
+            rows: r.near.map(|near| {
+                let near = near % 6;
+                (32 * near, 32 * (near ^ 1))
+            }),
             octant: r.octant,
             // SAFETY: as above.
             shift: unsafe { _mm256_set1_epi32(3 * r.octant as i32) },
@@ -610,8 +625,9 @@ fn triangle_rays8(
     (found.hits, found.exact)
 }
 
-/// Proof that this CPU has AVX2 and FMA (and POPCNT, BMI1 and LZCNT, which every AVX2 CPU
-/// has and the mask bookkeeping uses): made only by [`Avx2Cpu::detect`].
+/// Proof that this CPU has AVX2 and FMA (and POPCNT, BMI1, BMI2 and LZCNT, which every AVX2
+/// CPU has and the mask bookkeeping uses: BMI2's `shrx` shifts without the flags and from
+/// memory, one instruction of the three in each step of the order scan): made only by [`Avx2Cpu::detect`].
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct Avx2Cpu(());
 
@@ -622,6 +638,7 @@ impl Avx2Cpu {
             && is_x86_feature_detected!("fma")
             && is_x86_feature_detected!("popcnt")
             && is_x86_feature_detected!("bmi1")
+            && is_x86_feature_detected!("bmi2")
             && is_x86_feature_detected!("lzcnt"))
         .then_some(Avx2Cpu(()))
     }
@@ -723,10 +740,10 @@ macro_rules! entry_points {
     };
 }
 
-entry_points!(avx2, Avx2Cpu, Avx2, "avx2,fma,popcnt,bmi1,lzcnt");
+entry_points!(avx2, Avx2Cpu, Avx2, "avx2,fma,popcnt,bmi1,bmi2,lzcnt");
 entry_points!(
     avx512,
     Avx512Cpu,
     super::super::lanes16::Avx512,
-    "avx2,fma,popcnt,bmi1,lzcnt,avx512f,avx512vl,avx512bw,avx512dq"
+    "avx2,fma,popcnt,bmi1,bmi2,lzcnt,avx512f,avx512vl,avx512bw,avx512dq"
 );
