@@ -561,7 +561,9 @@ impl Builder<'_> {
         }
         let (mut cost, mut split) = (f64::INFINITY, 0);
         let mut acc = Aabb::EMPTY;
-        for (k, &right) in right_area.iter().enumerate().take(n).skip(1) {
+        // A zip from 1: `.enumerate().take(n).skip(1)` left a call (`Take::nth`) in every
+        // sweep (2.5% of a build's instructions, session 24).
+        for (k, &right) in (1..n).zip(&right_area[1..n]) {
             acc.grow(&at(k - 1).bounds());
             let c = sah::blocks(k) * acc.half_area() + sah::blocks(n - k) * right;
             if c < cost {

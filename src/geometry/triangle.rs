@@ -293,7 +293,12 @@ fn owns_edge(q: (f32, f32), r: (f32, f32), opposite: (f32, f32)) -> bool {
 /// edge cross product is taken in f64, where differences of f32 coordinates are exact, so
 /// only truly flat triangles count. Such a triangle has no surface to hit, and the BVH leaves
 /// it out (a ray could otherwise "hit" it through rounding in the sheared ray space).
+///
+/// The three conversions are written out: `t.map(..)` stayed a call of its own (`try_map`),
+/// whose result the build's reference loop read back from memory with wider loads than it was
+/// written with, a store-forwarding stall per triangle (about 4% of a build; session 24).
+#[inline]
 pub fn is_degenerate(t: &[Vec3; 3]) -> bool {
-    let [a, b, c] = t.map(|v| v.as_dvec3());
+    let (a, b, c) = (t[0].as_dvec3(), t[1].as_dvec3(), t[2].as_dvec3());
     (b - a).cross(c - a) == DVec3::ZERO
 }
