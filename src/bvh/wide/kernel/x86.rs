@@ -13,8 +13,9 @@
 //! same bits) compiled with AVX-512 F, VL, BW and DQ enabled: 32 vector registers instead of
 //! 16, and EVEX encodings. (More registers did not keep the box test's ray constants in
 //! registers: the closest-hit walk still reads them from the stack at every node, as memory
-//! operands of its arithmetic, in both kernels; session 24's disassembly.) On session 13's Zen 4 it traced the dragon's canonical
-//! rays 2-4% faster (closest, occlusion and packets; `examples/trace_time`, three pairs). Its
+//! operands of its arithmetic, in both kernels; session 24's disassembly.) On session 13's
+//! Zen 4 it traced the dragon's canonical rays 2-4% faster (closest, occlusion and packets;
+//! `examples/trace_time`, three pairs). Its
 //! one part of its own, a packet's rays tested against a triangle sixteen at a time, is in
 //! [`super::lanes16`].
 //!
@@ -630,7 +631,8 @@ fn triangle_rays8(
 
 /// Proof that this CPU has AVX2 and FMA (and POPCNT, BMI1, BMI2 and LZCNT, which every AVX2
 /// CPU has and the mask bookkeeping uses: BMI2's `shrx` shifts without the flags and from
-/// memory, one instruction of the three in each step of the order scan): made only by [`Avx2Cpu::detect`].
+/// memory, one instruction of the three in each step of the order scan): made only by
+/// [`Avx2Cpu::detect`].
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct Avx2Cpu(());
 
