@@ -16,6 +16,7 @@ use std::time::Instant;
 
 use glam::{Vec3, Vec3A, Vec4};
 
+use super::stats::TreeCounts;
 use super::{BuildOptions, Bvh, BvhNode, BvhStats, MAX_DEPTH, SplitMethod, sah};
 use crate::geometry::{Aabb, is_degenerate};
 
@@ -59,8 +60,8 @@ pub(super) fn build(triangles: &[[Vec3; 3]], options: &BuildOptions) -> Bvh {
     }
     let excluded = triangles.len() - refs.len() - degenerate;
 
-    let nodes = if refs.is_empty() {
-        vec![EMPTY_NODE; 2]
+    let (nodes, counts) = if refs.is_empty() {
+        (vec![EMPTY_NODE; 2], TreeCounts::EMPTY)
     } else {
         let mut scratch = vec![PrimRef::ZERO; refs.len()];
         let mut keys = vec![0u8; refs.len()];
@@ -101,7 +102,7 @@ pub(super) fn build(triangles: &[[Vec3; 3]], options: &BuildOptions) -> Bvh {
         options,
     };
     let build_time = start.elapsed();
-    bvh.stats = BvhStats::measure(&bvh, excluded, degenerate, build_time);
+    bvh.stats = BvhStats::new(&bvh, &counts, excluded, degenerate, build_time);
     bvh
 }
 
@@ -114,14 +115,15 @@ const EMPTY_NODE: BvhNode = BvhNode {
 };
 
 /// Builds the subtree of `task` (whose range is all of `bufs`; `offset` is the position of
-/// `bufs` in the whole reference list) into a node array of its own: root at 0, slot 1 unused,
-/// sibling pairs from 2, leaves pointing at whole-list reference slots.
+/// `bufs` in the whole reference list) into a node array of its own (root at 0, slot 1 unused,
+/// sibling pairs from 2, leaves pointing at whole-list reference slots), and counts it for the
+/// statistics.
 fn subtree(
     options: &BuildOptions,
     mut bufs: Buffers<'_>,
     offset: usize,
     task: Task,
-) -> Vec<BvhNode> {
+) -> (Vec<BvhNode>, TreeCounts) {
     let builder = Builder::new(options, offset);
     // On one thread the halves would be built one after the other and then copied into
     // their parent's array: build them in place instead (the same node array).
@@ -156,8 +158,13 @@ fn subtree(
     join_subtrees(&task.bounds, l, r)
 }
 
-/// The node array of a node over `bounds` whose children are the roots of `l` and `r`.
-fn join_subtrees(bounds: &Aabb, l: Vec<BvhNode>, r: Vec<BvhNode>) -> Vec<BvhNode> {
+/// The node array (and counts) of a node over `bounds` whose children are the roots of `l`
+/// and `r`.
+fn join_subtrees(
+    bounds: &Aabb,
+    (l, l_counts): (Vec<BvhNode>, TreeCounts),
+    (r, r_counts): (Vec<BvhNode>, TreeCounts),
+) -> (Vec<BvhNode>, TreeCounts) {
     // `l`'s nodes from index 2 go to 4.., `r`'s after them; inner nodes' child indices move
     // with them (leaves point at reference slots, which do not move).
     let (base_l, base_r) = (4u32, 4 + (l.len() as u32 - 2));
@@ -178,7 +185,10 @@ fn join_subtrees(bounds: &Aabb, l: Vec<BvhNode>, r: Vec<BvhNode>) -> Vec<BvhNode
     nodes.extend([root, EMPTY_NODE, shift(&l[0], base_l), shift(&r[0], base_r)]);
     nodes.extend(l[2..].iter().map(|n| shift(n, base_l)));
     nodes.extend(r[2..].iter().map(|n| shift(n, base_r)));
-    nodes
+    let mut counts = l_counts;
+    counts.add(&r_counts);
+    counts.inner(&root);
+    (nodes, counts)
 }
 
 struct Task {
@@ -346,7 +356,8 @@ impl<'a> Builder<'a> {
 
     /// Builds the subtree of `root` (whose range is all of `bufs`) on this thread, depth first
     /// (see [`subtree`]).
-    fn run(&self, mut bufs: Buffers<'_>, root: Task) -> Vec<BvhNode> {
+    fn run(&self, mut bufs: Buffers<'_>, root: Task) -> (Vec<BvhNode>, TreeCounts) {
+        let mut counts = TreeCounts::EMPTY;
         let mut nodes = Vec::with_capacity(2 * bufs.refs.len().div_ceil(2));
         nodes.extend([EMPTY_NODE; 2]);
         let mut stack = vec![root];
@@ -358,6 +369,7 @@ impl<'a> Builder<'a> {
                     let n = &mut nodes[task.node];
                     n.first = (self.offset + task.start) as u32;
                     n.count = (task.end - task.start) as u32;
+                    counts.leaf(n, task.depth);
                     // Leaves point into the reference array: bring the data home.
                     if task.in_scratch {
                         let range = task.start..task.end;
@@ -370,6 +382,7 @@ impl<'a> Builder<'a> {
                     let n = &mut nodes[task.node];
                     n.first = left as u32;
                     n.count = 0;
+                    counts.inner(n);
                     // Right first so that the left subtree is laid out next (depth-first).
                     stack.push(Task {
                         node: left + 1,
@@ -392,7 +405,7 @@ impl<'a> Builder<'a> {
                 }
             }
         }
-        nodes
+        (nodes, counts)
     }
 
     /// Decides how to split a range, or `None` for a leaf.
