@@ -283,8 +283,8 @@ fn fill_blocks(sources: &[(u32, u32)], triangles: &[[Vec3; 3]], prim_ids: &[u32]
     // The triangles are read in leaf order, scattered over the caller's array: each block
     // asks for the triangles of the block `AHEAD` of it, so that their cache misses overlap,
     // both ends of each (36 bytes cross a cache line more often than not). Session 25,
-    // `examples/build_time` alternating: the start alone and 8 blocks ahead took 0.4-0.5 ms
-    // more of a dragon 202k build (fill 3.9-4.5 ms against 3.3-3.7).
+    // `examples/build_time` alternating: the start alone and 8 blocks ahead took about 0.5 ms
+    // more of a dragon 202k build (fill 3.7-4.5 ms against 3.3-3.8, cold).
     const AHEAD: usize = 24;
     (0..sources.len())
         .into_par_iter()
