@@ -109,6 +109,7 @@ impl BvhStats {
 /// of a dragon 202k build (session 25).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub(super) struct TreeCounts {
+    /// Leaf nodes.
     pub leaves: usize,
     /// The deepest leaf's depth plus one.
     pub levels: u32,
