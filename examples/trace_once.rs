@@ -1,0 +1,87 @@
+//! Traces the canonical camera rays that hit the mesh (DESIGN.md) once, one by one, with one
+//! engine and one query, on one thread: a run to count under `valgrind`, ours beside Embree's.
+//!
+//! Valgrind counts the whole process (the mesh's loading, both builds, the choice of rays), so
+//! each engine is run twice, once with `setup` as the last argument (everything but the
+//! tracing) and once without; the difference, divided by the rays printed, is what tracing
+//! one hitting ray costs: instructions, cache misses of a simulated hierarchy, mispredicted
+//! branches of a simulated predictor.
+//!
+//! ```text
+//! cargo build --release --no-default-features --features embree --example trace_once
+//! TRACERY_KERNEL=avx2 valgrind --tool=cachegrind --cache-sim=yes --branch-sim=yes \
+//!     --D1=49152,12,64 --LL=2097152,16,64 target/release/examples/trace_once MESH ENGINE QUERY [setup]
+//! ```
+//!
+//! `ENGINE` is `tracery` or `embree` (`rtcIntersect1` / `rtcOccluded1`), `QUERY` `closest` or
+//! `occluded`. Valgrind runs no AVX-512: our kernel is picked by `TRACERY_KERNEL`, and Embree
+//! picks its AVX2 kernels by itself when valgrind's CPU reports no AVX-512.
+
+use std::path::PathBuf;
+
+use anyhow::{Context, Result, bail};
+use tracery::bench::canonical_rays;
+use tracery::bench::embree::Embree;
+use tracery::bvh::{BuildOptions, Bvh};
+use tracery::scene::Scene;
+
+fn main() -> Result<()> {
+    let mut args = std::env::args().skip(1);
+    let path = PathBuf::from(args.next().context("MESH")?);
+    let engine = args.next().context("ENGINE (tracery or embree)")?;
+    let query = args.next().context("QUERY (closest or occluded)")?;
+    let setup_only = match args.next().as_deref() {
+        None => false,
+        Some("setup") => true,
+        Some(other) => bail!("the last argument is `setup` or nothing, not `{other}`"),
+    };
+    let closest = match query.as_str() {
+        "closest" => true,
+        "occluded" => false,
+        _ => bail!("QUERY is `closest` or `occluded`, not `{query}`"),
+    };
+    let scene = Scene::load(&path)?;
+    let triangles = &scene.mesh.triangles;
+    let bvh = Bvh::build(triangles, &BuildOptions::sah());
+    let mut rays = canonical_rays(&bvh.bounds());
+    rays.retain(|r| bvh.occluded(r, f32::INFINITY));
+    let traced = if setup_only { 0 } else { rays.len() };
+    let hits = match engine.as_str() {
+        "tracery" => rays[..traced]
+            .iter()
+            .filter(|r| {
+                if closest {
+                    bvh.intersect(r, f32::INFINITY).is_some()
+                } else {
+                    bvh.occluded(r, f32::INFINITY)
+                }
+            })
+            .count(),
+        "embree" => {
+            let embree = Embree::build(triangles, 1)?;
+            rays[..traced]
+                .iter()
+                .filter(|r| {
+                    if closest {
+                        embree.intersect1(r).prim != u32::MAX
+                    } else {
+                        embree.occluded1(r)
+                    }
+                })
+                .count()
+        }
+        _ => bail!("ENGINE is `tracery` or `embree`, not `{engine}`"),
+    };
+    anyhow::ensure!(
+        hits == traced,
+        "{engine} found {hits} hits of {traced} rays"
+    );
+    println!(
+        "{} ({} triangles): {engine} {query}, {traced} of the {} canonical rays that hit traced, kernel {}",
+        path.display(),
+        triangles.len(),
+        rays.len(),
+        bvh.kernel()
+    );
+    Ok(())
+}
