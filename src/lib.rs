@@ -10,7 +10,6 @@
 //! - [`camera`], [`render`], [`film`], [`sampling`]: from camera rays to an 8-bit image.
 //! - [`mod@bench`]: the canonical benchmark rays, their file formats, and peers measured alike.
 //! - [`convergence`]: image error against render time, per sampler, with a plot.
-//! - [`memory`]: the global allocator (jemalloc on Linux, asking for transparent huge pages).
 //!
 //! ```
 //! use glam::Vec3;
@@ -35,7 +34,6 @@ pub mod camera;
 pub mod convergence;
 pub mod film;
 pub mod geometry;
-pub mod memory;
 pub mod plot_font;
 pub mod render;
 pub mod sampling;

@@ -155,32 +155,6 @@ unsafe extern "C" {
     );
 }
 
-// glibc's `mallopt` (Embree allocates through glibc's `malloc`; tracery through jemalloc).
-unsafe extern "C" {
-    fn mallopt(param: c_int, value: c_int) -> c_int;
-}
-
-/// glibc's `M_TRIM_THRESHOLD` and `M_MMAP_THRESHOLD` parameters.
-const M_TRIM_THRESHOLD: c_int = -1;
-const M_MMAP_THRESHOLD: c_int = -3;
-
-/// Gives Embree the warm glibc heap it had before tracery allocated through jemalloc: blocks up
-/// to 32 MiB from the heap (not fresh mappings) and up to 256 MiB of free memory kept at its
-/// top, so that Embree's builds after the first reuse memory they already touched, as they did
-/// when our own large allocations had raised glibc's thresholds to these values (no page fault
-/// in a build from the second round on). Set once per process.
-fn warm_heap_for_embree() {
-    static ONCE: std::sync::Once = std::sync::Once::new();
-    ONCE.call_once(|| {
-        // SAFETY: `mallopt` only changes glibc's allocation thresholds; the values are within
-        // the ranges glibc accepts (a threshold of at most 32 MiB on 64-bit targets).
-        unsafe {
-            mallopt(M_MMAP_THRESHOLD, 32 << 20);
-            mallopt(M_TRIM_THRESHOLD, 256 << 20);
-        }
-    });
-}
-
 /// An Embree device and a committed scene over a triangle list (built with a given number of
 /// threads; tracing runs on whatever threads call it).
 pub struct Embree {
@@ -202,7 +176,6 @@ impl Embree {
     /// Builds the scene at medium quality with `threads` threads. Triangles must be finite
     /// (the benchmark leaves out the others before any engine sees them).
     pub fn build(triangles: &[[Vec3; 3]], threads: usize) -> Result<Embree> {
-        warm_heap_for_embree();
         let config = std::ffi::CString::new(format!("threads={}", threads.max(1)))
             .expect("no NUL in a number");
         // SAFETY: `config` is a NUL-terminated string that outlives the call.

@@ -161,7 +161,6 @@ fn print_table(mesh: &str, triangles: usize, excluded: usize, rows: &[EngineResu
         "\n{mesh} ({triangles} triangles{left_out}), canonical camera 1024x1024, best of runs; tracery kernel {}",
         tracery::bvh::wide::Kernel::detect()
     );
-    println!("{}", tracery::memory::summary());
     println!(
         "{:<15} {:>7} {:>9} {:>7} {:>8} {:>9} {:>13} {:>14} {:>9}",
         "engine",
