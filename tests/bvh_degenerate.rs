@@ -165,7 +165,7 @@ fn stats_describe_the_tree() {
         let s = bvh.stats;
         assert_eq!(s.triangles, tris.len());
         assert_eq!(s.nodes, 2 * s.leaves - 1, "a binary tree");
-        assert!(s.min_leaf_size >= 1 && s.max_leaf_size <= 4);
+        assert!(s.min_leaf_size >= 1 && s.max_leaf_size <= bvh.options.max_leaf_size);
         assert!((s.mean_leaf_size - tris.len() as f64 / s.leaves as f64).abs() < 1e-9);
         assert!(s.sah_cost > 1.0 && s.build_ms >= 0.0);
         assert!(s.levels > (s.leaves as f64).log2().ceil() as u32);

@@ -419,7 +419,7 @@ impl<'a> Builder<'a> {
         // least one block test per side weighted by its area, never less while traversing
         // costs at least a block test (`C_TRAVERSE >= C_INTERSECT`). The SAH would bin and
         // sweep the node to decide the same: half the nodes of a tree are such leaves.
-        if n <= max_leaf && sah::C_TRAVERSE >= sah::C_INTERSECT * sah::blocks(n) {
+        if n <= max_leaf && sah::C_TRAVERSE >= sah::C_INTERSECT * sah::leaf_tests(n) {
             return None;
         }
         if task.depth >= COUNT_SPLIT_DEPTH {
@@ -512,8 +512,8 @@ impl<'a> Builder<'a> {
             if count == 0 || right_count[p] == 0 {
                 continue;
             }
-            let cost = sah::blocks(count as usize) * acc.half_area()
-                + sah::blocks(right_count[p] as usize) * right_area[p];
+            let cost = sah::leaf_tests(count as usize) * acc.half_area()
+                + sah::leaf_tests(right_count[p] as usize) * right_area[p];
             if best.1 == 0 || cost < best.0 {
                 best = (cost, p, count as usize);
             }
@@ -525,7 +525,7 @@ impl<'a> Builder<'a> {
         // Compare un-normalized costs so that a flat node (zero area) does not divide by zero.
         let area = task.bounds.half_area();
         let split_cost = sah::C_TRAVERSE * area + sah::C_INTERSECT * cost;
-        let leaf_cost = sah::C_INTERSECT * sah::blocks(n) * area;
+        let leaf_cost = sah::C_INTERSECT * sah::leaf_tests(n) * area;
         if n <= max_leaf && split_cost >= leaf_cost {
             return None;
         }
@@ -578,14 +578,14 @@ impl Builder<'_> {
         // sweep (2.5% of a build's instructions, session 24).
         for (k, &right) in (1..n).zip(&right_area[1..n]) {
             acc.grow(&at(k - 1).bounds());
-            let c = sah::blocks(k) * acc.half_area() + sah::blocks(n - k) * right;
+            let c = sah::leaf_tests(k) * acc.half_area() + sah::leaf_tests(n - k) * right;
             if c < cost {
                 (cost, split) = (c, k);
             }
         }
         let area = task.bounds.half_area();
         let split_cost = sah::C_TRAVERSE * area + sah::C_INTERSECT * cost;
-        let leaf_cost = sah::C_INTERSECT * sah::blocks(n) * area;
+        let leaf_cost = sah::C_INTERSECT * sah::leaf_tests(n) * area;
         if n <= max_leaf && split_cost >= leaf_cost {
             return None;
         }

@@ -98,7 +98,7 @@ impl BvhStats {
                     / root_area
             } else {
                 // A flat or point-like scene: every ray meeting the root tests everything.
-                sah::C_INTERSECT * sah::blocks(triangles)
+                sah::C_INTERSECT * sah::leaf_tests(triangles)
             },
         }
     }
@@ -140,7 +140,7 @@ impl TreeCounts {
         self.levels = self.levels.max(depth + 1);
         self.min_leaf = self.min_leaf.min(n.count);
         self.max_leaf = self.max_leaf.max(n.count);
-        self.leaf_area += n.aabb().half_area() * sah::blocks(n.count as usize);
+        self.leaf_area += n.aabb().half_area() * sah::leaf_tests(n.count as usize);
     }
 
     /// Counts inner node `n`.

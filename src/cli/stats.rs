@@ -65,11 +65,13 @@ pub fn run(a: StatsArgs) -> Result<()> {
         return Ok(());
     }
     println!(
-        "{}: {} triangles (SAH cost constants: traversal {}, intersection {})",
+        "{}: {} triangles (SAH cost constants: traversal {}, a block of four triangles {}, two \
+         blocks tested together {})",
         scene.name,
         scene.triangle_count(),
         tracery::bvh::sah::C_TRAVERSE,
-        tracery::bvh::sah::C_INTERSECT
+        tracery::bvh::sah::C_INTERSECT,
+        tracery::bvh::sah::C_INTERSECT * tracery::bvh::sah::PAIR_TEST
     );
     println!(
         "{:<8} {:>5} {:>5} {:>10} {:>9} {:>7} {:>16} {:>9} {:>10} {:>9} {:>10} {:>11} {:>11} {:>13}",

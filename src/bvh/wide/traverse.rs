@@ -17,7 +17,7 @@
 //! leaves at once (occlusion 1.5-2% faster on the canonical camera).
 
 use super::kernel::stack::{Slots, Stack};
-use super::kernel::{BlockHits, Lanes, NodeRay, TriRay};
+use super::kernel::{BlockHits, Lanes, NodeRay, PairHits, TriRay};
 use super::{BLOCK, Child, TriBlock, WIDTH, WideBvh, WideNode};
 use crate::geometry::{PreparedRay, Ray, intersect_triangle, intersect_triangle_t};
 
@@ -69,7 +69,9 @@ fn leaf(w: &WideBvh, first: u32, count: u32) -> &[TriBlock] {
     &w.blocks[first as usize..(first + count) as usize]
 }
 
-/// Tests a leaf's blocks, keeping the closest hit (lowest index on ties).
+/// Tests a leaf's blocks, keeping the closest hit (lowest index on ties): two at a time (see
+/// [`Lanes::block_pair`]), a last lone block alone. The best is the same in any order
+/// (`Best::offer` keeps the closest, the lowest index on ties).
 #[inline(always)]
 pub(crate) fn leaf_closest<L: Lanes>(
     blocks: &[TriBlock],
@@ -77,22 +79,58 @@ pub(crate) fn leaf_closest<L: Lanes>(
     lr: &L::TriRay,
     best: &mut Best,
 ) {
-    let mut out = BlockHits::default();
-    for block in blocks {
+    let mut pairs = blocks.chunks_exact(2);
+    let mut out = PairHits::default();
+    for pair in &mut pairs {
         // Hits as close as the best so far still count (for the index tie rule).
         let limit = next_up(best.t);
-        let (mut hits, mut exact) = L::block(block, lr, limit, &mut out);
-        while hits != 0 {
-            let k = hits.trailing_zeros() as usize & (BLOCK - 1);
-            hits &= hits - 1;
-            best.offer(out.t[k], block.prim[k], out.u[k], out.v[k]);
-        }
-        while exact != 0 {
-            let k = exact.trailing_zeros() as usize & (BLOCK - 1);
-            exact &= exact - 1;
-            if let Some(h) = intersect_triangle(&r.ray, &block.triangle(k), limit) {
-                best.offer(h.t, block.prim[k], h.u, h.v);
-            }
+        let (hits, exact) = L::block_pair(&pair[0], &pair[1], lr, limit, &mut out);
+        offer_lanes(pair, hits, exact, &out, r, limit, best);
+    }
+    let mut out = BlockHits::default();
+    for block in pairs.remainder() {
+        let limit = next_up(best.t);
+        let (hits, exact) = L::block(block, lr, limit, &mut out);
+        offer_lanes(
+            std::slice::from_ref(block),
+            hits,
+            exact,
+            &out,
+            r,
+            limit,
+            best,
+        );
+    }
+}
+
+/// Offers `best` the lanes a test of `blocks` (one or two) hit, and the lanes the scalar test
+/// decides (`exact`); lane `k` is lane `k % 4` of `blocks[k / 4]`.
+#[inline(always)]
+fn offer_lanes<const N: usize>(
+    blocks: &[TriBlock],
+    mut hits: u32,
+    mut exact: u32,
+    out: &BlockHits<N>,
+    r: &TriRay,
+    limit: f32,
+    best: &mut Best,
+) {
+    while hits != 0 {
+        let k = hits.trailing_zeros() as usize & (N - 1);
+        hits &= hits - 1;
+        best.offer(
+            out.t[k],
+            blocks[k / BLOCK].prim[k % BLOCK],
+            out.u[k],
+            out.v[k],
+        );
+    }
+    while exact != 0 {
+        let k = exact.trailing_zeros() as usize & (N - 1);
+        exact &= exact - 1;
+        let (block, lane) = (&blocks[k / BLOCK], k % BLOCK);
+        if let Some(h) = intersect_triangle(&r.ray, &block.triangle(lane), limit) {
+            best.offer(h.t, block.prim[lane], h.u, h.v);
         }
     }
 }
@@ -268,7 +306,8 @@ pub(crate) fn closest_tallied<L: Lanes, const SAFE: bool>(
     }
 }
 
-/// Calls `f(prim, t)` for every hit in a leaf; false when `f` asked to stop.
+/// Calls `f(prim, t)` for every hit in a leaf (its blocks two at a time, as
+/// [`leaf_closest`]); false when `f` asked to stop.
 #[inline(always)]
 fn leaf_each<L: Lanes>(
     w: &WideBvh,
@@ -279,24 +318,50 @@ fn leaf_each<L: Lanes>(
     t_max: f32,
     f: &mut impl FnMut(u32, f32) -> bool,
 ) -> bool {
-    let mut out = BlockHits::default();
-    for b in first..first + count {
-        let block = &w.blocks[b as usize];
-        let (mut hits, mut exact) = L::block(block, lr, t_max, &mut out);
-        while hits != 0 {
-            let k = hits.trailing_zeros() as usize & (BLOCK - 1);
-            hits &= hits - 1;
-            if !f(block.prim[k], out.t[k]) {
-                return false;
-            }
+    let mut pairs = leaf(w, first, count).chunks_exact(2);
+    let mut out = PairHits::default();
+    for pair in &mut pairs {
+        let (hits, exact) = L::block_pair(&pair[0], &pair[1], lr, t_max, &mut out);
+        if !each_lane(pair, hits, exact, &out, r, t_max, f) {
+            return false;
         }
-        while exact != 0 {
-            let k = exact.trailing_zeros() as usize & (BLOCK - 1);
-            exact &= exact - 1;
-            let tk = intersect_triangle_t(&r.ray, &block.triangle(k), t_max);
-            if tk < t_max && !f(block.prim[k], tk) {
-                return false;
-            }
+    }
+    let mut out = BlockHits::default();
+    for block in pairs.remainder() {
+        let (hits, exact) = L::block(block, lr, t_max, &mut out);
+        if !each_lane(std::slice::from_ref(block), hits, exact, &out, r, t_max, f) {
+            return false;
+        }
+    }
+    true
+}
+
+/// Calls `f(prim, t)` for the lanes a test of `blocks` hit and those the scalar test finds hit
+/// (see [`offer_lanes`]); false when `f` asked to stop.
+#[inline(always)]
+fn each_lane<const N: usize>(
+    blocks: &[TriBlock],
+    mut hits: u32,
+    mut exact: u32,
+    out: &BlockHits<N>,
+    r: &TriRay,
+    t_max: f32,
+    f: &mut impl FnMut(u32, f32) -> bool,
+) -> bool {
+    while hits != 0 {
+        let k = hits.trailing_zeros() as usize & (N - 1);
+        hits &= hits - 1;
+        if !f(blocks[k / BLOCK].prim[k % BLOCK], out.t[k]) {
+            return false;
+        }
+    }
+    while exact != 0 {
+        let k = exact.trailing_zeros() as usize & (N - 1);
+        exact &= exact - 1;
+        let (block, lane) = (&blocks[k / BLOCK], k % BLOCK);
+        let tk = intersect_triangle_t(&r.ray, &block.triangle(lane), t_max);
+        if tk < t_max && !f(block.prim[lane], tk) {
+            return false;
         }
     }
     true

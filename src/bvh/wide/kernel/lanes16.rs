@@ -67,6 +67,17 @@ impl Lanes for Avx512 {
     }
 
     #[inline(always)]
+    fn block_pair(
+        a: &TriBlock,
+        b: &TriBlock,
+        r: &TriRay4,
+        limit: f32,
+        out: &mut super::PairHits,
+    ) -> (u32, u32) {
+        Avx2::block_pair(a, b, r, limit, out)
+    }
+
+    #[inline(always)]
     fn octant(r: &NodeRay8) -> u32 {
         Avx2::octant(r)
     }

@@ -1,6 +1,6 @@
 //! The two tests the traversal loop needs, behind one interface with three implementations:
 //! eight child boxes against a ray ([`Lanes::node`]) and four triangles against a ray
-//! ([`Lanes::block`]).
+//! ([`Lanes::block`]), or a leaf's eight at once ([`Lanes::block_pair`]).
 //!
 //! - [`scalar`]: plain Rust, one lane at a time, calling the reference triangle test. It is the
 //!   readable specification and the fallback on any target.
@@ -309,16 +309,53 @@ pub(crate) trait Lanes: Sized {
     /// (their distances and barycentric coordinates in `out`) and the lanes the scalar test must
     /// decide (an edge function was exactly zero, or the f32 distance overflowed).
     fn block(b: &TriBlock, r: &Self::TriRay, limit: f32, out: &mut BlockHits) -> (u32, u32);
+
+    /// [`Lanes::block`] on two blocks at once: lanes 0-3 are `a`'s, 4-7 `b`'s. Here as two
+    /// block tests; the AVX2 and AVX-512 kernels test the eight lanes in 256-bit registers
+    /// (leaves of five to eight triangles, the default since session 28, cost one test).
+    #[inline(always)]
+    fn block_pair(
+        a: &TriBlock,
+        b: &TriBlock,
+        r: &Self::TriRay,
+        limit: f32,
+        out: &mut PairHits,
+    ) -> (u32, u32) {
+        let mut o = BlockHits::default();
+        let (h0, e0) = Self::block(a, r, limit, &mut o);
+        out.t[..BLOCK].copy_from_slice(&o.t);
+        out.u[..BLOCK].copy_from_slice(&o.u);
+        out.v[..BLOCK].copy_from_slice(&o.v);
+        let (h1, e1) = Self::block(b, r, limit, &mut o);
+        out.t[BLOCK..].copy_from_slice(&o.t);
+        out.u[BLOCK..].copy_from_slice(&o.u);
+        out.v[BLOCK..].copy_from_slice(&o.v);
+        (h0 | h1 << BLOCK, e0 | e1 << BLOCK)
+    }
 }
 
-/// What [`Lanes::block`] found per lane: distance and the barycentric weights of the second
-/// and third vertex (valid in the lanes it reports hit).
-#[derive(Clone, Copy, Debug, Default)]
-pub(crate) struct BlockHits {
-    pub t: [f32; BLOCK],
-    pub u: [f32; BLOCK],
-    pub v: [f32; BLOCK],
+/// What [`Lanes::block`] (`N` = 4) or [`Lanes::block_pair`] (`N` = 8) found per lane:
+/// distance and the barycentric weights of the second and third vertex (valid in the lanes it
+/// reports hit).
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct BlockHits<const N: usize = BLOCK> {
+    pub t: [f32; N],
+    pub u: [f32; N],
+    pub v: [f32; N],
 }
+
+impl<const N: usize> Default for BlockHits<N> {
+    fn default() -> Self {
+        Self {
+            t: [0.0; N],
+            u: [0.0; N],
+            v: [0.0; N],
+        }
+    }
+}
+
+/// A pair of blocks' answer (see [`Lanes::block_pair`]).
+pub(crate) type PairHits = BlockHits<{ 2 * BLOCK }>;
 
 pub(crate) use scalar::Scalar;
 #[cfg(all(test, target_arch = "x86_64"))]

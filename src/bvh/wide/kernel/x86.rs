@@ -3,7 +3,9 @@
 //!
 //! Both share the triangle test ([`block_sse`], 4 lanes in 128-bit registers, VEX-encoded
 //! inside the AVX2 functions), which is [`super::floats::watertight`] on a block's lanes, as
-//! the packets' eight-ray test ([`triangle_rays8`]) is on eight rays' lanes. The box test is 8 lanes in one 256-bit register with AVX2, two
+//! the AVX2 kernel's test of two blocks at once ([`block_pair_avx`], 8 lanes in 256-bit
+//! registers) is on two blocks' lanes and the packets' eight-ray test ([`triangle_rays8`]) on
+//! eight rays' lanes. The box test is 8 lanes in one 256-bit register with AVX2, two
 //! 128-bit halves with SSE2. The traversal loops are the generic ones of
 //! [`super::super::traverse`], instantiated inside `#[target_feature]` entry points so that
 //! the whole loop, helpers and intrinsics included, is compiled for the kernel's instruction
@@ -110,6 +112,76 @@ fn block_sse(b: &TriBlock, r: &TriRay4, limit: f32, out: &mut BlockHits) -> (u32
         }
     }
     (found.hits, found.exact)
+}
+
+/// One vertex of two blocks' eight triangles (lanes 0-3 `a`'s, 4-7 `b`'s), sheared.
+#[inline(always)]
+fn sheared8(
+    a: &TriBlock,
+    b: &TriBlock,
+    r: &TriRay4,
+    o: &[__m256; 3],
+    sx: __m256,
+    sy: __m256,
+    vertex: usize,
+) -> [__m256; 3] {
+    let ra = a.v[vertex].as_ptr().cast::<u8>();
+    let rb = b.v[vertex].as_ptr().cast::<u8>();
+    // SAFETY: AVX (inside the AVX2 and AVX-512 entry points only); each pair of loads reads a
+    // whole `[f32; 4]` row of each block's vertex (offsets 0, 16 or 32, as in `sheared4`).
+    let v = unsafe {
+        [
+            _mm256_loadu2_m128(rb.add(r.row[0]).cast(), ra.add(r.row[0]).cast()),
+            _mm256_loadu2_m128(rb.add(r.row[1]).cast(), ra.add(r.row[1]).cast()),
+            _mm256_loadu2_m128(rb.add(r.row[2]).cast(), ra.add(r.row[2]).cast()),
+        ]
+    };
+    floats::sheared(v, o, sx, sy)
+}
+
+/// The watertight test on two blocks' eight lanes in 256-bit registers ([`Lanes::block_pair`]):
+/// each row of the two blocks joined into one register (`vinsertf128`), then the test of
+/// [`block_sse`] at twice its width, the same operations per lane, so the same bits.
+#[inline(always)]
+fn block_pair_avx(
+    a: &TriBlock,
+    b: &TriBlock,
+    r: &TriRay4,
+    limit: f32,
+    out: &mut super::PairHits,
+) -> (u32, u32) {
+    // SAFETY: AVX2 (inside the AVX2 and AVX-512 entry points only); the loads read each
+    // block's whole `[u32; 4]` of indices, the stores write whole `[f32; 8]` outputs.
+    unsafe {
+        let none = _mm_set1_epi32(-1);
+        let ea = _mm_cmpeq_epi32(_mm_loadu_si128(a.prim.as_ptr().cast()), none);
+        let eb = _mm_cmpeq_epi32(_mm_loadu_si128(b.prim.as_ptr().cast()), none);
+        let empty = _mm_movemask_ps(_mm_castsi128_ps(ea)) as u32
+            | (_mm_movemask_ps(_mm_castsi128_ps(eb)) as u32) << 4;
+        let valid = !empty & 0xff;
+        let o = [
+            _mm256_set_m128(r.origin[0], r.origin[0]),
+            _mm256_set_m128(r.origin[1], r.origin[1]),
+            _mm256_set_m128(r.origin[2], r.origin[2]),
+        ];
+        let sx = _mm256_set_m128(r.sx, r.sx);
+        let sy = _mm256_set_m128(r.sy, r.sy);
+        let sz = _mm256_set_m128(r.sz, r.sz);
+        let found = floats::watertight(
+            sheared8(a, b, r, &o, sx, sy, 0),
+            sheared8(a, b, r, &o, sx, sy, 1),
+            sheared8(a, b, r, &o, sx, sy, 2),
+            [sx, sy, sz],
+            __m256::splat(limit),
+            valid,
+        );
+        if let Some([t, u, v]) = found.tuv {
+            _mm256_storeu_ps(out.t.as_mut_ptr(), t);
+            _mm256_storeu_ps(out.u.as_mut_ptr(), u);
+            _mm256_storeu_ps(out.v.as_mut_ptr(), v);
+        }
+        (found.hits, found.exact)
+    }
 }
 
 /// SSE2: each node as two 4-wide halves.
@@ -467,6 +539,17 @@ impl Lanes for Avx2 {
     #[inline(always)]
     fn block(b: &TriBlock, r: &TriRay4, limit: f32, out: &mut BlockHits) -> (u32, u32) {
         block_sse(b, r, limit, out)
+    }
+
+    #[inline(always)]
+    fn block_pair(
+        a: &TriBlock,
+        b: &TriBlock,
+        r: &TriRay4,
+        limit: f32,
+        out: &mut super::PairHits,
+    ) -> (u32, u32) {
+        block_pair_avx(a, b, r, limit, out)
     }
 
     /// Eight rays per instruction: the single ray's box test on eight lanes of rays.
