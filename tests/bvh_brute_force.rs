@@ -129,7 +129,17 @@ fn rays_aimed_at_vertices_and_edges_match_brute_force() {
             }
         }
     }
-    let all = common::all_bvhs(&tris);
+    // The default trees, and trees of one and of four triangles a leaf: a vertex aimed at lies
+    // on its leaf's box, where only the conservative far distance keeps the box entered (the
+    // default trees alone stopped catching a plain slab test once leaves held eight triangles).
+    let mut all = common::all_bvhs(&tris);
+    for leaf in [1, 4] {
+        let options = BuildOptions {
+            max_leaf_size: leaf,
+            ..BuildOptions::sah()
+        };
+        all.extend(common::every_kernel(&Bvh::build(&tris, &options)));
+    }
     let bvhs: Vec<&Bvh> = all.iter().map(|(_, b)| b).collect();
     common::assert_matches_brute_force("vertex rays", &tris, &bvhs, &rays);
 }
