@@ -3,7 +3,7 @@
 //!
 //! Both share the triangle test ([`block_sse`], 4 lanes in 128-bit registers, VEX-encoded
 //! inside the AVX2 functions), which is [`super::floats::watertight`] on a block's lanes, as
-//! the AVX2 kernel's test of two blocks at once ([`block_pair_avx`], 8 lanes in 256-bit
+//! the AVX2 kernel's test of two blocks at once (`Avx2::block_pair`, 8 lanes in 256-bit
 //! registers) is on two blocks' lanes and the packets' eight-ray test ([`triangle_rays8`]) on
 //! eight rays' lanes. The box test is 8 lanes in one 256-bit register with AVX2, two
 //! 128-bit halves with SSE2. The traversal loops are the generic ones of
@@ -137,51 +137,6 @@ fn sheared8(
         ]
     };
     floats::sheared(v, o, sx, sy)
-}
-
-/// The watertight test on two blocks' eight lanes in 256-bit registers ([`Lanes::block_pair`]):
-/// each row of the two blocks joined into one register (`vinsertf128`), then the test of
-/// [`block_sse`] at twice its width, the same operations per lane, so the same bits.
-#[inline(always)]
-fn block_pair_avx(
-    a: &TriBlock,
-    b: &TriBlock,
-    r: &TriRay4,
-    limit: f32,
-    out: &mut super::PairHits,
-) -> (u32, u32) {
-    // SAFETY: AVX2 (inside the AVX2 and AVX-512 entry points only); the loads read each
-    // block's whole `[u32; 4]` of indices, the stores write whole `[f32; 8]` outputs.
-    unsafe {
-        let none = _mm_set1_epi32(-1);
-        let ea = _mm_cmpeq_epi32(_mm_loadu_si128(a.prim.as_ptr().cast()), none);
-        let eb = _mm_cmpeq_epi32(_mm_loadu_si128(b.prim.as_ptr().cast()), none);
-        let empty = _mm_movemask_ps(_mm_castsi128_ps(ea)) as u32
-            | (_mm_movemask_ps(_mm_castsi128_ps(eb)) as u32) << 4;
-        let valid = !empty & 0xff;
-        let o = [
-            _mm256_set_m128(r.origin[0], r.origin[0]),
-            _mm256_set_m128(r.origin[1], r.origin[1]),
-            _mm256_set_m128(r.origin[2], r.origin[2]),
-        ];
-        let sx = _mm256_set_m128(r.sx, r.sx);
-        let sy = _mm256_set_m128(r.sy, r.sy);
-        let sz = _mm256_set_m128(r.sz, r.sz);
-        let found = floats::watertight(
-            sheared8(a, b, r, &o, sx, sy, 0),
-            sheared8(a, b, r, &o, sx, sy, 1),
-            sheared8(a, b, r, &o, sx, sy, 2),
-            [sx, sy, sz],
-            __m256::splat(limit),
-            valid,
-        );
-        if let Some([t, u, v]) = found.tuv {
-            _mm256_storeu_ps(out.t.as_mut_ptr(), t);
-            _mm256_storeu_ps(out.u.as_mut_ptr(), u);
-            _mm256_storeu_ps(out.v.as_mut_ptr(), v);
-        }
-        (found.hits, found.exact)
-    }
 }
 
 /// SSE2: each node as two 4-wide halves.
@@ -541,6 +496,9 @@ impl Lanes for Avx2 {
         block_sse(b, r, limit, out)
     }
 
+    /// The watertight test on two blocks' eight lanes in 256-bit registers: each row of the
+    /// two blocks joined into one register (`vinsertf128`), then the test of [`block_sse`] at
+    /// twice its width, the same operations per lane, so the same bits.
     #[inline(always)]
     fn block_pair(
         a: &TriBlock,
@@ -549,7 +507,38 @@ impl Lanes for Avx2 {
         limit: f32,
         out: &mut super::PairHits,
     ) -> (u32, u32) {
-        block_pair_avx(a, b, r, limit, out)
+        // SAFETY: AVX2 (inside the AVX2 and AVX-512 entry points only); the loads read each
+        // block's whole `[u32; 4]` of indices, the stores write whole `[f32; 8]` outputs.
+        unsafe {
+            let none = _mm_set1_epi32(-1);
+            let ea = _mm_cmpeq_epi32(_mm_loadu_si128(a.prim.as_ptr().cast()), none);
+            let eb = _mm_cmpeq_epi32(_mm_loadu_si128(b.prim.as_ptr().cast()), none);
+            let empty = _mm_movemask_ps(_mm_castsi128_ps(ea)) as u32
+                | (_mm_movemask_ps(_mm_castsi128_ps(eb)) as u32) << 4;
+            let valid = !empty & 0xff;
+            let o = [
+                _mm256_set_m128(r.origin[0], r.origin[0]),
+                _mm256_set_m128(r.origin[1], r.origin[1]),
+                _mm256_set_m128(r.origin[2], r.origin[2]),
+            ];
+            let sx = _mm256_set_m128(r.sx, r.sx);
+            let sy = _mm256_set_m128(r.sy, r.sy);
+            let sz = _mm256_set_m128(r.sz, r.sz);
+            let found = floats::watertight(
+                sheared8(a, b, r, &o, sx, sy, 0),
+                sheared8(a, b, r, &o, sx, sy, 1),
+                sheared8(a, b, r, &o, sx, sy, 2),
+                [sx, sy, sz],
+                __m256::splat(limit),
+                valid,
+            );
+            if let Some([t, u, v]) = found.tuv {
+                _mm256_storeu_ps(out.t.as_mut_ptr(), t);
+                _mm256_storeu_ps(out.u.as_mut_ptr(), u);
+                _mm256_storeu_ps(out.v.as_mut_ptr(), v);
+            }
+            (found.hits, found.exact)
+        }
     }
 
     /// Eight rays per instruction: the single ray's box test on eight lanes of rays.
