@@ -273,6 +273,41 @@ fn ply_errors_name_the_file() {
     assert!(!e.contains("ParseError") && !e.contains("1:"), "{e}");
 }
 
+/// A count the bytes after the header cannot hold is refused before any record is read, and
+/// binary elements without properties (records of no bytes) are not read at all: the parser
+/// pushed one empty record per count, and a mutant with four billion such faces filled memory
+/// until CI's mutation test was killed.
+#[test]
+fn a_ply_count_the_file_cannot_hold_is_refused_up_front() {
+    let dir = tempfile::tempdir().unwrap();
+    let binary = |vertices: u32, faces: &str| {
+        let mut d = format!("ply\nformat binary_little_endian 1.0\nelement vertex {vertices}\nproperty float x\nproperty float y\nproperty float z\nelement face {faces}\nend_header\n").into_bytes();
+        for c in [0.0f32, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0] {
+            d.extend(c.to_le_bytes());
+        }
+        d
+    };
+    // Faces without properties: no bytes per record, none read, no triangles.
+    for faces in ["2", "4000000000"] {
+        let s = Scene::load(&write(dir.path(), "empty_faces.ply", &binary(3, faces))).unwrap();
+        assert_eq!(s.triangle_count(), 0);
+    }
+    // Vertices the payload cannot hold: 1000 records of 12 bytes in 36 bytes.
+    let e = err(Scene::load(&write(
+        dir.path(),
+        "short.ply",
+        &binary(1000, "0"),
+    )));
+    assert!(
+        e.contains("short.ply") && e.contains("1000 `vertex`"),
+        "{e}"
+    );
+    // The same in ASCII: a line (at least a byte) per record.
+    let ascii = PLY_ASCII.replace("element face 1", "element face 4000000000");
+    let e = err(Scene::load(&write(dir.path(), "a.ply", ascii.as_bytes())));
+    assert!(e.contains("a.ply") && e.contains("`face` records"), "{e}");
+}
+
 /// Blender 2.4 wrote a header line that is not a PLY keyword (`Blender 2.4 export`); assimp
 /// reads such files, and so does tracery (the line counts as a comment).
 #[test]

@@ -47,7 +47,6 @@
 //! ```
 
 use std::collections::BTreeMap;
-use std::io::Cursor;
 use std::path::{Path, PathBuf};
 
 use anyhow::{Result, anyhow, bail};
@@ -431,7 +430,7 @@ fn load_mesh_file(
             Ok((d.mesh, d.materials, d.warnings))
         }
         Some("ply") => Ok((
-            ply::load_from(file, Cursor::new(bytes), rule)?,
+            ply::load_from(file, &bytes, rule)?,
             vec![Material::default()],
             Vec::new(),
         )),

@@ -5,13 +5,16 @@
 //! read and dropped. Polygons are fan-triangulated as `(0, k, k + 1)`. Without normals in the
 //! file, faces are smoothed across edges below a crease angle ([`super::normals`]).
 
-use std::io::{BufReader, Read};
+use std::io::Read;
 use std::path::Path;
 
 use anyhow::{Result, anyhow, bail};
 use glam::Vec3;
 use ply_rs_bw::parser::{Parser, Reader};
-use ply_rs_bw::ply::{DefaultElement, Property, PropertyAccess, PropertyAccessResult};
+use ply_rs_bw::ply::{
+    DefaultElement, ElementDef, Encoding, Property, PropertyAccess, PropertyAccessResult,
+    PropertyType, ScalarType,
+};
 
 use super::normals::{DEFAULT_CREASE_DEG, NormalRule};
 use super::{Mesh, face_normal};
@@ -92,18 +95,14 @@ impl PropertyAccess for Face {
 
 /// Loads a PLY file.
 pub fn load(path: &Path) -> Result<Mesh> {
-    let file = std::fs::File::open(path)
-        .map_err(|e| anyhow!("{}: cannot open file: {e}", path.display()))?;
-    load_from(path, BufReader::new(file), None)
+    let bytes =
+        std::fs::read(path).map_err(|e| anyhow!("{}: cannot open file: {e}", path.display()))?;
+    load_from(path, &bytes, None)
 }
 
 /// Parses PLY data named `path` (for messages). Normals the file does not give follow `rule`,
 /// or a crease of [`DEFAULT_CREASE_DEG`] when it is `None`.
-pub fn load_from(
-    path: &Path,
-    data: impl std::io::BufRead,
-    rule: Option<NormalRule>,
-) -> Result<Mesh> {
+pub fn load_from(path: &Path, data: &[u8], rule: Option<NormalRule>) -> Result<Mesh> {
     let at = |e: ply_rs_bw::parser::ParseError| {
         let msg = one_line(&e.to_string());
         match e.line() {
@@ -120,10 +119,15 @@ pub fn load_from(
     let fparser = Parser::<Face>::new();
     let other = Parser::<DefaultElement>::new();
     let header = vparser.read_header(&mut reader).map_err(at)?;
+    check_counts(path, &header.elements, &header.encoding, data.len())?;
     let mut vertices: Vec<Vertex> = Vec::new();
     let mut faces: Vec<Face> = Vec::new();
     let mut seen_vertex = false;
     for (_, element) in &header.elements {
+        if element.properties.is_empty() && header.encoding != Encoding::Ascii {
+            // Records of no bytes: nothing to read, however many the header counts.
+            continue;
+        }
         match element.name.as_str() {
             "vertex" => {
                 vertices = vparser
@@ -252,6 +256,47 @@ fn column_only(cause: &str) -> String {
         }
         _ => cause.to_string(),
     }
+}
+
+/// Refuses an element whose count could not fit in the `payload` bytes after the header, before
+/// the parser allocates a record per count. Every record takes at least its scalars' and list
+/// lengths' bytes in binary, and at least one byte (its line break) in ASCII. (Binary elements
+/// without properties take no bytes and are not read at all.)
+fn check_counts(
+    path: &Path,
+    elements: &ply_rs_bw::ply::KeyMap<ElementDef>,
+    encoding: &Encoding,
+    payload: usize,
+) -> Result<()> {
+    let size = |t: &ScalarType| match t {
+        ScalarType::Char | ScalarType::UChar => 1,
+        ScalarType::Short | ScalarType::UShort => 2,
+        ScalarType::Int | ScalarType::UInt | ScalarType::Float => 4,
+        ScalarType::Double => 8,
+    };
+    let mut need = 0usize;
+    for (name, element) in elements {
+        let record = match encoding {
+            Encoding::Ascii => 1,
+            _ => element
+                .properties
+                .values()
+                .map(|p| match &p.data_type {
+                    PropertyType::Scalar(t) | PropertyType::List(t, _) => size(t),
+                })
+                .sum::<usize>(),
+        };
+        need = need.saturating_add(element.count.saturating_mul(record));
+        if need > payload {
+            bail!(
+                "{}: the header promises {} `{name}` records, more than the {payload} bytes \
+                 after it can hold",
+                path.display(),
+                element.count
+            );
+        }
+    }
+    Ok(())
 }
 
 /// Reads the header up to and including `end_header`, and turns lines no PLY keyword starts
