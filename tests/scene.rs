@@ -299,7 +299,7 @@ fn a_ply_count_the_file_cannot_hold_is_refused_up_front() {
         &binary(1000, "0"),
     )));
     assert!(
-        e.contains("short.ply") && e.contains("1000 `vertex`"),
+        e.contains("short.ply") && e.contains("end of file before the 1000 `vertex` records"),
         "{e}"
     );
     // The same in ASCII: a line (at least a byte) per record.

@@ -289,8 +289,8 @@ fn check_counts(
         need = need.saturating_add(element.count.saturating_mul(record));
         if need > payload {
             bail!(
-                "{}: the header promises {} `{name}` records, more than the {payload} bytes \
-                 after it can hold",
+                "{}: end of file before the {} `{name}` records the header promises (they need \
+                 at least {need} bytes after the header, the file has {payload})",
                 path.display(),
                 element.count
             );
