@@ -17,7 +17,7 @@
 //! leaves at once (occlusion 1.5-2% faster on the canonical camera).
 
 use super::kernel::stack::{Slots, Stack};
-use super::kernel::{BlockHits, Lanes, NodeRay, PairHits, TriRay};
+use super::kernel::{BlockHits, LaneValues, Lanes, NodeRay, TriRay};
 use super::{BLOCK, Child, TriBlock, WIDTH, WideBvh, WideNode};
 use crate::geometry::{PreparedRay, Ray, intersect_triangle, intersect_triangle_t};
 
@@ -80,53 +80,38 @@ pub(crate) fn leaf_closest<L: Lanes>(
     best: &mut Best,
 ) {
     let mut pairs = blocks.chunks_exact(2);
-    let mut out = PairHits::default();
     for pair in &mut pairs {
         // Hits as close as the best so far still count (for the index tie rule).
         let limit = next_up(best.t);
-        let (hits, exact) = L::block_pair(&pair[0], &pair[1], lr, limit, &mut out);
-        offer_lanes(pair, hits, exact, &out, r, limit, best);
+        let found = L::block_pair(&pair[0], &pair[1], lr, limit);
+        offer_lanes(pair, &found, r, limit, best);
     }
-    let mut out = BlockHits::default();
     for block in pairs.remainder() {
         let limit = next_up(best.t);
-        let (hits, exact) = L::block(block, lr, limit, &mut out);
-        offer_lanes(
-            std::slice::from_ref(block),
-            hits,
-            exact,
-            &out,
-            r,
-            limit,
-            best,
-        );
+        let found = L::block(block, lr, limit);
+        offer_lanes(std::slice::from_ref(block), &found, r, limit, best);
     }
 }
 
 /// Offers `best` the lanes a test of `blocks` (one or two) hit, and the lanes the scalar test
 /// decides (`exact`); lane `k` is lane `k % 4` of `blocks[k / 4]`.
 #[inline(always)]
-fn offer_lanes<const N: usize>(
+fn offer_lanes<V: LaneValues>(
     blocks: &[TriBlock],
-    mut hits: u32,
-    mut exact: u32,
-    out: &BlockHits<N>,
+    out: &BlockHits<V>,
     r: &TriRay,
     limit: f32,
     best: &mut Best,
 ) {
+    let (mut hits, mut exact) = (out.hits, out.exact);
     while hits != 0 {
-        let k = hits.trailing_zeros() as usize & (N - 1);
+        let k = hits.trailing_zeros() as usize;
         hits &= hits - 1;
-        best.offer(
-            out.t[k],
-            blocks[k / BLOCK].prim[k % BLOCK],
-            out.u[k],
-            out.v[k],
-        );
+        let (u, v) = out.tuv.uv(k);
+        best.offer(out.tuv.t(k), blocks[k / BLOCK].prim[k % BLOCK], u, v);
     }
     while exact != 0 {
-        let k = exact.trailing_zeros() as usize & (N - 1);
+        let k = exact.trailing_zeros() as usize;
         exact &= exact - 1;
         let (block, lane) = (&blocks[k / BLOCK], k % BLOCK);
         if let Some(h) = intersect_triangle(&r.ray, &block.triangle(lane), limit) {
@@ -319,17 +304,15 @@ fn leaf_each<L: Lanes>(
     f: &mut impl FnMut(u32, f32) -> bool,
 ) -> bool {
     let mut pairs = leaf(w, first, count).chunks_exact(2);
-    let mut out = PairHits::default();
     for pair in &mut pairs {
-        let (hits, exact) = L::block_pair(&pair[0], &pair[1], lr, t_max, &mut out);
-        if !each_lane(pair, hits, exact, &out, r, t_max, f) {
+        let found = L::block_pair(&pair[0], &pair[1], lr, t_max);
+        if !each_lane(pair, &found, r, t_max, f) {
             return false;
         }
     }
-    let mut out = BlockHits::default();
     for block in pairs.remainder() {
-        let (hits, exact) = L::block(block, lr, t_max, &mut out);
-        if !each_lane(std::slice::from_ref(block), hits, exact, &out, r, t_max, f) {
+        let found = L::block(block, lr, t_max);
+        if !each_lane(std::slice::from_ref(block), &found, r, t_max, f) {
             return false;
         }
     }
@@ -339,24 +322,23 @@ fn leaf_each<L: Lanes>(
 /// Calls `f(prim, t)` for the lanes a test of `blocks` hit and those the scalar test finds hit
 /// (see [`offer_lanes`]); false when `f` asked to stop.
 #[inline(always)]
-fn each_lane<const N: usize>(
+fn each_lane<V: LaneValues>(
     blocks: &[TriBlock],
-    mut hits: u32,
-    mut exact: u32,
-    out: &BlockHits<N>,
+    out: &BlockHits<V>,
     r: &TriRay,
     t_max: f32,
     f: &mut impl FnMut(u32, f32) -> bool,
 ) -> bool {
+    let (mut hits, mut exact) = (out.hits, out.exact);
     while hits != 0 {
-        let k = hits.trailing_zeros() as usize & (N - 1);
+        let k = hits.trailing_zeros() as usize;
         hits &= hits - 1;
-        if !f(blocks[k / BLOCK].prim[k % BLOCK], out.t[k]) {
+        if !f(blocks[k / BLOCK].prim[k % BLOCK], out.tuv.t(k)) {
             return false;
         }
     }
     while exact != 0 {
-        let k = exact.trailing_zeros() as usize & (N - 1);
+        let k = exact.trailing_zeros() as usize;
         exact &= exact - 1;
         let (block, lane) = (&blocks[k / BLOCK], k % BLOCK);
         let tk = intersect_triangle_t(&r.ray, &block.triangle(lane), t_max);

@@ -66,15 +66,11 @@ impl Lanes for Avx512 {
         Avx2::push_others_in_order::<DIST>(n, r, mask, near, stack)
     }
 
+    type Pair = super::x86::Tuv8;
+
     #[inline(always)]
-    fn block_pair(
-        a: &TriBlock,
-        b: &TriBlock,
-        r: &TriRay4,
-        limit: f32,
-        out: &mut super::PairHits,
-    ) -> (u32, u32) {
-        Avx2::block_pair(a, b, r, limit, out)
+    fn block_pair(a: &TriBlock, b: &TriBlock, r: &TriRay4, limit: f32) -> BlockHits<Self::Pair> {
+        Avx2::block_pair(a, b, r, limit)
     }
 
     #[inline(always)]
@@ -162,8 +158,8 @@ impl Lanes for Avx512 {
     }
 
     #[inline(always)]
-    fn block(b: &TriBlock, r: &TriRay4, limit: f32, out: &mut BlockHits) -> (u32, u32) {
-        Avx2::block(b, r, limit, out)
+    fn block(b: &TriBlock, r: &TriRay4, limit: f32) -> BlockHits {
+        Avx2::block(b, r, limit)
     }
 }
 

@@ -305,57 +305,87 @@ pub(crate) trait Lanes: Sized {
         }
     }
 
-    /// The watertight test on the four lanes of `b` for `0 < t < limit`: returns the lanes hit
-    /// (their distances and barycentric coordinates in `out`) and the lanes the scalar test must
-    /// decide (an edge function was exactly zero, or the f32 distance overflowed).
-    fn block(b: &TriBlock, r: &Self::TriRay, limit: f32, out: &mut BlockHits) -> (u32, u32);
+    /// The watertight test on the four lanes of `b` for `0 < t < limit`: the lanes hit (their
+    /// distances and barycentric coordinates) and the lanes the scalar test must decide (an
+    /// edge function was exactly zero, or the f32 distance overflowed).
+    fn block(b: &TriBlock, r: &Self::TriRay, limit: f32) -> BlockHits;
 
-    /// [`Lanes::block`] on two blocks at once: lanes 0-3 are `a`'s, 4-7 `b`'s. Here as two
-    /// block tests; the AVX2 and AVX-512 kernels test the eight lanes in 256-bit registers
-    /// (leaves of five to eight triangles, the default since session 28, cost one test).
-    #[inline(always)]
+    /// The per-lane values of [`Lanes::block_pair`], in this kernel's own form.
+    type Pair: LaneValues;
+
+    /// [`Lanes::block`] on two blocks at once: lanes 0-3 are `a`'s, 4-7 `b`'s. The scalar and
+    /// SSE2 kernels make it of two block tests ([`pair_of_blocks`]); the AVX2 and AVX-512
+    /// kernels test the eight lanes in 256-bit registers (leaves of five to eight triangles,
+    /// the default since session 28, cost one test).
     fn block_pair(
         a: &TriBlock,
         b: &TriBlock,
         r: &Self::TriRay,
         limit: f32,
-        out: &mut PairHits,
-    ) -> (u32, u32) {
-        let mut o = BlockHits::default();
-        let (h0, e0) = Self::block(a, r, limit, &mut o);
-        out.t[..BLOCK].copy_from_slice(&o.t);
-        out.u[..BLOCK].copy_from_slice(&o.u);
-        out.v[..BLOCK].copy_from_slice(&o.v);
-        let (h1, e1) = Self::block(b, r, limit, &mut o);
-        out.t[BLOCK..].copy_from_slice(&o.t);
-        out.u[BLOCK..].copy_from_slice(&o.u);
-        out.v[BLOCK..].copy_from_slice(&o.v);
-        (h0 | h1 << BLOCK, e0 | e1 << BLOCK)
+    ) -> BlockHits<Self::Pair>;
+}
+
+/// [`Lanes::block_pair`] as two [`Lanes::block`] tests.
+#[inline(always)]
+pub(crate) fn pair_of_blocks<L: Lanes>(
+    a: &TriBlock,
+    b: &TriBlock,
+    r: &L::TriRay,
+    limit: f32,
+) -> BlockHits<[[f32; 2 * BLOCK]; 3]> {
+    let (x, y) = (L::block(a, r, limit), L::block(b, r, limit));
+    BlockHits {
+        hits: x.hits | y.hits << BLOCK,
+        exact: x.exact | y.exact << BLOCK,
+        tuv: std::array::from_fn(|i| {
+            std::array::from_fn(|k| {
+                if k < BLOCK {
+                    x.tuv[i][k]
+                } else {
+                    y.tuv[i][k - BLOCK]
+                }
+            })
+        }),
     }
 }
 
-/// What [`Lanes::block`] (`N` = 4) or [`Lanes::block_pair`] (`N` = 8) found per lane:
-/// distance and the barycentric weights of the second and third vertex (valid in the lanes it
-/// reports hit).
+/// What [`Lanes::block`] or [`Lanes::block_pair`] found: the lanes hit, the lanes the scalar
+/// test must decide, and per lane the distance and the barycentric weights of the second and
+/// third vertex (meaningful in the lanes hit only), as `V` holds them: arrays (`[t, u, v]`,
+/// the default), or registers in the AVX2 and AVX-512 kernels' pair test.
 #[derive(Clone, Copy, Debug)]
-pub(crate) struct BlockHits<const N: usize = BLOCK> {
-    pub t: [f32; N],
-    pub u: [f32; N],
-    pub v: [f32; N],
+pub(crate) struct BlockHits<V = [[f32; BLOCK]; 3]> {
+    pub hits: u32,
+    pub exact: u32,
+    pub tuv: V,
 }
 
-impl<const N: usize> Default for BlockHits<N> {
-    fn default() -> Self {
-        Self {
-            t: [0.0; N],
-            u: [0.0; N],
-            v: [0.0; N],
-        }
+/// Per-lane values of a triangle test: distance, then the barycentric weights of the second
+/// and third vertex.
+///
+/// The pair test of the AVX2 and AVX-512 kernels keeps them in registers and reads a lane by
+/// a lane permutation (`x86`'s `Tuv8`). Written out to arrays, they cost the AVX-512 kernel's
+/// closest-hit walk its only 512-bit instructions: the compiler zeroed the arrays with merged
+/// 512-bit stores and read a lane's two weights with one masked 512-bit load, and on session
+/// 30's Intel Xeon that walk ran 8-9% slower than the same code compiled for AVX2 alone
+/// (dragon, `examples/trace_time`); without them the two are level.
+pub(crate) trait LaneValues: Copy {
+    /// Lane `k`'s distance.
+    fn t(&self, k: usize) -> f32;
+    /// Lane `k`'s barycentric weights of the second and third vertex.
+    fn uv(&self, k: usize) -> (f32, f32);
+}
+
+impl<const N: usize> LaneValues for [[f32; N]; 3] {
+    #[inline(always)]
+    fn t(&self, k: usize) -> f32 {
+        self[0][k & (N - 1)]
+    }
+    #[inline(always)]
+    fn uv(&self, k: usize) -> (f32, f32) {
+        (self[1][k & (N - 1)], self[2][k & (N - 1)])
     }
 }
-
-/// A pair of blocks' answer (see [`Lanes::block_pair`]).
-pub(crate) type PairHits = BlockHits<{ 2 * BLOCK }>;
 
 pub(crate) use scalar::Scalar;
 #[cfg(all(test, target_arch = "x86_64"))]

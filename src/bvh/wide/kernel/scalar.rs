@@ -75,17 +75,28 @@ impl Lanes for Scalar {
     }
 
     #[inline(always)]
-    fn block(b: &TriBlock, r: &TriRay, limit: f32, out: &mut BlockHits) -> (u32, u32) {
-        let mut hits = 0;
+    fn block(b: &TriBlock, r: &TriRay, limit: f32) -> BlockHits {
+        let mut out = BlockHits {
+            hits: 0,
+            exact: 0,
+            tuv: [[0.0; BLOCK]; 3],
+        };
         for k in 0..BLOCK {
             if b.prim[k] == u32::MAX {
                 continue;
             }
             if let Some(h) = intersect_triangle(&r.ray, &b.triangle(k), limit) {
-                (out.t[k], out.u[k], out.v[k]) = (h.t, h.u, h.v);
-                hits |= 1 << k;
+                (out.tuv[0][k], out.tuv[1][k], out.tuv[2][k]) = (h.t, h.u, h.v);
+                out.hits |= 1 << k;
             }
         }
-        (hits, 0)
+        out
+    }
+
+    type Pair = [[f32; 2 * BLOCK]; 3];
+
+    #[inline(always)]
+    fn block_pair(a: &TriBlock, b: &TriBlock, r: &TriRay, limit: f32) -> BlockHits<Self::Pair> {
+        super::pair_of_blocks::<Self>(a, b, r, limit)
     }
 }

@@ -21,6 +21,14 @@
 //! one part of its own, a packet's rays tested against a triangle sixteen at a time, is in
 //! [`super::lanes16`].
 //!
+//! The single-ray walks use no 512-bit instruction, and must not: with AVX-512 enabled the
+//! compiler is free to join scalar and 256-bit memory operations into 512-bit ones, and on
+//! session 30's Intel Xeon the closest-hit walk ran 8-9% slower than the AVX2 kernel's for the
+//! 12 it had (zeroing the pair test's answer, reading two of its lanes), all from the pair
+//! test's answer written to memory. That answer now stays in registers ([`Tuv8`]); check with
+//! `objdump -d` that `avx512::closest_inner` and `each_hit_inner` mention no `zmm` after a
+//! change to the walks (the packet walk uses 512-bit registers by design).
+//!
 //! Every operation mirrors the scalar reference in order and kind: subtract then multiply in
 //! the box test (no FMA, so the conservative far scale stays valid), and in the triangle test
 //! exactly the multiplications, subtractions and the one division of
@@ -88,7 +96,7 @@ fn sheared4(b: &TriBlock, r: &TriRay4, vertex: usize) -> [__m128; 3] {
 
 /// The watertight test on a block's four lanes (see [`Lanes::block`]).
 #[inline(always)]
-fn block_sse(b: &TriBlock, r: &TriRay4, limit: f32, out: &mut BlockHits) -> (u32, u32) {
+fn block_sse(b: &TriBlock, r: &TriRay4, limit: f32) -> BlockHits {
     // SAFETY: SSE2 baseline operations; the load reads the whole `[u32; 4]` of indices.
     let valid = unsafe {
         // Lanes holding a triangle: index not u32::MAX.
@@ -103,15 +111,45 @@ fn block_sse(b: &TriBlock, r: &TriRay4, limit: f32, out: &mut BlockHits) -> (u32
         __m128::splat(limit),
         valid,
     );
-    if let Some([t, u, v]) = found.tuv {
-        // SAFETY: SSE2 baseline stores of whole `[f32; 4]` outputs.
+    let [t, u, v] = found.tuv.unwrap_or([__m128::splat(0.0); 3]);
+    // SAFETY: a 128-bit register is four `f32` lanes (the same size, any bits valid). No
+    // closure (`map`): it could be compiled apart, without the caller's target features.
+    let tuv = unsafe { std::mem::transmute::<[__m128; 3], [[f32; BLOCK]; 3]>([t, u, v]) };
+    BlockHits {
+        hits: found.hits,
+        exact: found.exact,
+        tuv,
+    }
+}
+
+/// The distance and barycentric weights of a pair test's eight lanes, in 256-bit registers
+/// (see [`super::LaneValues`]).
+#[derive(Clone, Copy)]
+pub(crate) struct Tuv8([__m256; 3]);
+
+impl Tuv8 {
+    /// Lane `k` of register `x`: one lane permutation by an index in the low lane (the other
+    /// lanes' indices do not matter).
+    #[inline(always)]
+    fn lane(x: __m256, k: usize) -> f32 {
+        // SAFETY: only reached inside the AVX2 and AVX-512 entry points (the pair test that
+        // makes a `Tuv8` runs only there); register operations.
         unsafe {
-            _mm_storeu_ps(out.t.as_mut_ptr(), t);
-            _mm_storeu_ps(out.u.as_mut_ptr(), u);
-            _mm_storeu_ps(out.v.as_mut_ptr(), v);
+            let index = _mm256_castsi128_si256(_mm_cvtsi32_si128(k as i32));
+            _mm256_cvtss_f32(_mm256_permutevar8x32_ps(x, index))
         }
     }
-    (found.hits, found.exact)
+}
+
+impl super::LaneValues for Tuv8 {
+    #[inline(always)]
+    fn t(&self, k: usize) -> f32 {
+        Self::lane(self.0[0], k)
+    }
+    #[inline(always)]
+    fn uv(&self, k: usize) -> (f32, f32) {
+        (Self::lane(self.0[1], k), Self::lane(self.0[2], k))
+    }
 }
 
 /// One vertex of two blocks' eight triangles (lanes 0-3 `a`'s, 4-7 `b`'s), sheared.
@@ -224,8 +262,15 @@ impl Lanes for Sse2 {
     }
 
     #[inline(always)]
-    fn block(b: &TriBlock, r: &TriRay4, limit: f32, out: &mut BlockHits) -> (u32, u32) {
-        block_sse(b, r, limit, out)
+    fn block(b: &TriBlock, r: &TriRay4, limit: f32) -> BlockHits {
+        block_sse(b, r, limit)
+    }
+
+    type Pair = [[f32; 2 * BLOCK]; 3];
+
+    #[inline(always)]
+    fn block_pair(a: &TriBlock, b: &TriBlock, r: &TriRay4, limit: f32) -> BlockHits<Self::Pair> {
+        super::pair_of_blocks::<Self>(a, b, r, limit)
     }
 }
 
@@ -492,23 +537,19 @@ impl Lanes for Avx2 {
     }
 
     #[inline(always)]
-    fn block(b: &TriBlock, r: &TriRay4, limit: f32, out: &mut BlockHits) -> (u32, u32) {
-        block_sse(b, r, limit, out)
+    fn block(b: &TriBlock, r: &TriRay4, limit: f32) -> BlockHits {
+        block_sse(b, r, limit)
     }
+
+    type Pair = Tuv8;
 
     /// The watertight test on two blocks' eight lanes in 256-bit registers: each row of the
     /// two blocks joined into one register (`vinsertf128`), then the test of [`block_sse`] at
     /// twice its width, the same operations per lane, so the same bits.
     #[inline(always)]
-    fn block_pair(
-        a: &TriBlock,
-        b: &TriBlock,
-        r: &TriRay4,
-        limit: f32,
-        out: &mut super::PairHits,
-    ) -> (u32, u32) {
+    fn block_pair(a: &TriBlock, b: &TriBlock, r: &TriRay4, limit: f32) -> BlockHits<Tuv8> {
         // SAFETY: AVX2 (inside the AVX2 and AVX-512 entry points only); the loads read each
-        // block's whole `[u32; 4]` of indices, the stores write whole `[f32; 8]` outputs.
+        // block's whole `[u32; 4]` of indices.
         unsafe {
             let none = _mm_set1_epi32(-1);
             let ea = _mm_cmpeq_epi32(_mm_loadu_si128(a.prim.as_ptr().cast()), none);
@@ -532,12 +573,11 @@ impl Lanes for Avx2 {
                 __m256::splat(limit),
                 valid,
             );
-            if let Some([t, u, v]) = found.tuv {
-                _mm256_storeu_ps(out.t.as_mut_ptr(), t);
-                _mm256_storeu_ps(out.u.as_mut_ptr(), u);
-                _mm256_storeu_ps(out.v.as_mut_ptr(), v);
+            BlockHits {
+                hits: found.hits,
+                exact: found.exact,
+                tuv: Tuv8(found.tuv.unwrap_or([_mm256_setzero_ps(); 3])),
             }
-            (found.hits, found.exact)
         }
     }
 
