@@ -161,10 +161,13 @@ fn bench_json_and_output_files_follow_the_formats() {
             "build_ms",
             "closest_mrays",
             "occluded_mrays",
+            "closest_spread",
         ] {
             assert!(r.get(key).is_some(), "{key} missing in {r}");
         }
         assert!(r["closest_mrays"].as_f64().unwrap() > 0.0);
+        // One round: the median is the fastest.
+        assert_eq!(r["closest_spread"].as_f64(), Some(1.0), "{r}");
     }
 
     // Rays: u32 count then 6 f32 each; hits: u32 count then (f32 t, u32 prim).
@@ -356,10 +359,11 @@ fn bench_leaves_out_non_finite_triangles_before_any_engine_sees_them() {
 }
 
 /// On two threads the text output ends with every engine's scaling from one thread, so that
-/// ours reads against the others' measured in the same rounds.
+/// ours reads against the others' measured in the same rounds, and, over several rounds, with
+/// how far each engine's rounds spread.
 #[test]
 fn bench_prints_every_engines_scaling() {
-    let o = tracery(&["bench", "--repeat", "1", "--threads", "2", "--no-peers"]);
+    let o = tracery(&["bench", "--repeat", "2", "--threads", "2", "--no-peers"]);
     assert!(o.status.success(), "{}", text(&o.stderr));
     let out = text(&o.stdout);
     let line = out
@@ -374,6 +378,35 @@ fn bench_prints_every_engines_scaling() {
     }
     let ratios = line.matches("x / ").count();
     assert_eq!(ratios, 3, "one closest / occluded pair per engine: {line}");
+
+    let prefix = "closest-hit rounds, median over fastest (1 / 2 threads): ";
+    let line = out
+        .lines()
+        .find_map(|l| l.strip_prefix(prefix))
+        .unwrap_or_else(|| panic!("no spread line: {out}"));
+    for engine in ["tracery-sah", "tracery-median", "tracery-packet"] {
+        let rest = line
+            .split(", ")
+            .find_map(|part| part.strip_prefix(&format!("{engine} ")))
+            .unwrap_or_else(|| panic!("{engine} missing: {line}"));
+        let spreads: Vec<f64> = rest
+            .split(" / ")
+            .map(|x| x.trim_end_matches('x').parse().unwrap())
+            .collect();
+        assert_eq!(spreads.len(), 2, "one and two threads: {line}");
+        // The median of two rounds (the slower) is never faster than the fastest.
+        assert!(spreads.iter().all(|&s| s >= 1.0), "{line}");
+    }
+}
+
+/// With one round there is no spread to show.
+#[test]
+fn bench_with_one_round_prints_no_spread() {
+    let o = tracery(&["bench", "--repeat", "1", "--threads", "2", "--no-peers"]);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let out = text(&o.stdout);
+    assert!(out.contains("every engine's scaling"), "{out}");
+    assert!(!out.contains("median over fastest"), "{out}");
 }
 
 /// Every command that takes a mesh takes a glTF (the fetched textured box, a GLB with an

@@ -112,6 +112,7 @@ fn the_bench_chart_has_a_bar_pair_per_one_thread_row_as_long_as_its_figure() {
         build_ms: 1.0,
         closest_mrays: closest,
         occluded_mrays: occluded,
+        closest_spread: 1.0,
         agreement: 1.0,
         stats: None,
         split: None,

@@ -131,6 +131,10 @@ pub struct EngineResult {
     pub closest_mrays: f64,
     /// Any-hit (occlusion) throughput on the same rays, millions of rays per second.
     pub occluded_mrays: f64,
+    /// The median round's closest-hit time over the fastest's (1 with one round): how much
+    /// the machine moved this engine's figure during the run. On a shared machine a core can
+    /// run slowly for seconds, which shows here before it shows in a ratio.
+    pub closest_spread: f64,
     /// Rays whose closest hit (triangle, or miss) equals the first engine's (`tracery-sah` by
     /// default), as a fraction; exact duplicate triangles count as one.
     pub agreement: f64,
@@ -207,6 +211,12 @@ fn pool(threads: usize) -> rayon::ThreadPool {
         .num_threads(threads)
         .build()
         .expect("a thread pool can be made")
+}
+
+/// The median of `times` (the slower middle one of an even count); zero for none.
+fn median(times: &mut [Duration]) -> Duration {
+    times.sort_unstable();
+    times.get(times.len() / 2).copied().unwrap_or_default()
 }
 
 /// For each triangle, the lowest index of a triangle with the same three vertices (in any
@@ -403,6 +413,7 @@ pub fn run(
     // Traces, interleaved over engines and thread counts.
     let n = entries.len() * pools.len();
     let mut closest = vec![Duration::MAX; n];
+    let mut closest_rounds = vec![Vec::with_capacity(config.repeat.max(1)); n];
     let mut occluded = vec![Duration::MAX; n];
     // Written in place each round: allocating (and faulting in) 8 MB of fresh records inside
     // the timed call cost every engine the same 2-3 ms, which pulled every ratio towards 1.
@@ -441,7 +452,9 @@ pub fn run(
                 let engine = &*entry.engine;
                 let start = Instant::now();
                 pool.install(|| engines::trace_closest(engine, rays, width, &mut hits[k]));
-                closest[k] = closest[k].min(start.elapsed());
+                let took = start.elapsed();
+                closest[k] = closest[k].min(took);
+                closest_rounds[k].push(took);
                 let start = Instant::now();
                 pool.install(|| engines::trace_occluded(engine, rays, width));
                 occluded[k] = occluded[k].min(start.elapsed());
@@ -490,6 +503,8 @@ pub fn run(
                 build_ms: entry.build_ms[p],
                 closest_mrays: rays.len() as f64 / closest[k].as_secs_f64() / 1e6,
                 occluded_mrays: rays.len() as f64 / occluded[k].as_secs_f64() / 1e6,
+                closest_spread: median(&mut closest_rounds[k]).as_secs_f64()
+                    / closest[k].as_secs_f64(),
                 agreement: agreement(&reference, &map_back(&hits[k]), &copies),
                 stats,
                 split: (Some(p) == one
@@ -515,4 +530,25 @@ pub fn run(
         sah_hits: reference,
         excluded,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_median_round_is_the_middle_one_or_the_slower_middle_one() {
+        let ms = |v: &[u64]| {
+            v.iter()
+                .map(|&m| Duration::from_millis(m))
+                .collect::<Vec<_>>()
+        };
+        assert_eq!(median(&mut ms(&[30, 10, 20])), Duration::from_millis(20));
+        assert_eq!(median(&mut ms(&[10, 40])), Duration::from_millis(40));
+        assert_eq!(
+            median(&mut ms(&[50, 10, 11, 12, 90])),
+            Duration::from_millis(12)
+        );
+        assert_eq!(median(&mut []), Duration::ZERO);
+    }
 }

@@ -136,7 +136,13 @@ pub fn run(a: BenchArgs) -> Result<()> {
             eprintln!("wrote tracery-sah hits to {}", p.display());
         }
         if !a.json {
-            print_table(&scene.name, tris.len(), out.excluded, &out.results);
+            print_table(
+                &scene.name,
+                tris.len(),
+                out.excluded,
+                a.repeat,
+                &out.results,
+            );
         }
         all_results.extend(out.results);
     }
@@ -151,7 +157,13 @@ pub fn run(a: BenchArgs) -> Result<()> {
     Ok(())
 }
 
-fn print_table(mesh: &str, triangles: usize, excluded: usize, rows: &[EngineResult]) {
+fn print_table(
+    mesh: &str,
+    triangles: usize,
+    excluded: usize,
+    rounds: usize,
+    rows: &[EngineResult],
+) {
     let left_out = if excluded > 0 {
         format!(", {excluded} with NaN or infinite vertices left out for every engine")
     } else {
@@ -251,6 +263,34 @@ fn print_table(mesh: &str, triangles: usize, excluded: usize, rows: &[EngineResu
             each.join(", ")
         );
     }
+    if rounds > 1 {
+        print_spread(rows, &threads);
+    }
+}
+
+/// Each engine's closest-hit rounds, the median over the fastest, per thread count: on a
+/// shared machine a core that runs slowly for a while moves one engine's figures more than
+/// another's, and this shows which figures it moved.
+fn print_spread(rows: &[EngineResult], threads: &[usize]) {
+    let mut engines: Vec<&str> = rows.iter().map(|r| r.engine.as_str()).collect();
+    engines.dedup();
+    let each: Vec<String> = engines
+        .iter()
+        .map(|&e| {
+            let spreads: Vec<String> = threads
+                .iter()
+                .filter_map(|&t| rows.iter().find(|r| r.engine == e && r.threads == t))
+                .map(|r| format!("{:.2}x", r.closest_spread))
+                .collect();
+            format!("{e} {}", spreads.join(" / "))
+        })
+        .collect();
+    let counts: Vec<String> = threads.iter().map(|t| t.to_string()).collect();
+    println!(
+        "closest-hit rounds, median over fastest ({} threads): {}",
+        counts.join(" / "),
+        each.join(", ")
+    );
 }
 
 /// The one-thread single-ray rates on the rays that hit and on those that miss, apart, and
