@@ -245,9 +245,7 @@ fn print_table(
         );
         // Every engine's, in the same rounds: on a shared machine the second core's load
         // moves them all, and a figure of ours reads against the others'.
-        let mut engines: Vec<&str> = rows.iter().map(|r| r.engine.as_str()).collect();
-        engines.dedup();
-        let each: Vec<String> = engines
+        let each: Vec<String> = engine_names(rows)
             .iter()
             .filter_map(|&e| {
                 let (one, all) = (find(e, 1)?, find(e, t)?);
@@ -272,9 +270,7 @@ fn print_table(
 /// shared machine a core that runs slowly for a while moves one engine's figures more than
 /// another's, and this shows which figures it moved.
 fn print_spread(rows: &[EngineResult], threads: &[usize]) {
-    let mut engines: Vec<&str> = rows.iter().map(|r| r.engine.as_str()).collect();
-    engines.dedup();
-    let each: Vec<String> = engines
+    let each: Vec<String> = engine_names(rows)
         .iter()
         .map(|&e| {
             let spreads: Vec<String> = threads
@@ -291,6 +287,14 @@ fn print_spread(rows: &[EngineResult], threads: &[usize]) {
         counts.join(" / "),
         each.join(", ")
     );
+}
+
+/// The engines of `rows` in their order, each once (their rows come together, one per thread
+/// count).
+fn engine_names(rows: &[EngineResult]) -> Vec<&str> {
+    let mut engines: Vec<&str> = rows.iter().map(|r| r.engine.as_str()).collect();
+    engines.dedup();
+    engines
 }
 
 /// The one-thread single-ray rates on the rays that hit and on those that miss, apart, and
