@@ -399,6 +399,19 @@ fn bench_prints_every_engines_scaling() {
     }
 }
 
+/// One thread count alone: the spread line names it in the singular.
+#[test]
+fn bench_on_one_thread_prints_its_spread_for_one_thread() {
+    let o = tracery(&["bench", "--repeat", "2", "--threads", "1", "--no-peers"]);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let out = text(&o.stdout);
+    let line = out
+        .lines()
+        .find_map(|l| l.strip_prefix("closest-hit rounds, median over fastest (1 thread): "))
+        .unwrap_or_else(|| panic!("no one-thread spread line: {out}"));
+    assert_eq!(line.matches("x, ").count() + 1, 3, "three engines: {line}");
+}
+
 /// With one round there is no spread to show.
 #[test]
 fn bench_with_one_round_prints_no_spread() {

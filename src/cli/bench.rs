@@ -282,8 +282,9 @@ fn print_spread(rows: &[EngineResult], threads: &[usize]) {
         })
         .collect();
     let counts: Vec<String> = threads.iter().map(|t| t.to_string()).collect();
+    let plural = if threads == [1] { "" } else { "s" };
     println!(
-        "closest-hit rounds, median over fastest ({} threads): {}",
+        "closest-hit rounds, median over fastest ({} thread{plural}): {}",
         counts.join(" / "),
         each.join(", ")
     );
