@@ -20,7 +20,7 @@ use std::collections::HashMap;
 use glam::{Vec2, Vec3};
 
 use super::RayCounts;
-use super::shade::{RectSample, Surface, Tracer, brdf, rect_sample, reflect, transmit};
+use super::shade::{RectLight, Surface, Tracer, brdf, reflect, transmit};
 use crate::bvh::Hit;
 use crate::geometry::{Ray, offset_ray_origin};
 use crate::sampling::{PathSampler, concentric_disk};
@@ -371,32 +371,24 @@ impl Tracer<'_> {
                     intensity,
                     samples,
                 } => {
-                    let normal = edge_u.cross(edge_v);
-                    let area = normal.length();
-                    let ln = normal / area;
                     let n = self.rect_samples(samples, depth);
+                    let rect = RectLight {
+                        corner,
+                        edge_u,
+                        edge_v,
+                        color,
+                        intensity,
+                        samples: n,
+                    };
                     let visible = self.lights.visible[i];
-                    let mut acc = Vec3::ZERO;
-                    for _ in 0..n {
-                        let Some(RectSample { q, wi, d2, cos_l }) =
-                            rect_sample(s, corner, edge_u, edge_v, ln, rng.next_2d())
-                        else {
-                            continue;
-                        };
-                        let cos = s.n.dot(wi);
-                        let weight = if visible {
-                            let p_light = d2 / (cos_l * area);
+                    self.rect_light(s, wo, &rect, rng, counts, |sample, cos, area| {
+                        if visible {
+                            let p_light = sample.d2 / (sample.cos_l * area);
                             power(n as f32, p_light, cos * std::f32::consts::FRAC_1_PI)
                         } else {
                             1.0
-                        };
-                        if weight == 0.0 {
-                            continue;
                         }
-                        let pass = self.shadow(origin, q - origin, 1.0 - 1e-4, counts);
-                        acc += brdf(s, wi, wo) * cos * cos_l * area / d2 * pass * weight;
-                    }
-                    acc * color * intensity / n as f32
+                    })
                 }
             };
         }

@@ -252,22 +252,15 @@ impl<'a> Tracer<'a> {
                     intensity,
                     samples,
                 } => {
-                    let normal = edge_u.cross(edge_v);
-                    let area = normal.length();
-                    let ln = normal / area;
-                    let samples = self.capped_samples(samples);
-                    let mut acc = Vec3::ZERO;
-                    for _ in 0..samples {
-                        let Some(RectSample { q, wi, d2, cos_l }) =
-                            rect_sample(s, corner, edge_u, edge_v, ln, rng.next_2d())
-                        else {
-                            continue;
-                        };
-                        // Stop just short of the light so its own quad does not shadow it.
-                        let pass = self.shadow(origin, q - origin, 1.0 - 1e-4, counts);
-                        acc += brdf(s, wi, wo) * s.n.dot(wi) * cos_l * area / d2 * pass;
-                    }
-                    acc * color * intensity / samples as f32
+                    let rect = RectLight {
+                        corner,
+                        edge_u,
+                        edge_v,
+                        color,
+                        intensity,
+                        samples: self.capped_samples(samples),
+                    };
+                    self.rect_light(s, wo, &rect, rng, counts, |_, _, _| 1.0)
                 }
             };
         }
@@ -295,6 +288,50 @@ impl<'a> Tracer<'a> {
         }
         let pass = self.shadow(origin, position - origin, 1.0, counts);
         brdf(s, wi, wo) * s.n.dot(wi) * intensity * pass / d2
+    }
+
+    /// Light the rectangle light `rect` sends to `s` and `s` reflects towards `wo`, from
+    /// `rect.samples` samples of it, each with its shadow ray (stopping just short of the
+    /// light, so that its own quad does not shadow it). Each sample's term is scaled by
+    /// `weight(sample, cos, area)` (`cos` at the surface, `area` the light's): the path
+    /// tracer's multiple-importance weight, 1 for direct light alone; a sample weighted 0
+    /// casts no shadow ray.
+    pub(super) fn rect_light(
+        &self,
+        s: &Surface,
+        wo: Vec3,
+        rect: &RectLight,
+        rng: &mut PathSampler,
+        counts: &mut RayCounts,
+        weight: impl Fn(&RectSample, f32, f32) -> f32,
+    ) -> Vec3 {
+        let RectLight {
+            corner,
+            edge_u,
+            edge_v,
+            color,
+            intensity,
+            samples: n,
+        } = *rect;
+        let origin = offset_ray_origin(s.p, s.p_err, s.ng);
+        let normal = edge_u.cross(edge_v);
+        let area = normal.length();
+        let ln = normal / area;
+        let mut acc = Vec3::ZERO;
+        for _ in 0..n {
+            let Some(sample) = rect_sample(s, corner, edge_u, edge_v, ln, rng.next_2d()) else {
+                continue;
+            };
+            let cos = s.n.dot(sample.wi);
+            let w = weight(&sample, cos, area);
+            if w == 0.0 {
+                continue;
+            }
+            let RectSample { q, wi, d2, cos_l } = sample;
+            let pass = self.shadow(origin, q - origin, 1.0 - 1e-4, counts);
+            acc += brdf(s, wi, wo) * cos * cos_l * area / d2 * pass * w;
+        }
+        acc * color * intensity / n as f32
     }
 
     /// A rectangle light's `samples` after the plan's cap.
@@ -368,6 +405,19 @@ impl<'a> Tracer<'a> {
         }
         pass
     }
+}
+
+/// A rectangle light's shape and emission: the rectangle `corner + [0, 1] edge_u +
+/// [0, 1] edge_v`, facing along `edge_u x edge_v`, `color * intensity`, and the number of
+/// samples to estimate its light with.
+#[derive(Clone, Copy)]
+pub(super) struct RectLight {
+    pub(super) corner: Vec3,
+    pub(super) edge_u: Vec3,
+    pub(super) edge_v: Vec3,
+    pub(super) color: Vec3,
+    pub(super) intensity: f32,
+    pub(super) samples: u32,
 }
 
 /// A point on a rectangle light seen from a surface.
