@@ -3,8 +3,9 @@
 //! The top of the tree is built in parallel on the rayon pool: a node with many triangles is
 //! split, then its two halves are built at once (`rayon::join`), each into a node array of its
 //! own that the parent then joins to its own. Below [`PARALLEL_MIN`] triangles a subtree is
-//! built by one thread into one array, depth first. On a one-thread pool the whole build runs
-//! in order on that thread, and the tree is the same on any number of threads.
+//! built by one thread into one array, depth first. The references are made on the pool too,
+//! one per triangle in order. On a one-thread pool the whole build runs in order on that
+//! thread, and the tree is the same on any number of threads.
 //!
 //! A SAH split moves each reference once: its two sides are written, in order, from the
 //! references to a scratch array of the same length (or back), so a range's data alternates
@@ -26,6 +27,8 @@ const COUNT_SPLIT_DEPTH: u32 = (MAX_DEPTH - 32) as u32;
 const MAX_BINS: usize = 64;
 /// Subtrees with at least this many triangles split in two that are built in parallel.
 const PARALLEL_MIN: usize = 16 * 1024;
+/// Triangles per piece of work when the references are made on the rayon pool.
+const REF_CHUNK: usize = 16 * 1024;
 
 pub(super) fn build(triangles: &[[Vec3; 3]], options: &BuildOptions) -> Bvh {
     let start = Instant::now();
@@ -37,28 +40,32 @@ pub(super) fn build(triangles: &[[Vec3; 3]], options: &BuildOptions) -> Bvh {
 
     // One 32-byte reference per finite triangle: its box, with the triangle's index in the
     // spare lane. The builders move these as they split (see the module docs), so every pass
-    // reads memory in order.
-    let mut refs: Vec<PrimRef> = Vec::with_capacity(triangles.len());
-    let mut root_bounds = Aabb::EMPTY;
-    let mut root_centroids = Aabb::EMPTY;
-    let mut degenerate = 0;
-    for (i, t) in triangles.iter().enumerate() {
-        if !(t[0].is_finite() && t[1].is_finite() && t[2].is_finite()) {
-            continue;
-        }
-        if is_degenerate(t) {
-            degenerate += 1;
-            continue;
-        }
-        let mut b = Aabb::EMPTY;
-        for v in t {
-            b.grow_point(Vec3A::from(*v));
-        }
-        root_bounds.grow(&b);
-        root_centroids.grow_point(b.center());
-        refs.push(PrimRef::new(&b, i as u32));
+    // reads memory in order. They are made on the rayon pool, one per triangle in the
+    // triangles' order (written in place: a large mesh's references are a fresh mapping whose
+    // pages fault in as they are written, on every thread at once), then tallied, and the
+    // left-out triangles' references dropped, in order, when there are any.
+    use rayon::prelude::*;
+    let mut refs: Vec<PrimRef> = Vec::new();
+    triangles
+        .par_iter()
+        .enumerate()
+        .with_min_len(REF_CHUNK)
+        .map(|(i, t)| PrimRef::of_triangle(t, i as u32))
+        .collect_into_vec(&mut refs);
+    let tally = refs
+        .par_iter()
+        .with_min_len(REF_CHUNK)
+        .fold(RefTally::default, RefTally::add)
+        .reduce(RefTally::default, RefTally::merge);
+    let RefTally {
+        bounds: root_bounds,
+        centroids: root_centroids,
+        excluded,
+        degenerate,
+    } = tally;
+    if excluded + degenerate > 0 {
+        refs.retain(PrimRef::is_kept);
     }
-    let excluded = triangles.len() - refs.len() - degenerate;
 
     let (nodes, counts) = if refs.is_empty() {
         (vec![EMPTY_NODE; 2], TreeCounts::EMPTY)
@@ -86,7 +93,6 @@ pub(super) fn build(triangles: &[[Vec3; 3]], options: &BuildOptions) -> Bvh {
         )
     };
 
-    use rayon::prelude::*;
     let prim_ids: Vec<u32> = refs
         .par_iter()
         .with_min_len(1 << 14)
@@ -291,12 +297,41 @@ impl PrimRef {
     /// infinity or NaN, which take no assist either).
     const ID_TAG: u32 = 1 << 30;
 
+    /// In `max.w` of a triangle left out: not finite, or degenerate (0 for every kept one).
+    const NOT_FINITE: f32 = 1.0;
+    const DEGENERATE: f32 = 2.0;
+
     fn new(b: &Aabb, id: u32) -> Self {
         debug_assert!(id < Self::ID_TAG);
         Self {
             min: b.min.extend(f32::from_bits(id | Self::ID_TAG)),
             max: b.max.extend(0.0),
         }
+    }
+
+    /// The reference of triangle `id`, or for a triangle the tree leaves out (a vertex not
+    /// finite, or no area) a reference marked as such, with no box.
+    fn of_triangle(t: &[Vec3; 3], id: u32) -> Self {
+        let left_out = |why: f32| PrimRef {
+            min: Vec4::ZERO,
+            max: Vec4::new(0.0, 0.0, 0.0, why),
+        };
+        if !(t[0].is_finite() && t[1].is_finite() && t[2].is_finite()) {
+            return left_out(Self::NOT_FINITE);
+        }
+        if is_degenerate(t) {
+            return left_out(Self::DEGENERATE);
+        }
+        let mut b = Aabb::EMPTY;
+        for v in t {
+            b.grow_point(Vec3A::from(*v));
+        }
+        Self::new(&b, id)
+    }
+
+    /// False for a left-out triangle's reference (see [`PrimRef::of_triangle`]).
+    fn is_kept(&self) -> bool {
+        self.max.w == 0.0
     }
 
     #[inline(always)]
@@ -316,6 +351,50 @@ impl PrimRef {
     #[inline(always)]
     fn centroid(&self) -> Vec3A {
         Vec3A::from_vec4(self.min) * 0.5 + Vec3A::from_vec4(self.max) * 0.5
+    }
+}
+
+/// What the references of a run of triangles hold: the union of the kept ones' boxes and of
+/// their centroids, and how many triangles were left out, by reason. Unions are order-free,
+/// so the tally of the whole list is the same however its runs were split.
+#[derive(Clone, Copy)]
+struct RefTally {
+    bounds: Aabb,
+    centroids: Aabb,
+    excluded: usize,
+    degenerate: usize,
+}
+
+impl Default for RefTally {
+    fn default() -> Self {
+        Self {
+            bounds: Aabb::EMPTY,
+            centroids: Aabb::EMPTY,
+            excluded: 0,
+            degenerate: 0,
+        }
+    }
+}
+
+impl RefTally {
+    fn add(mut self, r: &PrimRef) -> Self {
+        if r.is_kept() {
+            self.bounds.grow(&r.bounds());
+            self.centroids.grow_point(r.centroid());
+        } else if r.max.w == PrimRef::NOT_FINITE {
+            self.excluded += 1;
+        } else {
+            self.degenerate += 1;
+        }
+        self
+    }
+
+    fn merge(mut self, other: Self) -> Self {
+        self.bounds.grow(&other.bounds);
+        self.centroids.grow(&other.centroids);
+        self.excluded += other.excluded;
+        self.degenerate += other.degenerate;
+        self
     }
 }
 
