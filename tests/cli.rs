@@ -481,3 +481,55 @@ fn every_mesh_command_takes_a_gltf() {
     ]);
     assert!(o.status.success(), "{}", text(&o.stderr));
 }
+
+/// `report scaling` prints one row per input with each builder's speed-up from one thread to
+/// all, the ratio of the row's own build times (and Embree's, when built with it).
+#[test]
+fn report_scaling_prints_each_builders_speed_up_from_one_thread_to_all() {
+    let o = tracery(&[
+        "report",
+        "scaling",
+        "--generated",
+        "200000",
+        "--repeat",
+        "1",
+    ]);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let stdout = text(&o.stdout);
+    let lines: Vec<Vec<String>> = stdout
+        .lines()
+        .filter(|l| l.starts_with('|'))
+        .map(|l| {
+            l.trim_matches('|')
+                .split('|')
+                .map(|c| c.trim().to_string())
+                .collect()
+        })
+        .collect();
+    let (header, rows) = (&lines[0], &lines[2..]);
+    assert_eq!(rows.len(), 1, "one row, the generated terrain:\n{stdout}");
+    let column = |name: &dyn Fn(&str) -> bool| header.iter().position(|h| name(h));
+    let engines: &[&str] = if cfg!(feature = "embree") {
+        &["ours", "Embree"]
+    } else {
+        &["ours"]
+    };
+    for engine in engines {
+        let one = column(&|h| h == format!("{engine} 1 thread ms")).expect("one-thread column");
+        let all = column(&|h| h.starts_with(engine) && h.ends_with("threads ms"))
+            .expect("all-threads column");
+        let speed_up = column(&|h| h.starts_with(engine) && h.ends_with("threads over 1"))
+            .unwrap_or_else(|| panic!("no speed-up column for {engine}:\n{stdout}"));
+        let row = &rows[0];
+        let ms = |i: usize| row[i].parse::<f64>().expect("a time in ms");
+        let printed: f64 = row[speed_up]
+            .strip_suffix('x')
+            .and_then(|v| v.parse().ok())
+            .unwrap_or_else(|| panic!("{engine}'s speed-up `{}` is not a ratio", row[speed_up]));
+        let expected = ms(one) / ms(all);
+        assert!(
+            (printed - expected).abs() <= 0.01 + 0.01 * expected,
+            "{engine}: printed {printed}x, its times give {expected:.3}x:\n{stdout}"
+        );
+    }
+}

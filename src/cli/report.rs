@@ -32,7 +32,7 @@ enum ReportKind {
     },
     /// Build time against size: our SAH build (with the 8-wide collapse) and Embree's (with
     /// the `embree` feature), on one thread and on every thread, with the growth per doubling
-    /// of the triangle count.
+    /// of the triangle count and each builder's speed-up from one thread to all.
     Scaling {
         /// Meshes, smallest first.
         meshes: Vec<PathBuf>,
@@ -267,19 +267,19 @@ fn scaling(
     }
     let embree = BenchConfig::embree_available();
     println!(
-        "| mesh | triangles | ours 1 thread ms | ours {cores} threads ms | growth per doubling (1 thread) |{}",
+        "| mesh | triangles | ours 1 thread ms | ours {cores} threads ms | growth per doubling (1 thread) | ours {cores} threads over 1 |{}",
         if embree {
             format!(
-                " Embree 1 thread ms | Embree {cores} threads ms | Embree growth per doubling | ours / Embree (1 thread) | ours / Embree ({cores} threads) |"
+                " Embree 1 thread ms | Embree {cores} threads ms | Embree growth per doubling | Embree {cores} threads over 1 | ours / Embree (1 thread) | ours / Embree ({cores} threads) |"
             )
         } else {
             String::new()
         }
     );
     println!(
-        "|---|---:|---:|---:|---:|{}",
+        "|---|---:|---:|---:|---:|---:|{}",
         if embree {
-            "---:|---:|---:|---:|---:|"
+            "---:|---:|---:|---:|---:|---:|"
         } else {
             ""
         }
@@ -323,14 +323,16 @@ fn scaling(
         };
         let [o1, on] = row.ours;
         print!(
-            "| {name} | {} | {o1:.1} | {on:.1} | {} |",
+            "| {name} | {} | {o1:.1} | {on:.1} | {} | {:.2}x |",
             row.triangles,
-            growth(last.map(|l| (l.triangles, l.ours[0])), o1)
+            growth(last.map(|l| (l.triangles, l.ours[0])), o1),
+            o1 / on
         );
         if let Some([e1, en]) = row.embree {
             print!(
-                " {e1:.1} | {en:.1} | {} | {:.2}x | {:.2}x |",
+                " {e1:.1} | {en:.1} | {} | {:.2}x | {:.2}x | {:.2}x |",
                 growth(last.and_then(|l| l.embree.map(|e| (l.triangles, e[0]))), e1),
+                e1 / en,
                 o1 / e1,
                 on / en
             );
