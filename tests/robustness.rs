@@ -224,6 +224,56 @@ fn a_permuted_input_and_any_thread_count_give_identical_hits() {
     }
 }
 
+/// A tree large enough that the top of its build (the root's split too), its layout into one
+/// node array and its collapse into wide nodes all run on the pool (327,680 triangles) is the
+/// same, every array of it bit for bit, on one, two and four threads.
+#[test]
+fn a_large_tree_and_its_wide_layout_are_the_same_on_any_thread_count() {
+    // Over `POOL_SPLIT_MIN` (src/bvh/build.rs) triangles.
+    let tris = shapes::icosphere(7);
+    assert!(tris.len() >= 1 << 18);
+    for options in common::both_builders() {
+        let build_on = |threads: usize| {
+            rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap()
+                .install(|| Bvh::build(&tris, &options))
+        };
+        let one = build_on(1);
+        assert!(
+            // The collapse's threshold (`PARALLEL_MIN_NODES`, src/bvh/wide/collapse.rs).
+            one.nodes.len() >= 1 << 14 && one.wide.nodes.len() > 1000,
+            "{} binary nodes, {} wide: too small to take the parallel paths",
+            one.nodes.len(),
+            one.wide.nodes.len()
+        );
+        // Blocks' unused lanes are NaN: compared as bits.
+        let block_bits = |b: &Bvh| -> Vec<u32> {
+            b.wide
+                .blocks
+                .iter()
+                .flat_map(|k| {
+                    k.v.iter()
+                        .flatten()
+                        .flatten()
+                        .map(|x| x.to_bits())
+                        .chain(k.prim)
+                })
+                .collect()
+        };
+        for threads in [2, 4] {
+            let other = build_on(threads);
+            let what = format!("{:?}, {threads} threads", options.split);
+            assert_eq!(one.nodes, other.nodes, "{what}: binary nodes");
+            assert_eq!(one.prim_ids, other.prim_ids, "{what}: triangle order");
+            assert_eq!(one.leaf_blocks, other.leaf_blocks, "{what}: leaves' blocks");
+            assert_eq!(one.wide.nodes, other.wide.nodes, "{what}: wide nodes");
+            assert_eq!(block_bits(&one), block_bits(&other), "{what}: blocks");
+        }
+    }
+}
+
 #[test]
 fn coordinates_of_1e12_1e9_away_and_a_mix_of_1e_minus_3_and_1e7_build_finite_and_exact() {
     let ico = shapes::icosphere(2);

@@ -49,46 +49,242 @@ pub fn collapse(
         out.root_leaf = Some((0, out.blocks.len() as u32));
         return (out, leaf_blocks);
     }
-    out.nodes.reserve(nodes.len() / 8);
-    // Where each block's triangles come from; the blocks are made at the end, in parallel.
-    let mut sources: Vec<(u32, u32)> = Vec::with_capacity(prim_ids.len() / BLOCK + nodes.len() / 8);
-    out.nodes.push(WideNode::EMPTY);
-    // (wide node to fill, binary inner node it stands for)
-    let mut stack = vec![(0usize, 0usize)];
-    let mut kids: Vec<usize> = Vec::with_capacity(WIDTH);
     let plan = Plan::new(nodes);
-    while let Some((wide, binary)) = stack.pop() {
-        kids.clear();
-        plan.node_lanes(nodes, binary, &mut kids);
-        let mut node = WideNode::EMPTY;
-        let mut inner = [(0usize, 0usize); WIDTH];
-        let mut inner_count = 0;
-        for (lane, &c) in kids.iter().enumerate() {
-            let n = &nodes[c];
-            for axis in 0..3 {
-                node.planes[2 * axis][lane] = n.min[axis];
-                node.planes[2 * axis + 1][lane] = n.max[axis];
-            }
-            node.child[lane] = if n.is_leaf() {
-                let first = push_blocks(&mut sources, n);
-                leaf_blocks[c] = first;
-                leaf_child(&mut out.nodes, n, first, sources.len() as u32 - first)
-            } else {
-                let index = out.nodes.len();
-                out.nodes.push(WideNode::EMPTY);
-                inner[inner_count] = (index, c);
-                inner_count += 1;
-                Child::inner(index as u32)
-            }
-            .0;
-        }
-        node.order = octant_order(&node);
-        out.nodes[wide] = node;
-        // Depth first, the first child next.
-        stack.extend(inner[..inner_count].iter().rev());
-    }
+    // The wide nodes, the blocks' sources and the leaves' first blocks, made by the rayon pool
+    // for a large tree (its top levels' subtrees at once), and laid out as one thread makes
+    // them: siblings side by side, subtrees depth first.
+    let parallel = nodes.len() >= PARALLEL_MIN_NODES && rayon::current_num_threads() > 1;
+    let part = if parallel {
+        Part::top(nodes, &plan, 0, 0)
+    } else {
+        Part::subtree(nodes, &plan, 0)
+    };
+    drop(plan);
+    let sources = part.into_layout(&mut out.nodes, &mut leaf_blocks);
     out.blocks = fill_blocks(&sources, triangles, prim_ids);
     (out, leaf_blocks)
+}
+
+/// Binary trees with at least this many nodes are collapsed on the rayon pool.
+const PARALLEL_MIN_NODES: usize = 1 << 14;
+/// Wide levels whose subtrees are collapsed at once (the root's level is 0): up to 64
+/// subtrees below level 1, for the pool to share.
+const PARALLEL_LEVELS: usize = 2;
+
+/// A wide subtree as it is made: its root (local node 0) and the nodes it made itself after
+/// it, the blocks' sources it made (local block indices), the binary leaves' first blocks, and
+/// the subtrees made apart, each with the local slot its root takes. In the layout its nodes
+/// from local 1 come first, then each part's, in order; its blocks likewise.
+struct Part {
+    nodes: Vec<WideNode>,
+    sources: Vec<(u32, u32)>,
+    /// (binary leaf, local first block)
+    leaves: Vec<(u32, u32)>,
+    parts: Vec<(u32, Part)>,
+    /// Nodes after the root, and blocks, of the whole subtree (its parts' included).
+    descendants: u32,
+    blocks: u32,
+}
+
+impl Part {
+    fn new(nodes: Vec<WideNode>, sources: Vec<(u32, u32)>, leaves: Vec<(u32, u32)>) -> Part {
+        Part {
+            descendants: nodes.len() as u32 - 1,
+            blocks: sources.len() as u32,
+            nodes,
+            sources,
+            leaves,
+            parts: Vec::new(),
+        }
+    }
+
+    /// The wide node of binary inner node `binary`: its lanes, leaves' blocks and leaf
+    /// nodes made here, its inner children's subtrees each a part of its own, made at once.
+    fn top(nodes: &[BvhNode], plan: &Plan, binary: usize, level: usize) -> Part {
+        use rayon::prelude::*;
+        let mut made = vec![WideNode::EMPTY];
+        let (mut sources, mut leaves) = (Vec::new(), Vec::new());
+        let mut inner = Vec::with_capacity(WIDTH);
+        let node = make_node(
+            nodes,
+            plan,
+            binary,
+            &mut made,
+            &mut sources,
+            &mut leaves,
+            &mut inner,
+        );
+        made[0] = node;
+        let mut part = Part::new(made, sources, leaves);
+        part.parts = inner
+            .par_iter()
+            .map(|&(slot, c)| {
+                let sub = if level + 1 < PARALLEL_LEVELS {
+                    Part::top(nodes, plan, c, level + 1)
+                } else {
+                    Part::subtree(nodes, plan, c)
+                };
+                (slot as u32, sub)
+            })
+            .collect();
+        // (A part's root is one of the slots made here, counted already.)
+        for (_, sub) in &part.parts {
+            part.descendants += sub.descendants;
+            part.blocks += sub.blocks;
+        }
+        part
+    }
+
+    /// The whole wide subtree of binary inner node `binary` on this thread, depth first.
+    fn subtree(nodes: &[BvhNode], plan: &Plan, binary: usize) -> Part {
+        let mut made = vec![WideNode::EMPTY];
+        let (mut sources, mut leaves) = (Vec::new(), Vec::new());
+        // (wide node to fill, binary inner node it stands for)
+        let mut stack = vec![(0usize, binary)];
+        let mut inner = Vec::with_capacity(WIDTH);
+        while let Some((wide, binary)) = stack.pop() {
+            inner.clear();
+            made[wide] = make_node(
+                nodes,
+                plan,
+                binary,
+                &mut made,
+                &mut sources,
+                &mut leaves,
+                &mut inner,
+            );
+            // Depth first, the first child next.
+            stack.extend(inner.iter().rev());
+        }
+        Part::new(made, sources, leaves)
+    }
+
+    /// Writes the layout: the wide nodes into `out` and each binary leaf's first block into
+    /// `leaf_blocks`; returns the blocks' sources. A part made on one thread is its layout.
+    fn into_layout(self, out: &mut Vec<WideNode>, leaf_blocks: &mut [u32]) -> Vec<(u32, u32)> {
+        use rayon::prelude::*;
+        self.set_leaf_blocks(0, leaf_blocks);
+        if self.parts.is_empty() {
+            *out = self.nodes;
+            return self.sources;
+        }
+        // Made on the pool, so that their fresh pages fault in on every thread.
+        rayon::iter::repeat_n(WideNode::EMPTY, 1 + self.descendants as usize).collect_into_vec(out);
+        let mut sources = Vec::new();
+        rayon::iter::repeat_n((0, 0), self.blocks as usize).collect_into_vec(&mut sources);
+        let (root, rest) = out.split_at_mut(1);
+        self.place(&mut root[0], rest, 1, &mut sources, 0);
+        sources
+    }
+
+    /// Sets the first block of each binary leaf in the part, its blocks starting at `base`.
+    fn set_leaf_blocks(&self, base: u32, leaf_blocks: &mut [u32]) {
+        for &(leaf, first) in &self.leaves {
+            leaf_blocks[leaf as usize] = base + first;
+        }
+        let mut base = base + self.sources.len() as u32;
+        for (_, sub) in &self.parts {
+            sub.set_leaf_blocks(base, leaf_blocks);
+            base += sub.blocks;
+        }
+    }
+
+    /// Writes the part's root to `root`, its other nodes to `rest` (from node `first`), its
+    /// blocks' sources to `sources` (from block `block`).
+    fn place(
+        &self,
+        root: &mut WideNode,
+        rest: &mut [WideNode],
+        first: u32,
+        sources: &mut [(u32, u32)],
+        block: u32,
+    ) {
+        use rayon::prelude::*;
+        // Local node `k` (1 or more) is node `first + k - 1`; local block `b` is `block + b`.
+        let fix = |n: &WideNode| {
+            let mut n = *n;
+            for lane in 0..WIDTH {
+                if n.planes[0][lane] > n.planes[1][lane] {
+                    continue; // an empty lane
+                }
+                let c = Child(n.child[lane]);
+                n.child[lane] = if c.is_leaf() {
+                    let (b, count) = c.blocks();
+                    Child::leaf(block + b, count).0
+                } else {
+                    first + c.index() - 1
+                };
+            }
+            n
+        };
+        *root = fix(&self.nodes[0]);
+        let own = self.nodes.len() - 1;
+        let (mine, mut rest) = rest.split_at_mut(own);
+        let (my_sources, mut sources) = sources.split_at_mut(self.sources.len());
+        for (dst, &src) in my_sources.iter_mut().zip(&self.sources) {
+            *dst = src;
+        }
+        // Each part's root slot among the nodes made here, and its own ranges after them.
+        let mut slots: Vec<Option<&mut WideNode>> = mine.iter_mut().map(Some).collect();
+        let (mut next, mut next_block) = (first + own as u32, block + self.sources.len() as u32);
+        let mut jobs = Vec::with_capacity(self.parts.len());
+        for (slot, sub) in &self.parts {
+            let root = slots[*slot as usize - 1].take().expect("one part a slot");
+            let (sub_rest, r) = rest.split_at_mut(sub.descendants as usize);
+            let (sub_sources, s) = sources.split_at_mut(sub.blocks as usize);
+            (rest, sources) = (r, s);
+            jobs.push((sub, root, sub_rest, next, sub_sources, next_block));
+            next += sub.descendants;
+            next_block += sub.blocks;
+        }
+        for (dst, n) in slots.into_iter().zip(&self.nodes[1..]) {
+            if let Some(dst) = dst {
+                *dst = fix(n);
+            }
+        }
+        jobs.into_par_iter()
+            .for_each(|(sub, root, rest, first, sources, block)| {
+                sub.place(root, rest, first, sources, block)
+            });
+    }
+}
+
+/// Makes the wide node of binary inner node `binary`: its lanes as the plan picks them, each
+/// leaf's blocks appended to `sources` (and its first block to `leaves`), a node appended to
+/// `made` for each inner child (`inner` gets its slot and binary node, in lane order) and for
+/// each leaf of more blocks than a leaf word holds.
+fn make_node(
+    nodes: &[BvhNode],
+    plan: &Plan,
+    binary: usize,
+    made: &mut Vec<WideNode>,
+    sources: &mut Vec<(u32, u32)>,
+    leaves: &mut Vec<(u32, u32)>,
+    inner: &mut Vec<(usize, usize)>,
+) -> WideNode {
+    let mut kids = [0usize; WIDTH];
+    let lanes = plan.node_lanes(nodes, binary, &mut kids);
+    let mut node = WideNode::EMPTY;
+    for (lane, &c) in kids[..lanes].iter().enumerate() {
+        let n = &nodes[c];
+        for axis in 0..3 {
+            node.planes[2 * axis][lane] = n.min[axis];
+            node.planes[2 * axis + 1][lane] = n.max[axis];
+        }
+        node.child[lane] = if n.is_leaf() {
+            let first = push_blocks(sources, n);
+            leaves.push((c as u32, first));
+            leaf_child(made, n, first, sources.len() as u32 - first)
+        } else {
+            let index = made.len();
+            made.push(WideNode::EMPTY);
+            inner.push((index, c));
+            Child::inner(index as u32)
+        }
+        .0;
+    }
+    node.order = octant_order(&node);
+    node
 }
 
 /// The SAH-optimal collapse (after Ylitie, Karras and Laine 2017, with the binary leaves kept
@@ -103,25 +299,39 @@ struct Plan {
 
 impl Plan {
     fn new(nodes: &[BvhNode]) -> Plan {
+        let parallel = nodes.len() >= PARALLEL_MIN_NODES && rayon::current_num_threads() > 1;
+        parallel
+            .then(|| Plan::on_pool(nodes))
+            .flatten()
+            .unwrap_or_else(|| Plan::in_order(nodes))
+    }
+
+    /// Planned in one backward pass (children are stored after their parents).
+    fn in_order(nodes: &[BvhNode]) -> Plan {
         let mut cost = vec![[0.0f32; WIDTH]; nodes.len()];
-        // Children are stored after their parents: one backward pass sees them first.
         for i in (2..nodes.len()).rev().chain([0]) {
             let n = &nodes[i];
-            let area = n.aabb().half_area() as f32;
             cost[i] = if n.is_leaf() {
-                [area * n.count.div_ceil(BLOCK as u32) as f32; WIDTH]
+                leaf_cost(n)
             } else {
-                let opened = opened(&cost[n.first as usize], &cost[n.first as usize + 1]);
-                // Kept as one lane: a node of its own, its children in up to WIDTH lanes.
-                let own = area + opened[WIDTH - 1];
-                let mut c = [own; WIDTH];
-                for k in 1..WIDTH {
-                    c[k] = if opened[k] < own { opened[k] } else { own };
-                }
-                c
+                inner_cost(n, &cost[n.first as usize], &cost[n.first as usize + 1])
             };
         }
         Plan { cost }
+    }
+
+    /// Planned on the rayon pool, subtrees at once, when the nodes are laid out as the
+    /// builder lays them out (each subtree's nodes one range of the array: see `plan_pairs`);
+    /// `None` when they are not.
+    fn on_pool(nodes: &[BvhNode]) -> Option<Plan> {
+        let mut cost = vec![[0.0f32; WIDTH]; nodes.len()];
+        if nodes[0].is_leaf() {
+            cost[0] = leaf_cost(&nodes[0]);
+        } else {
+            plan_pairs(nodes, 2, cost.get_mut(2..)?)?;
+            cost[0] = inner_cost(&nodes[0], &cost[2], &cost[3]);
+        }
+        Some(Plan { cost })
     }
 
     /// How many of `k` lanes (2 or more) the left child of inner node `i` gets when `i` is
@@ -143,25 +353,110 @@ impl Plan {
         best.1
     }
 
-    /// Appends the lanes binary node `i` takes when given `k` of them.
-    fn lanes(&self, nodes: &[BvhNode], i: usize, k: usize, out: &mut Vec<usize>) {
+    /// Writes the lanes binary node `i` takes when given `k` of them to `out` from `*len`,
+    /// advancing it.
+    fn lanes(
+        &self,
+        nodes: &[BvhNode],
+        i: usize,
+        k: usize,
+        out: &mut [usize; WIDTH],
+        len: &mut usize,
+    ) {
         let n = &nodes[i];
         // Kept as one lane unless opening it into its `k` lanes costs less.
         if k == 1 || n.is_leaf() || self.cost[i][k - 1] >= self.cost[i][0] {
-            out.push(i);
+            out[*len] = i;
+            *len += 1;
             return;
         }
         let j = self.share(nodes, i, k);
-        self.lanes(nodes, n.first as usize, j, out);
-        self.lanes(nodes, n.first as usize + 1, k - j, out);
+        self.lanes(nodes, n.first as usize, j, out, len);
+        self.lanes(nodes, n.first as usize + 1, k - j, out, len);
     }
 
-    /// The lanes of the node made for binary inner node `i`: its children in up to WIDTH.
-    fn node_lanes(&self, nodes: &[BvhNode], i: usize, out: &mut Vec<usize>) {
+    /// The lanes of the node made for binary inner node `i` (its children in up to WIDTH),
+    /// written to `out`; returns how many.
+    fn node_lanes(&self, nodes: &[BvhNode], i: usize, out: &mut [usize; WIDTH]) -> usize {
         let j = self.share(nodes, i, WIDTH);
-        self.lanes(nodes, nodes[i].first as usize, j, out);
-        self.lanes(nodes, nodes[i].first as usize + 1, WIDTH - j, out);
+        let mut len = 0;
+        self.lanes(nodes, nodes[i].first as usize, j, out, &mut len);
+        self.lanes(nodes, nodes[i].first as usize + 1, WIDTH - j, out, &mut len);
+        len
     }
+}
+
+/// Plans the sibling pair at `c` and their descendants, whose costs are `cost` (from
+/// `c`), on the rayon pool: the nodes of a pair whose first child's children are at `c + 2`
+/// (as the builder lays them out) are the pair, the first one's descendants, then the
+/// second one's, so the two are planned at once. `None` (the plan unfinished) when the
+/// nodes are not laid out so.
+fn plan_pairs(nodes: &[BvhNode], c: usize, cost: &mut [[f32; WIDTH]]) -> Option<()> {
+    /// Ranges of fewer nodes are planned on one thread.
+    const PARALLEL_MIN: usize = 4096;
+    let (a, b) = (nodes.get(c)?, nodes.get(c + 1)?);
+    let (pair, rest) = cost.split_at_mut_checked(2)?;
+    // The first child's descendants: up to the second's children, or to the end.
+    let first_len = match (a.is_leaf(), b.is_leaf()) {
+        (true, _) => 0,
+        (false, true) => rest.len(),
+        (false, false) => (b.first as usize).checked_sub(c + 2)?,
+    };
+    let (ra, rb) = rest.split_at_mut_checked(first_len)?;
+    let laid_out = (a.is_leaf() || a.first as usize == c + 2)
+        && if b.is_leaf() {
+            rb.is_empty()
+        } else {
+            b.first as usize == c + 2 + first_len
+        };
+    if !laid_out {
+        return None;
+    }
+    let plan = |n: &BvhNode, at: usize, range: &mut [[f32; WIDTH]]| {
+        n.is_leaf() || plan_pairs(nodes, at, range).is_some()
+    };
+    let b_at = c + 2 + first_len;
+    let planned = if ra.len() + rb.len() >= PARALLEL_MIN {
+        let (x, y) = rayon::join(|| plan(a, c + 2, &mut *ra), || plan(b, b_at, &mut *rb));
+        x && y
+    } else {
+        plan(a, c + 2, ra) && plan(b, b_at, rb)
+    };
+    if !planned {
+        return None;
+    }
+    pair[0] = if a.is_leaf() {
+        leaf_cost(a)
+    } else {
+        inner_cost(a, &ra[0], &ra[1])
+    };
+    pair[1] = if b.is_leaf() {
+        leaf_cost(b)
+    } else {
+        inner_cost(b, &rb[0], &rb[1])
+    };
+    Some(())
+}
+
+/// A binary leaf's cost in any number of lanes: its area times its blocks.
+#[inline(always)]
+fn leaf_cost(n: &BvhNode) -> [f32; WIDTH] {
+    let area = n.aabb().half_area() as f32;
+    [area * n.count.div_ceil(BLOCK as u32) as f32; WIDTH]
+}
+
+/// A binary inner node's cost in 1 to WIDTH lanes, its children's being `l` and `r`.
+#[inline(always)]
+fn inner_cost(n: &BvhNode, l: &[f32; WIDTH], r: &[f32; WIDTH]) -> [f32; WIDTH] {
+    let area = n.aabb().half_area() as f32;
+    let opened = opened(l, r);
+    // Kept as one lane: a node of its own, its children in up to WIDTH lanes.
+    let own = area + opened[WIDTH - 1];
+    let mut c = [own; WIDTH];
+    for k in 1..WIDTH {
+        c[k] = if opened[k] < own { opened[k] } else { own };
+    }
+    c
 }
 
 /// `[k - 1]`: the least cost of two siblings (costs `l`, `r`) in `k` lanes, each in at least
@@ -430,6 +725,63 @@ mod tests {
             checked += 1;
         }
         assert!(checked > 150, "only {checked} trees had inner nodes");
+    }
+
+    /// The plan made on the pool is the one made in order, bit for bit, on a tree large enough
+    /// to share; nodes not laid out as the builder lays them out are refused.
+    #[test]
+    fn the_plan_made_on_the_pool_is_the_plan_made_in_order() {
+        let tris = crate::scene::shapes::icosphere(6);
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(2)
+            .build()
+            .expect("a pool");
+        for options in [BuildOptions::sah(), BuildOptions::median()] {
+            let bvh = pool.install(|| Bvh::build(&tris, &options));
+            assert!(bvh.nodes.len() >= PARALLEL_MIN_NODES);
+            let shared = pool
+                .install(|| Plan::on_pool(&bvh.nodes))
+                .expect("the builder's layout");
+            let ordered = Plan::in_order(&bvh.nodes);
+            let bits =
+                |p: &Plan| -> Vec<u32> { p.cost.iter().flatten().map(|c| c.to_bits()).collect() };
+            assert!(bits(&shared) == bits(&ordered), "{:?}", options.split);
+        }
+        // Root 0 over the pair at 2; node 2's children stored after node 3's (a valid tree,
+        // not the builder's layout).
+        let leaf = |x: f32, slot: u32| BvhNode {
+            min: [x, 0.0, 0.0],
+            first: slot,
+            max: [x + 1.0, 1.0, 1.0],
+            count: 1,
+        };
+        let inner = |x0: f32, x1: f32, first: u32| BvhNode {
+            min: [x0, 0.0, 0.0],
+            first,
+            max: [x1, 1.0, 1.0],
+            count: 0,
+        };
+        let unused = inner(0.0, 0.0, 0);
+        let swapped = [
+            inner(0.0, 4.0, 2),
+            unused,
+            inner(0.0, 2.0, 6),
+            inner(2.0, 4.0, 4),
+            leaf(2.0, 2),
+            leaf(3.0, 3),
+            leaf(0.0, 0),
+            leaf(1.0, 1),
+        ];
+        assert!(Plan::on_pool(&swapped).is_none());
+        let mut laid_out = swapped;
+        laid_out[2].first = 4;
+        laid_out[3].first = 6;
+        laid_out.swap(4, 6);
+        laid_out.swap(5, 7);
+        let bits =
+            |p: &Plan| -> Vec<u32> { p.cost.iter().flatten().map(|c| c.to_bits()).collect() };
+        let shared = Plan::on_pool(&laid_out).expect("the builder's layout");
+        assert_eq!(bits(&shared), bits(&Plan::in_order(&laid_out)));
     }
 
     /// The octant order is, per octant, the lanes sorted by entry-corner key (farthest first,
