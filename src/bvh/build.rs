@@ -881,11 +881,7 @@ impl BinPlan {
             *k = self.add::<AXIS>(p, g0);
         }
         for row in [&*g1, &*g2, &*g3] {
-            for (a, b) in g0[..bins].iter_mut().zip(&row[..bins]) {
-                a.bounds.grow(&b.bounds);
-                a.centroids.grow(&b.centroids);
-                a.count += b.count;
-            }
+            merge_bins(&mut g0[..bins], &row[..bins]);
         }
     }
 
@@ -901,11 +897,7 @@ impl BinPlan {
     ) {
         use rayon::prelude::*;
         let merge = |mut a: Box<Grid>, b: Box<Grid>| {
-            for (x, y) in a[0][..bins].iter_mut().zip(&b[0][..bins]) {
-                x.bounds.grow(&y.bounds);
-                x.centroids.grow(&y.centroids);
-                x.count += y.count;
-            }
+            merge_bins(&mut a[0][..bins], &b[0][..bins]);
             a
         };
         let empty = || Box::new([[Bin::EMPTY; MAX_BINS]; ROWS]);
@@ -937,6 +929,15 @@ impl BinPlan {
         bin.centroids.grow_point(c);
         bin.count += 1;
         k as u8
+    }
+}
+
+/// Adds each bin of `other` to the same bin of `row`.
+fn merge_bins(row: &mut [Bin], other: &[Bin]) {
+    for (a, b) in row.iter_mut().zip(other) {
+        a.bounds.grow(&b.bounds);
+        a.centroids.grow(&b.centroids);
+        a.count += b.count;
     }
 }
 

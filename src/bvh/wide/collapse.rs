@@ -87,13 +87,13 @@ struct Part {
 }
 
 impl Part {
-    fn new(nodes: Vec<WideNode>, sources: Vec<(u32, u32)>, leaves: Vec<(u32, u32)>) -> Part {
+    fn new(made: Made) -> Part {
         Part {
-            descendants: nodes.len() as u32 - 1,
-            blocks: sources.len() as u32,
-            nodes,
-            sources,
-            leaves,
+            descendants: made.nodes.len() as u32 - 1,
+            blocks: made.sources.len() as u32,
+            nodes: made.nodes,
+            sources: made.sources,
+            leaves: made.leaves,
             parts: Vec::new(),
         }
     }
@@ -102,20 +102,10 @@ impl Part {
     /// nodes made here, its inner children's subtrees each a part of its own, made at once.
     fn top(nodes: &[BvhNode], plan: &Plan, binary: usize, level: usize) -> Part {
         use rayon::prelude::*;
-        let mut made = vec![WideNode::EMPTY];
-        let (mut sources, mut leaves) = (Vec::new(), Vec::new());
+        let mut made = Made::new();
         let mut inner = Vec::with_capacity(WIDTH);
-        let node = make_node(
-            nodes,
-            plan,
-            binary,
-            &mut made,
-            &mut sources,
-            &mut leaves,
-            &mut inner,
-        );
-        made[0] = node;
-        let mut part = Part::new(made, sources, leaves);
+        made.nodes[0] = made.node(nodes, plan, binary, &mut inner);
+        let mut part = Part::new(made);
         part.parts = inner
             .par_iter()
             .map(|&(slot, c)| {
@@ -137,26 +127,17 @@ impl Part {
 
     /// The whole wide subtree of binary inner node `binary` on this thread, depth first.
     fn subtree(nodes: &[BvhNode], plan: &Plan, binary: usize) -> Part {
-        let mut made = vec![WideNode::EMPTY];
-        let (mut sources, mut leaves) = (Vec::new(), Vec::new());
+        let mut made = Made::new();
         // (wide node to fill, binary inner node it stands for)
         let mut stack = vec![(0usize, binary)];
         let mut inner = Vec::with_capacity(WIDTH);
         while let Some((wide, binary)) = stack.pop() {
             inner.clear();
-            made[wide] = make_node(
-                nodes,
-                plan,
-                binary,
-                &mut made,
-                &mut sources,
-                &mut leaves,
-                &mut inner,
-            );
+            made.nodes[wide] = made.node(nodes, plan, binary, &mut inner);
             // Depth first, the first child next.
             stack.extend(inner.iter().rev());
         }
-        Part::new(made, sources, leaves)
+        Part::new(made)
     }
 
     /// Writes the layout: the wide nodes into `out` and each binary leaf's first block into
@@ -249,42 +230,60 @@ impl Part {
     }
 }
 
-/// Makes the wide node of binary inner node `binary`: its lanes as the plan picks them, each
-/// leaf's blocks appended to `sources` (and its first block to `leaves`), a node appended to
-/// `made` for each inner child (`inner` gets its slot and binary node, in lane order) and for
-/// each leaf of more blocks than a leaf word holds.
-fn make_node(
-    nodes: &[BvhNode],
-    plan: &Plan,
-    binary: usize,
-    made: &mut Vec<WideNode>,
-    sources: &mut Vec<(u32, u32)>,
-    leaves: &mut Vec<(u32, u32)>,
-    inner: &mut Vec<(usize, usize)>,
-) -> WideNode {
-    let mut kids = [0usize; WIDTH];
-    let lanes = plan.node_lanes(nodes, binary, &mut kids);
-    let mut node = WideNode::EMPTY;
-    for (lane, &c) in kids[..lanes].iter().enumerate() {
-        let n = &nodes[c];
-        for axis in 0..3 {
-            node.planes[2 * axis][lane] = n.min[axis];
-            node.planes[2 * axis + 1][lane] = n.max[axis];
+/// What one thread makes of a wide subtree: its nodes (the root at 0), the blocks' sources
+/// and the binary leaves' first blocks (local indices).
+struct Made {
+    nodes: Vec<WideNode>,
+    sources: Vec<(u32, u32)>,
+    /// (binary leaf, first block)
+    leaves: Vec<(u32, u32)>,
+}
+
+impl Made {
+    /// The root's place and nothing else.
+    fn new() -> Made {
+        Made {
+            nodes: vec![WideNode::EMPTY],
+            sources: Vec::new(),
+            leaves: Vec::new(),
         }
-        node.child[lane] = if n.is_leaf() {
-            let first = push_blocks(sources, n);
-            leaves.push((c as u32, first));
-            leaf_child(made, n, first, sources.len() as u32 - first)
-        } else {
-            let index = made.len();
-            made.push(WideNode::EMPTY);
-            inner.push((index, c));
-            Child::inner(index as u32)
-        }
-        .0;
     }
-    node.order = octant_order(&node);
-    node
+
+    /// Makes the wide node of binary inner node `binary`: its lanes as the plan picks them,
+    /// each leaf's blocks appended to the sources (and its first block to the leaves), a
+    /// node appended for each inner child (`inner` gets its place and binary node, in lane
+    /// order) and for each leaf of more blocks than a leaf word holds.
+    fn node(
+        &mut self,
+        tree: &[BvhNode],
+        plan: &Plan,
+        binary: usize,
+        inner: &mut Vec<(usize, usize)>,
+    ) -> WideNode {
+        let mut kids = [0usize; WIDTH];
+        let lanes = plan.node_lanes(tree, binary, &mut kids);
+        let mut node = WideNode::EMPTY;
+        for (lane, &c) in kids[..lanes].iter().enumerate() {
+            let n = &tree[c];
+            for axis in 0..3 {
+                node.planes[2 * axis][lane] = n.min[axis];
+                node.planes[2 * axis + 1][lane] = n.max[axis];
+            }
+            node.child[lane] = if n.is_leaf() {
+                let first = push_blocks(&mut self.sources, n);
+                self.leaves.push((c as u32, first));
+                leaf_child(&mut self.nodes, n, first, self.sources.len() as u32 - first)
+            } else {
+                let index = self.nodes.len();
+                self.nodes.push(WideNode::EMPTY);
+                inner.push((index, c));
+                Child::inner(index as u32)
+            }
+            .0;
+        }
+        node.order = octant_order(&node);
+        node
+    }
 }
 
 /// The SAH-optimal collapse (after Ylitie, Karras and Laine 2017, with the binary leaves kept
