@@ -117,7 +117,33 @@ fn stats_json_has_both_builders() {
         ] {
             assert!(row.get(key).is_some(), "{key} missing in {row}");
         }
+        // The build's phases, each timed, together no more than the whole build.
+        let ms = |v: &serde_json::Value| v.as_f64().unwrap_or(f64::NAN);
+        let phases = ["references_ms", "tree_ms", "layout_ms"].map(|k| ms(&row["phases"][k]));
+        let build = ms(&row["build_ms"]);
+        assert!(
+            phases.iter().all(|&p| p > 0.0) && phases.iter().sum::<f64>() <= build + 1e-9,
+            "phases {phases:?} of a {build} ms build in {row}"
+        );
     }
+}
+
+/// Output into a pipe whose reader has gone (`tracery stats --json | head -0`) ends the process
+/// quietly, as SIGPIPE ends other command-line tools, not with a panic.
+#[cfg(unix)]
+#[test]
+fn printing_into_a_closed_pipe_ends_quietly() {
+    use std::os::unix::process::ExitStatusExt;
+    let (reader, writer) = std::io::pipe().expect("a pipe");
+    drop(reader);
+    let o = Command::new(env!("CARGO_BIN_EXE_tracery"))
+        .args(["stats", "--json"])
+        .stdout(writer)
+        .output()
+        .expect("the binary runs");
+    let stderr = text(&o.stderr);
+    assert!(!stderr.contains("panicked"), "{stderr}");
+    assert_eq!(o.status.signal(), Some(13), "{:?}: {stderr}", o.status);
 }
 
 #[test]

@@ -17,7 +17,7 @@ use std::time::Instant;
 
 use glam::{Vec3, Vec3A, Vec4};
 
-use super::stats::TreeCounts;
+use super::stats::{BuildPhases, TreeCounts};
 use super::{BuildOptions, Bvh, BvhNode, BvhStats, MAX_DEPTH, SplitMethod, sah};
 use crate::geometry::{Aabb, is_degenerate};
 
@@ -73,6 +73,7 @@ pub(super) fn build(triangles: &[[Vec3; 3]], options: &BuildOptions) -> Bvh {
         refs.retain(PrimRef::is_kept);
     }
 
+    let references = start.elapsed();
     let (nodes, counts) = if refs.is_empty() {
         (vec![EMPTY_NODE; 2], TreeCounts::EMPTY)
     } else {
@@ -100,6 +101,7 @@ pub(super) fn build(triangles: &[[Vec3; 3]], options: &BuildOptions) -> Bvh {
         (part.into_nodes(), counts)
     };
 
+    let tree = start.elapsed();
     let prim_ids: Vec<u32> = refs
         .par_iter()
         .with_min_len(1 << 14)
@@ -115,7 +117,13 @@ pub(super) fn build(triangles: &[[Vec3; 3]], options: &BuildOptions) -> Bvh {
         options,
     };
     let build_time = start.elapsed();
-    bvh.stats = BvhStats::new(&bvh, &counts, excluded, degenerate, build_time);
+    let ms = |d: std::time::Duration| d.as_secs_f64() * 1e3;
+    let phases = BuildPhases {
+        references_ms: ms(references),
+        tree_ms: ms(tree - references),
+        layout_ms: ms(build_time - tree),
+    };
+    bvh.stats = BvhStats::new(&bvh, &counts, excluded, degenerate, build_time, phases);
     bvh
 }
 

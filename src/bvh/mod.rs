@@ -23,7 +23,7 @@ pub mod wide;
 use glam::{Vec3, Vec3A};
 
 pub use reference::BruteForce;
-pub use stats::BvhStats;
+pub use stats::{BuildPhases, BvhStats};
 pub use traverse::{Hit, Visit};
 pub use wide::packet::RayTile;
 pub use wide::traverse::Visits;

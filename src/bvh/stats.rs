@@ -28,6 +28,8 @@ pub struct BvhStats {
     pub sah_cost: f64,
     /// Wall-clock build time in milliseconds.
     pub build_ms: f64,
+    /// Where the build time went.
+    pub phases: BuildPhases,
     /// Nodes of the 8-wide traversal layout.
     pub wide_nodes: usize,
     /// Triangle blocks (four triangles each) of the traversal layout.
@@ -38,6 +40,19 @@ pub struct BvhStats {
     /// Bytes of the traversal layout: 8-wide nodes and triangle blocks (which carry the
     /// caller's indices).
     pub wide_bytes: usize,
+}
+
+/// Where a build's time went, in milliseconds, phase by phase (together
+/// [`BvhStats::build_ms`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
+pub struct BuildPhases {
+    /// The triangles' references (box and index), the root's boxes, the left-out triangles
+    /// counted and dropped.
+    pub references_ms: f64,
+    /// The binary tree (every split) and its node array.
+    pub tree_ms: f64,
+    /// The traversal layout: the collapse into 8-wide nodes and the triangle blocks.
+    pub layout_ms: f64,
 }
 
 impl BvhStats {
@@ -60,6 +75,7 @@ impl BvhStats {
         excluded: usize,
         degenerate: usize,
         build_time: Duration,
+        phases: BuildPhases,
     ) -> Self {
         let triangles = bvh.triangle_count();
         let root_area = bvh.bounds().half_area();
@@ -74,6 +90,7 @@ impl BvhStats {
             excluded,
             degenerate,
             build_ms: build_time.as_secs_f64() * 1e3,
+            phases,
             // Every node but the unused slot 1 (see `BvhNode`); none in an empty tree.
             nodes: if bvh.is_empty() {
                 0
@@ -203,6 +220,7 @@ mod tests {
                         s.excluded,
                         s.degenerate,
                         Duration::from_secs_f64(s.build_ms / 1e3),
+                        s.phases,
                     );
                     let what = format!(
                         "{threads} thread(s), {:?}, {} triangles",

@@ -74,7 +74,7 @@ pub fn run(a: StatsArgs) -> Result<()> {
         tracery::bvh::sah::C_INTERSECT * tracery::bvh::sah::PAIR_TEST
     );
     println!(
-        "{:<8} {:>5} {:>5} {:>10} {:>9} {:>7} {:>16} {:>9} {:>10} {:>9} {:>10} {:>11} {:>11} {:>13}",
+        "{:<8} {:>5} {:>5} {:>10} {:>9} {:>7} {:>16} {:>9} {:>10} {:>9} {:>10} {:>17} {:>11} {:>11} {:>13}",
         "split",
         "bins",
         "leaf",
@@ -86,6 +86,7 @@ pub fn run(a: StatsArgs) -> Result<()> {
         "non-finite",
         "zero-area",
         "build ms",
+        "refs/tree/layout",
         "8-wide nodes",
         "blocks of 4",
         "bytes/tri b+w"
@@ -93,7 +94,7 @@ pub fn run(a: StatsArgs) -> Result<()> {
     for r in &rows {
         let s = &r.stats;
         println!(
-            "{:<8} {:>5} {:>5} {:>10} {:>9} {:>7} {:>16} {:>9.2} {:>10} {:>9} {:>10.2} {:>11} {:>11} {:>13}",
+            "{:<8} {:>5} {:>5} {:>10} {:>9} {:>7} {:>16} {:>9.2} {:>10} {:>9} {:>10.2} {:>17} {:>11} {:>11} {:>13}",
             r.split.to_string(),
             if r.split == SplitMethod::Sah {
                 r.bins.to_string()
@@ -112,6 +113,10 @@ pub fn run(a: StatsArgs) -> Result<()> {
             s.excluded,
             s.degenerate,
             s.build_ms,
+            format!(
+                "{:.1}/{:.1}/{:.1}",
+                s.phases.references_ms, s.phases.tree_ms, s.phases.layout_ms
+            ),
             s.wide_nodes,
             s.blocks,
             format!(
