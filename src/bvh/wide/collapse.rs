@@ -5,7 +5,9 @@
 //! node and lane budget, whether to keep it as one lane or open it, and one pass top down
 //! makes the nodes. Binary leaves become wide leaves, their triangles cut into blocks of four.
 //! Siblings' nodes and blocks are stored side by side, and subtrees depth first. Each node
-//! gets its per-octant visiting order ([`WideNode::order`]).
+//! gets its per-octant visiting order ([`WideNode::order`]). On a large tree both passes run
+//! on the rayon pool (the plan by subtrees, `plan_pairs`; the nodes by the top two wide
+//! levels' subtrees, [`Part`]), giving the same layout as one thread.
 //!
 //! The greedy rule it replaced (open the inner child of largest area until eight lanes are
 //! filled) left 8,187 of the dragon 202k's 18,718 nodes with two children: a small inner node
