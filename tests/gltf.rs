@@ -908,6 +908,37 @@ fn an_attribute_past_the_accessor_list_is_an_error() {
     assert!(e.contains("meshes[0].primitives[0].attributes"), "{e}");
 }
 
+/// An image in a buffer view without its MIME type, and an image with neither a URI nor a
+/// buffer view, break rules the glTF crate does not check and made its `Image::source` panic
+/// (found by mutating a textured GLB): both are errors naming the image.
+#[test]
+fn an_image_without_mime_type_or_source_is_an_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let textured = |image: Value| {
+        doc(
+            json!([{"mesh": 0}]),
+            json!({
+                "meshes": [{"primitives": [{"attributes": {"POSITION": 0, "TEXCOORD_0": 2}, "indices": 3, "material": 0}]}],
+                "materials": [{"pbrMetallicRoughness": {"baseColorTexture": {"index": 0}}}],
+                "textures": [{"source": 0}],
+                "images": [image]
+            }),
+        )
+    };
+    let e = error_of(&write(
+        dir.path(),
+        "nomime.gltf",
+        &textured(json!({"bufferView": 0})),
+    ));
+    assert!(e.contains("images[0].mimeType"), "{e}");
+    let e = error_of(&write(
+        dir.path(),
+        "nosource.gltf",
+        &textured(json!({"name": "lost"})),
+    ));
+    assert!(e.contains("images[0].uri"), "{e}");
+}
+
 /// Thirty levels of nodes, each listing the next twice, would place 2^30 copies of the mesh:
 /// the loader stops with a message instead of hanging.
 #[test]

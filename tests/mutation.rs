@@ -9,9 +9,11 @@ use std::path::{Path, PathBuf};
 use std::sync::mpsc;
 use std::time::Duration;
 
+use base64::Engine as _;
 use proptest::prelude::*;
 use tracery::bvh::{BuildOptions, Bvh};
 use tracery::geometry::Ray;
+use tracery::render::{RenderSettings, render};
 use tracery::scene::Scene;
 
 const OBJ: &str = "# a cube with a material library\nmtllib cube.mtl\no cube\nv -1 -1 -1\nv 1 -1 -1\nv 1 1 -1\nv -1 1 -1\nv -1 -1 1\nv 1 -1 1\nv 1 1 1\nv -1 1 1\nvn 0 0 1\nvt 0.5 0.5\nusemtl red\nf 1 2 3 4\nf 5/1/1 6/1/1 7/1/1 8/1/1\nf 1 5 8 4\nf -7 -3 -2 -6\nf 4 3 7 8\nf 1 2 6 5\n";
@@ -62,11 +64,17 @@ fn gltf_bin() -> Vec<u8> {
 
 /// The quad as one GLB: its JSON (without the buffer's URI) and its buffer as the BIN chunk.
 fn glb() -> Vec<u8> {
-    let mut json = GLTF.replace(r#","uri":"quad.bin""#, "").into_bytes();
+    glb_of(
+        GLTF.replace(r#","uri":"quad.bin""#, "").into_bytes(),
+        gltf_bin(),
+    )
+}
+
+/// A GLB of a JSON chunk and a BIN chunk.
+fn glb_of(mut json: Vec<u8>, bin: Vec<u8>) -> Vec<u8> {
     while !json.len().is_multiple_of(4) {
         json.push(b' ');
     }
-    let bin = gltf_bin();
     let mut d = b"glTF".to_vec();
     d.extend(2u32.to_le_bytes());
     d.extend(((12 + 8 + json.len() + 8 + bin.len()) as u32).to_le_bytes());
@@ -77,6 +85,111 @@ fn glb() -> Vec<u8> {
     d.extend(b"BIN\0");
     d.extend(bin);
     d
+}
+
+/// A 2 x 2 RGBA PNG (red, green; blue, white half transparent).
+fn png_2x2() -> Vec<u8> {
+    let img = image::RgbaImage::from_raw(
+        2,
+        2,
+        vec![
+            255, 0, 0, 255, 0, 255, 0, 255, 0, 0, 255, 255, 255, 255, 255, 128,
+        ],
+    )
+    .expect("four pixels");
+    let mut out = std::io::Cursor::new(Vec::new());
+    img.write_to(&mut out, image::ImageFormat::Png)
+        .expect("a PNG in memory");
+    out.into_inner()
+}
+
+/// The quad's buffer followed by a PNG (buffer view 4), padded to four bytes.
+fn textured_bin() -> Vec<u8> {
+    let mut d = gltf_bin();
+    assert!(
+        d.len().is_multiple_of(4),
+        "the PNG starts on a four-byte boundary"
+    );
+    d.extend(png_2x2());
+    while !d.len().is_multiple_of(4) {
+        d.push(0);
+    }
+    d
+}
+
+/// The quad with what the plain one leaves out: a masked material with a base colour texture
+/// in a buffer view (moved by `KHR_texture_transform`, with a sampler) and an emissive one in a
+/// data URI, a perspective camera and a spot light (`KHR_lights_punctual`). `uri` names the
+/// buffer's file (`None` for GLB, whose buffer is its BIN chunk).
+fn textured_gltf(uri: Option<&str>) -> String {
+    let bin = textured_bin();
+    let png = png_2x2();
+    let mut buffer = serde_json::json!({"byteLength": bin.len()});
+    if let Some(u) = uri {
+        buffer["uri"] = u.into();
+    }
+    let data_uri = format!(
+        "data:image/png;base64,{}",
+        base64::engine::general_purpose::STANDARD.encode(&png)
+    );
+    let doc = serde_json::json!({
+        "asset": {"version": "2.0"},
+        "extensionsUsed": ["KHR_lights_punctual", "KHR_texture_transform"],
+        "extensions": {"KHR_lights_punctual": {"lights": [
+            {"type": "spot", "color": [1.0, 0.9, 0.8], "intensity": 20.0,
+             "spot": {"innerConeAngle": 0.3, "outerConeAngle": 0.6}}
+        ]}},
+        "scene": 0,
+        "scenes": [{"nodes": [0, 2, 3]}],
+        "nodes": [
+            {"children": [1], "translation": [1, 0, 0]},
+            {"mesh": 0, "rotation": [0, 0, 0.3826834, 0.9238795]},
+            {"camera": 0, "translation": [0.5, 0.5, 3.0]},
+            {"translation": [0.5, 0.5, 2.0],
+             "extensions": {"KHR_lights_punctual": {"light": 0}}}
+        ],
+        "cameras": [{"type": "perspective",
+                     "perspective": {"yfov": 0.8, "aspectRatio": 1.5, "znear": 0.01}}],
+        "meshes": [{"primitives": [{
+            "attributes": {"POSITION": 0, "NORMAL": 1, "TEXCOORD_0": 2},
+            "indices": 3, "material": 0
+        }]}],
+        "materials": [{
+            "pbrMetallicRoughness": {
+                "baseColorTexture": {"index": 0, "extensions": {"KHR_texture_transform":
+                    {"offset": [0.25, 0.0], "rotation": 0.5, "scale": [2.0, 2.0]}}},
+                "baseColorFactor": [1.0, 0.8, 0.6, 1.0],
+                "metallicFactor": 0.0
+            },
+            "emissiveTexture": {"index": 1},
+            "emissiveFactor": [0.5, 0.5, 0.5],
+            "alphaMode": "MASK",
+            "alphaCutoff": 0.4
+        }],
+        "textures": [{"source": 0, "sampler": 0}, {"source": 1}],
+        "samplers": [{"magFilter": 9729, "wrapS": 33071, "wrapT": 33648}],
+        "images": [{"bufferView": 4, "mimeType": "image/png"}, {"uri": data_uri}],
+        "buffers": [buffer],
+        "bufferViews": [
+            {"buffer": 0, "byteOffset": 0, "byteLength": 48},
+            {"buffer": 0, "byteOffset": 48, "byteLength": 48, "byteStride": 12},
+            {"buffer": 0, "byteOffset": 96, "byteLength": 32},
+            {"buffer": 0, "byteOffset": 128, "byteLength": 12},
+            {"buffer": 0, "byteOffset": gltf_bin().len(), "byteLength": png.len()}
+        ],
+        "accessors": [
+            {"bufferView": 0, "componentType": 5126, "count": 4, "type": "VEC3"},
+            {"bufferView": 1, "componentType": 5126, "count": 4, "type": "VEC3"},
+            {"bufferView": 2, "componentType": 5126, "count": 4, "type": "VEC2"},
+            {"bufferView": 3, "componentType": 5123, "count": 6, "type": "SCALAR"}
+        ]
+    });
+    serde_json::to_string_pretty(&doc).expect("JSON")
+}
+
+/// [`textured_gltf`] as one GLB.
+fn textured_glb() -> Vec<u8> {
+    glb_of(textured_gltf(None).into_bytes(), textured_bin())
 }
 
 /// Tokens that parsers trip over.
@@ -250,6 +363,30 @@ fn check(path: &Path, names: &[&str]) -> Result<(), TestCaseError> {
     Ok(())
 }
 
+/// [`check`], and a scene that loads renders a small picture (its textures looked up through
+/// their transforms and samplers, its camera and lights used) without a panic, every pixel
+/// finite.
+fn check_rendered(path: &Path, names: &[&str]) -> Result<(), TestCaseError> {
+    check(path, names)?;
+    if let Ok(scene) = Scene::load(path) {
+        let bvh = Bvh::build(&scene.mesh.triangles, &BuildOptions::sah());
+        let settings = RenderSettings {
+            width: 12,
+            height: 8,
+            spp: 1,
+            ..RenderSettings::default()
+        };
+        let film = render(&scene, &bvh, &settings, &|_| {})
+            .map_err(|e| TestCaseError::fail(format!("render failed: {e:#}")))?
+            .film;
+        prop_assert!(
+            film.mean().iter().all(|p| p.is_finite()),
+            "a pixel is not finite"
+        );
+    }
+    Ok(())
+}
+
 fn config() -> ProptestConfig {
     ProptestConfig {
         cases: 500,
@@ -322,6 +459,23 @@ proptest! {
     }
 
     #[test]
+    fn mutated_textured_gltf_files_load_or_fail_naming_the_file(edits in prop::collection::vec(edit(), 1..8)) {
+        let dir = tempfile::tempdir().unwrap();
+        std::fs::write(dir.path().join("tex.bin"), textured_bin()).unwrap();
+        let p = dir.path().join("mutant.gltf");
+        std::fs::write(&p, apply(textured_gltf(Some("tex.bin")).into_bytes(), &edits)).unwrap();
+        check_rendered(&p, &["mutant.gltf", "tex.bin"])?;
+    }
+
+    #[test]
+    fn mutated_textured_glb_files_load_or_fail_naming_the_file(edits in prop::collection::vec(edit(), 1..8)) {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("mutant.glb");
+        std::fs::write(&p, apply(textured_glb(), &edits)).unwrap();
+        check_rendered(&p, &["mutant.glb"])?;
+    }
+
+    #[test]
     fn mutated_scene_files_load_or_fail_naming_the_file(edits in prop::collection::vec(edit(), 1..8)) {
         let dir = tempfile::tempdir().unwrap();
         std::fs::write(dir.path().join("square.ply"), PLY_ASCII).unwrap();
@@ -343,6 +497,25 @@ fn the_unmutated_files_load() {
     std::fs::write(dir.path().join("quad.bin"), gltf_bin()).unwrap();
     std::fs::write(dir.path().join("quad.gltf"), GLTF).unwrap();
     std::fs::write(dir.path().join("quad.glb"), glb()).unwrap();
+    std::fs::write(dir.path().join("tex.bin"), textured_bin()).unwrap();
+    std::fs::write(dir.path().join("tex.gltf"), textured_gltf(Some("tex.bin"))).unwrap();
+    std::fs::write(dir.path().join("tex.glb"), textured_glb()).unwrap();
+    for f in ["tex.gltf", "tex.glb"] {
+        let s = Scene::load(&dir.path().join(f)).unwrap();
+        assert!(s.warnings.is_empty(), "{f}: {:?}", s.warnings);
+        assert_eq!(s.triangle_count(), 2, "{f}");
+        let m = &s.materials[0];
+        assert!(
+            m.diffuse_map.is_some() && m.emission_map.is_some(),
+            "{f}: both textures"
+        );
+        assert_eq!(s.lights.len(), 1, "{f}: the spot light");
+        let eye = s.camera.position + s.mesh.origin.as_vec3();
+        assert!(
+            (eye - glam::Vec3::new(0.5, 0.5, 3.0)).abs().max_element() < 1e-5,
+            "{f}: the file's camera, not one framing the quad: {eye}"
+        );
+    }
     let count = |f: &str| Scene::load(&dir.path().join(f)).unwrap().triangle_count();
     assert_eq!(count("quad.gltf"), 2);
     assert_eq!(count("quad.glb"), 2);

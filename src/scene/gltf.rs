@@ -314,6 +314,23 @@ fn validate(doc: &::gltf::Gltf) -> std::result::Result<(), ::gltf::Error> {
         }
     }
     let mut errors = Vec::new();
+    // Two rules of the specification the crate does not check, and whose absence its
+    // `Image::source` meets with a panic: an image in a buffer view names its MIME type, and
+    // every image has a URI or a buffer view.
+    for (i, image) in root.images.iter().enumerate() {
+        let missing = match (&image.buffer_view, &image.uri) {
+            (Some(_), _) if image.mime_type.is_none() => Some("mimeType"),
+            (None, None) => Some("uri"),
+            _ => None,
+        };
+        if let Some(field) = missing {
+            let path = ::gltf::json::Path::new()
+                .field("images")
+                .index(i)
+                .field(field);
+            errors.push((path, Error::Missing));
+        }
+    }
     root.validate(root, ::gltf::json::Path::new, &mut |path, err| {
         let p = path();
         let at = p.to_string();
