@@ -374,22 +374,6 @@ fn spot_lights_keep_their_cones() {
 // Textures
 // ---------------------------------------------------------------------------------------
 
-/// PNG bytes of a 2x2 RGBA image: red, green / blue, white (top row first).
-fn png_2x2() -> Vec<u8> {
-    let img = image::RgbaImage::from_raw(
-        2,
-        2,
-        vec![
-            255, 0, 0, 255, 0, 255, 0, 255, //
-            0, 0, 255, 255, 255, 255, 255, 255,
-        ],
-    )
-    .unwrap();
-    let mut out = std::io::Cursor::new(Vec::new());
-    img.write_to(&mut out, image::ImageFormat::Png).unwrap();
-    out.into_inner()
-}
-
 #[test]
 fn textures_filter_bilinearly_decode_srgb_and_wrap() {
     let texels = vec![
@@ -443,7 +427,7 @@ fn textures_filter_bilinearly_decode_srgb_and_wrap() {
 #[test]
 fn gltf_base_colour_and_emissive_textures_are_read_with_their_samplers() {
     let dir = tempfile::tempdir().unwrap();
-    let png = png_2x2();
+    let png = common::png_2x2();
     let d = doc(
         json!([{"mesh": 0}]),
         json!({
@@ -518,7 +502,7 @@ fn mean_of(film: &tracery::film::Film, x0: u32, x1: u32, y0: u32, y1: u32) -> Ve
 #[test]
 fn a_textured_obj_shows_its_texture() {
     let dir = tempfile::tempdir().unwrap();
-    std::fs::write(dir.path().join("checker.png"), png_2x2()).unwrap();
+    std::fs::write(dir.path().join("checker.png"), common::png_2x2()).unwrap();
     std::fs::write(
         dir.path().join("quad.mtl"),
         "newmtl tex\nKd 1 1 1\nmap_Kd checker.png\n",
@@ -984,7 +968,7 @@ fn texture_transforms_offset_rotate_and_scale_lookups() {
     ));
 
     let dir = tempfile::tempdir().unwrap();
-    let png = png_2x2();
+    let png = common::png_2x2();
     let d = doc(
         json!([{"mesh": 0}]),
         json!({

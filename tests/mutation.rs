@@ -5,6 +5,8 @@
 //! time bound, and never panic; a scene that loads must build a BVH and trace rays without
 //! a panic or a NaN-poisoned tree. Failing inputs shrink to a small mutation list.
 
+mod common;
+
 use std::path::{Path, PathBuf};
 use std::sync::mpsc;
 use std::time::Duration;
@@ -87,22 +89,6 @@ fn glb_of(mut json: Vec<u8>, bin: Vec<u8>) -> Vec<u8> {
     d
 }
 
-/// A 2 x 2 RGBA PNG (red, green; blue, white half transparent).
-fn png_2x2() -> Vec<u8> {
-    let img = image::RgbaImage::from_raw(
-        2,
-        2,
-        vec![
-            255, 0, 0, 255, 0, 255, 0, 255, 0, 0, 255, 255, 255, 255, 255, 128,
-        ],
-    )
-    .expect("four pixels");
-    let mut out = std::io::Cursor::new(Vec::new());
-    img.write_to(&mut out, image::ImageFormat::Png)
-        .expect("a PNG in memory");
-    out.into_inner()
-}
-
 /// The quad's buffer followed by a PNG (buffer view 4), padded to four bytes.
 fn textured_bin() -> Vec<u8> {
     let mut d = gltf_bin();
@@ -110,7 +96,7 @@ fn textured_bin() -> Vec<u8> {
         d.len().is_multiple_of(4),
         "the PNG starts on a four-byte boundary"
     );
-    d.extend(png_2x2());
+    d.extend(common::png_2x2());
     while !d.len().is_multiple_of(4) {
         d.push(0);
     }
@@ -123,7 +109,7 @@ fn textured_bin() -> Vec<u8> {
 /// buffer's file (`None` for GLB, whose buffer is its BIN chunk).
 fn textured_gltf(uri: Option<&str>) -> String {
     let bin = textured_bin();
-    let png = png_2x2();
+    let png = common::png_2x2();
     let mut buffer = serde_json::json!({"byteLength": bin.len()});
     if let Some(u) = uri {
         buffer["uri"] = u.into();

@@ -185,3 +185,19 @@ pub fn layers(k: usize, dz: f32) -> Vec<[Vec3; 3]> {
         })
         .collect()
 }
+
+/// PNG bytes of a 2x2 RGBA image: red, green / blue, white (top row first).
+pub fn png_2x2() -> Vec<u8> {
+    let img = image::RgbaImage::from_raw(
+        2,
+        2,
+        vec![
+            255, 0, 0, 255, 0, 255, 0, 255, //
+            0, 0, 255, 255, 255, 255, 255, 255,
+        ],
+    )
+    .unwrap();
+    let mut out = std::io::Cursor::new(Vec::new());
+    img.write_to(&mut out, image::ImageFormat::Png).unwrap();
+    out.into_inner()
+}
