@@ -87,6 +87,8 @@ pub struct PixelSampler {
     kind: SamplerKind,
     seed: u64,
     index: u32,
+    /// `index` bit-reversed, once per sample instead of once per dimension.
+    index_rev: u32,
 }
 
 impl PixelSampler {
@@ -96,12 +98,17 @@ impl PixelSampler {
             kind,
             seed: mix64(seed ^ mix64(pixel.wrapping_add(0x5851_F42D_4C95_7F2D))),
             index,
+            index_rev: index.reverse_bits(),
         }
     }
 
     /// The same pixel's sampler for another sample index.
     pub fn with_index(self, index: u32) -> Self {
-        Self { index, ..self }
+        Self {
+            index,
+            index_rev: index.reverse_bits(),
+            ..self
+        }
     }
 
     /// The 2D point of dimension pair `dim`, in `[0, 1)^2`.
@@ -113,11 +120,16 @@ impl PixelSampler {
                 glam::Vec2::new(unit((r >> 32) as u32), unit(r as u32))
             }
             SamplerKind::Sobol => {
-                // Shuffle the index (decorrelates dimension pairs), then scramble each axis.
-                let i = nested_uniform_scramble(self.index, h as u32);
-                let x = nested_uniform_scramble(i.reverse_bits(), (h >> 32) as u32 ^ 0x68bc_21eb);
-                let y = nested_uniform_scramble(sobol_dim1(i), (h >> 16) as u32 ^ 0x02e5_be93);
-                glam::Vec2::new(unit(x), unit(y))
+                // Shuffle the index (decorrelates dimension pairs), then scramble each axis:
+                // with `i` the shuffled index, `x = nested_uniform_scramble(i.reverse_bits(),
+                // sx)` and `y = nested_uniform_scramble(sobol_dim1(i), sy)`. Computed on the
+                // reversed bits throughout, where the scrambles work (`i` reversed is `w`, and
+                // `sobol_dim1(i)` reversed is a table lookup of `w`): three bit reversals a
+                // point instead of seven, the same bits (`tests/sampling.rs`).
+                let w = laine_karras(self.index_rev, h as u32);
+                let x = laine_karras(w.reverse_bits(), (h >> 32) as u32 ^ 0x68bc_21eb);
+                let y = laine_karras(sobol_dim1_reversed(w), (h >> 16) as u32 ^ 0x02e5_be93);
+                glam::Vec2::new(unit(x.reverse_bits()), unit(y.reverse_bits()))
             }
         }
     }
@@ -142,6 +154,17 @@ pub fn sobol_dim1(i: u32) -> u32 {
         ^ t[3][(i >> 24) as usize]
 }
 
+/// `sobol_dim1(w.reverse_bits()).reverse_bits()`, by tables of the reversed columns: the
+/// second Sobol dimension where the index and the point are both bit-reversed.
+#[inline]
+fn sobol_dim1_reversed(w: u32) -> u32 {
+    let t = &SOBOL_DIM1_REVERSED_TABLES;
+    t[0][(w & 0xff) as usize]
+        ^ t[1][((w >> 8) & 0xff) as usize]
+        ^ t[2][((w >> 16) & 0xff) as usize]
+        ^ t[3][(w >> 24) as usize]
+}
+
 /// [`sobol_dim1`] one bit at a time: column `k + 1` is column `k` xor itself shifted right.
 pub fn sobol_dim1_bitwise(mut i: u32) -> u32 {
     let mut v = 1u32 << 31;
@@ -157,9 +180,13 @@ pub fn sobol_dim1_bitwise(mut i: u32) -> u32 {
 }
 
 /// For each byte of the index, the xor of the generator columns its set bits select.
-static SOBOL_DIM1_TABLES: [[u32; 256]; 4] = sobol_dim1_tables();
+static SOBOL_DIM1_TABLES: [[u32; 256]; 4] = sobol_dim1_tables(false);
 
-const fn sobol_dim1_tables() -> [[u32; 256]; 4] {
+/// The same for a bit-reversed index and point ([`sobol_dim1_reversed`]): bit `m` of the
+/// reversed index is bit `31 - m` of the index, and selects column `31 - m` reversed.
+static SOBOL_DIM1_REVERSED_TABLES: [[u32; 256]; 4] = sobol_dim1_tables(true);
+
+const fn sobol_dim1_tables(reversed: bool) -> [[u32; 256]; 4] {
     let mut columns = [0u32; 32];
     let mut v = 1u32 << 31;
     let mut k = 0;
@@ -167,6 +194,14 @@ const fn sobol_dim1_tables() -> [[u32; 256]; 4] {
         columns[k] = v;
         v ^= v >> 1;
         k += 1;
+    }
+    if reversed {
+        let forward = columns;
+        let mut m = 0;
+        while m < 32 {
+            columns[m] = forward[31 - m].reverse_bits();
+            m += 1;
+        }
     }
     let mut t = [[0u32; 256]; 4];
     let mut j = 0;
@@ -192,13 +227,19 @@ const fn sobol_dim1_tables() -> [[u32; 256]; 4] {
 /// Owen scrambling by hashing (Laine-Karras permutation on the reversed bits, Burley 2020).
 #[inline]
 pub fn nested_uniform_scramble(x: u32, seed: u32) -> u32 {
-    let mut v = x.reverse_bits();
+    laine_karras(x.reverse_bits(), seed).reverse_bits()
+}
+
+/// The Laine-Karras permutation, on bit-reversed values: each bit flipped by a hash of the
+/// bits below it (above it in the value's own order).
+#[inline]
+fn laine_karras(mut v: u32, seed: u32) -> u32 {
     v = v.wrapping_add(seed);
     v ^= v.wrapping_mul(0x6c50_b47c);
     v ^= v.wrapping_mul(0xb82f_1e52);
     v ^= v.wrapping_mul(0xc7af_e638);
     v ^= v.wrapping_mul(0x8d22_f6e6);
-    v.reverse_bits()
+    v
 }
 
 /// Shirley-Chiu concentric map of the unit square onto the unit disk (keeps strata intact).

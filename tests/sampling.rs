@@ -135,3 +135,44 @@ fn the_byte_table_sobol_dimension_equals_the_bitwise_one() {
         assert_eq!(sobol_dim1(i), sobol_dim1_bitwise(i), "index {i:#x}");
     }
 }
+
+/// The Sobol sampler computes its points on bit-reversed values (three reversals a point):
+/// every point equals the formula as written, a shuffle of the index, then Owen scrambling
+/// of the first dimension (the reversed index) and of the second (`sobol_dim1_bitwise`), for
+/// seeds, pixels, sample indices (edges included, and through `with_index`) and dimensions.
+#[test]
+fn sobol_points_equal_the_straightforward_formula() {
+    use tracery::sampling::{SplitMix64, mix64, nested_uniform_scramble, sobol_dim1_bitwise};
+    let unit = |x: u32| (x >> 8) as f32 * (1.0 / (1u32 << 24) as f32);
+    let reference = |seed: u64, pixel: u64, index: u32, d: u32| {
+        let s = mix64(seed ^ mix64(pixel.wrapping_add(0x5851_F42D_4C95_7F2D)));
+        let h = mix64(s ^ (d as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15));
+        let i = nested_uniform_scramble(index, h as u32);
+        let x = nested_uniform_scramble(i.reverse_bits(), (h >> 32) as u32 ^ 0x68bc_21eb);
+        let y = nested_uniform_scramble(sobol_dim1_bitwise(i), (h >> 16) as u32 ^ 0x02e5_be93);
+        Vec2::new(unit(x), unit(y))
+    };
+    let mut rng = SplitMix64::new(11);
+    let edge = [0u32, 1, 2, 3, 255, 256, 0xffff, 1 << 31, u32::MAX];
+    for k in 0..20_000 {
+        let (seed, pixel) = (rng.next_u64(), rng.next_u64() % 5_000_000);
+        let index = match edge.get(k) {
+            Some(&e) => e,
+            None => rng.next_u64() as u32,
+        };
+        let d = (rng.next_u64() % 64) as u32;
+        let s = PixelSampler::new(SamplerKind::Sobol, seed, pixel, index);
+        let want = reference(seed, pixel, index, d);
+        assert_eq!(
+            s.get_2d(d),
+            want,
+            "seed {seed} pixel {pixel} index {index} dim {d}"
+        );
+        let other = index.wrapping_add(1 + k as u32);
+        assert_eq!(
+            s.with_index(other).get_2d(d),
+            reference(seed, pixel, other, d),
+            "with_index({other})"
+        );
+    }
+}

@@ -157,7 +157,7 @@ impl Tracer<'_> {
         });
         let m = s.material;
         if m.diffuse != Vec3::ZERO || m.specular != Vec3::ZERO {
-            let origin = offset_ray_origin(s.p, s.p_err, s.ng);
+            let origin = s.origin;
             for (li, light) in self.scene.lights.iter().enumerate() {
                 let (to_point, t_max) = match *light {
                     Light::Point { position, .. } | Light::Spot { position, .. } => (position, 1.0),
@@ -183,7 +183,7 @@ impl Tracer<'_> {
         if self.plan.reflections && m.is_mirror() {
             let r = reflect(ray.dir, s.n);
             if r.dot(s.ng) > 0.0 {
-                let bounce = Ray::new(offset_ray_origin(s.p, s.p_err, s.ng), r.normalize());
+                let bounce = Ray::new(s.origin, r.normalize());
                 self.debug_segment(
                     &bounce,
                     SegmentKind::Reflection,

@@ -238,7 +238,7 @@ impl Tracer<'_> {
                 let r = reflect(ray.dir, s.n);
                 if r.dot(s.ng) > 0.0 {
                     counts.reflection += 1;
-                    let bounce = Ray::new(offset_ray_origin(s.p, s.p_err, s.ng), r);
+                    let bounce = Ray::new(s.origin, r);
                     let tint = alpha * m.mirror.min(Vec3::ONE);
                     let h = self.bvh.intersect(&bounce, f32::INFINITY);
                     l += tint
@@ -354,7 +354,7 @@ impl Tracer<'_> {
         if !m.reflects() {
             return Vec3::ZERO;
         }
-        let origin = offset_ray_origin(s.p, s.p_err, s.ng);
+        let origin = s.origin;
         let mut sum = Vec3::ZERO;
         for (i, light) in self.scene.lights.iter().enumerate() {
             sum += match *light {
@@ -452,7 +452,7 @@ impl Tracer<'_> {
             weight /= survive;
         }
         counts.bounce += 1;
-        let bounce = Ray::new(offset_ray_origin(s.p, s.p_err, s.ng), wi);
+        let bounce = Ray::new(s.origin, wi);
         let hit = self.bvh.intersect(&bounce, f32::INFINITY);
         let arrival = Arrival::Bounce {
             pdf,

@@ -39,6 +39,9 @@ pub(super) struct Surface<'a> {
     pub(super) p_err: Vec3,
     /// Geometric normal facing the incoming ray.
     pub(super) ng: Vec3,
+    /// `p` moved off the surface on the side of `ng` ([`offset_ray_origin`]): where shadow
+    /// rays, bounces and reflections leave from, made once for all of them.
+    pub(super) origin: Vec3,
     /// Shading normal on the same side as `ng`.
     pub(super) n: Vec3,
     /// True when the ray arrived on the side the triangle's winding calls outside.
@@ -171,6 +174,7 @@ impl<'a> Tracer<'a> {
             p,
             p_err,
             ng,
+            origin: offset_ray_origin(p, p_err, ng),
             n,
             entering,
             material,
@@ -211,7 +215,7 @@ impl<'a> Tracer<'a> {
             let r = reflect(ray.dir, s.n);
             if r.dot(s.ng) > 0.0 {
                 counts.reflection += 1;
-                let bounce = Ray::new(offset_ray_origin(s.p, s.p_err, s.ng), r);
+                let bounce = Ray::new(s.origin, r);
                 l += alpha * m.mirror.min(Vec3::ONE) * self.trace(&bounce, depth + 1, rng, counts);
             }
         }
@@ -235,7 +239,7 @@ impl<'a> Tracer<'a> {
         if !m.reflects() {
             return Vec3::ZERO;
         }
-        let origin = offset_ray_origin(s.p, s.p_err, s.ng);
+        let origin = s.origin;
         let mut sum = Vec3::ZERO;
         for light in &self.scene.lights {
             sum += match *light {
@@ -313,7 +317,7 @@ impl<'a> Tracer<'a> {
             intensity,
             samples: n,
         } = *rect;
-        let origin = offset_ray_origin(s.p, s.p_err, s.ng);
+        let origin = s.origin;
         let normal = edge_u.cross(edge_v);
         let area = normal.length();
         let ln = normal / area;
