@@ -322,6 +322,11 @@ fn load_bounded(path: PathBuf) -> Result<Scene, String> {
 
 /// The property: a scene, usable, or an error that names one of `names`.
 fn check(path: &Path, names: &[&str]) -> Result<(), TestCaseError> {
+    checked(path, names).map(|_| ())
+}
+
+/// [`check`], handing back the scene that loaded and its BVH.
+fn checked(path: &Path, names: &[&str]) -> Result<Option<(Scene, Bvh)>, TestCaseError> {
     match load_bounded(path.to_path_buf()) {
         Ok(scene) => {
             let bvh = Bvh::build(&scene.mesh.triangles, &BuildOptions::sah());
@@ -338,24 +343,23 @@ fn check(path: &Path, names: &[&str]) -> Result<(), TestCaseError> {
                 let hit = bvh.intersect(&Ray::new(glam::Vec3::splat(0.1), d), f32::INFINITY);
                 prop_assert!(hit.is_none_or(|h| h.t.is_finite() && h.t > 0.0));
             }
+            Ok(Some((scene, bvh)))
         }
         Err(e) => {
             prop_assert!(
                 names.iter().any(|n| e.contains(n)),
                 "the error does not name the file: {e}"
             );
+            Ok(None)
         }
     }
-    Ok(())
 }
 
 /// [`check`], and a scene that loads renders a small picture (its textures looked up through
 /// their transforms and samplers, its camera and lights used) without a panic, every pixel
 /// finite.
 fn check_rendered(path: &Path, names: &[&str]) -> Result<(), TestCaseError> {
-    check(path, names)?;
-    if let Ok(scene) = Scene::load(path) {
-        let bvh = Bvh::build(&scene.mesh.triangles, &BuildOptions::sah());
+    if let Some((scene, bvh)) = checked(path, names)? {
         let settings = RenderSettings {
             width: 12,
             height: 8,
