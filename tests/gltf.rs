@@ -1173,3 +1173,205 @@ fn light_through_a_textured_transparent_surface_takes_the_texture_colour() {
     assert!(l.x > 0.0, "lit through the quad: {l}");
     assert!(l.y < 0.01 * l.x && l.z < 0.01 * l.x, "red: {l}");
 }
+
+/// PNG bytes of a 1x1 RGB image.
+fn png_1x1(rgb: [u8; 3]) -> Vec<u8> {
+    let img = image::RgbImage::from_raw(1, 1, rgb.to_vec()).unwrap();
+    let mut out = std::io::Cursor::new(Vec::new());
+    img.write_to(&mut out, image::ImageFormat::Png).unwrap();
+    out.into_inner()
+}
+
+/// A 2x2 quad in the xy plane facing +z, its texture's top row (`v = 0`) along y = 1, as an
+/// exporter writes it, with a normal map of one texel `rgb` and, if given, a `TANGENT` for
+/// every vertex; a dielectric grey material.
+fn normal_mapped_quad(dir: &Path, rgb: [u8; 3], tangent: Option<[f32; 4]>) -> Scene {
+    let mut bin = f32_bytes(&[-1., -1., 0., 1., -1., 0., 1., 1., 0., -1., 1., 0.]);
+    bin.extend(f32_bytes(&[0., 0., 1.].repeat(4)));
+    bin.extend(f32_bytes(&[0., 1., 1., 1., 1., 0., 0., 0.]));
+    bin.extend([0u16, 1, 2, 0, 2, 3].iter().flat_map(|i| i.to_le_bytes()));
+    let mut attributes = json!({"POSITION": 0, "NORMAL": 1, "TEXCOORD_0": 2});
+    let mut views = vec![
+        json!({"buffer": 0, "byteOffset": 0, "byteLength": 48}),
+        json!({"buffer": 0, "byteOffset": 48, "byteLength": 48}),
+        json!({"buffer": 0, "byteOffset": 96, "byteLength": 32}),
+        json!({"buffer": 0, "byteOffset": 128, "byteLength": 12}),
+    ];
+    let mut accessors = vec![
+        json!({"bufferView": 0, "componentType": 5126, "count": 4, "type": "VEC3", "min": [-1, -1, 0], "max": [1, 1, 0]}),
+        json!({"bufferView": 1, "componentType": 5126, "count": 4, "type": "VEC3"}),
+        json!({"bufferView": 2, "componentType": 5126, "count": 4, "type": "VEC2"}),
+        json!({"bufferView": 3, "componentType": 5123, "count": 6, "type": "SCALAR"}),
+    ];
+    if let Some(t) = tangent {
+        bin.extend(f32_bytes(&t.repeat(4)));
+        views.push(json!({"buffer": 0, "byteOffset": 140, "byteLength": 64}));
+        accessors.push(json!({"bufferView": 4, "componentType": 5126, "count": 4, "type": "VEC4"}));
+        attributes["TANGENT"] = json!(4);
+    }
+    let png = png_1x1(rgb);
+    let d = json!({
+        "asset": {"version": "2.0"},
+        "scene": 0,
+        "scenes": [{"nodes": [0]}],
+        "nodes": [{"mesh": 0}],
+        "meshes": [{"primitives": [{"attributes": attributes, "indices": 3, "material": 0}]}],
+        "materials": [{
+            "pbrMetallicRoughness": {"metallicFactor": 0.0, "roughnessFactor": 1.0},
+            "normalTexture": {"index": 0, "scale": 1.0}
+        }],
+        "textures": [{"source": 0}],
+        "images": [{"uri": format!("data:image/png;base64,{}", base64::engine::general_purpose::STANDARD.encode(&png))}],
+        "buffers": [{"byteLength": bin.len(), "uri": data_uri(&bin)}],
+        "bufferViews": views,
+        "accessors": accessors
+    });
+    let scene = Scene::load(&write(dir, "normal_mapped.gltf", &d)).unwrap();
+    assert!(scene.warnings.is_empty(), "{:?}", scene.warnings);
+    scene
+}
+
+/// The radiance at the centre of the quad of [`normal_mapped_quad`], seen from +z, lit by a
+/// point light at `light` alone (the direct integrator, no highlight).
+fn centre_radiance(scene: &Scene, light: Vec3) -> Vec3 {
+    let mut scene = scene.clone();
+    scene.materials[0].specular = Vec3::ZERO;
+    scene.lights = vec![Light::Point {
+        position: light,
+        color: Vec3::ONE,
+        intensity: 1e5,
+    }];
+    scene.camera = tracery::scene::Camera {
+        position: Vec3::new(0.0, 0.0, 5.0),
+        look_at: Vec3::ZERO,
+        up: Vec3::Y,
+        vfov_deg: 30.0,
+        lens_radius: 0.0,
+        focus_distance: 5.0,
+    };
+    scene.environment = tracery::scene::Environment::None;
+    scene.integrator = tracery::scene::Integrator::Direct;
+    let bvh = Bvh::build(&scene.mesh.triangles, &BuildOptions::sah());
+    let settings = RenderSettings {
+        width: 9,
+        height: 9,
+        spp: 1,
+        ..RenderSettings::default()
+    };
+    let film = render(&scene, &bvh, &settings, &|_| {}).unwrap().film;
+    mean_of(&film, 4, 5, 4, 5)
+}
+
+/// A glTF normal map (`normalTexture`) on a quad facing the camera, its one texel leaning 45
+/// degrees towards the image's up (green, +Y in tangent space): lit by a point light above
+/// the quad's centre and then by one as far below it, the centre is brighter under the upper
+/// one by the ratio of the bent normal's cosines to the two lights (3), where without
+/// the map the two light it alike. The tangents are MikkTSpace's (the file gives none): +x,
+/// with the image's up along +y. With a `TANGENT` whose sign mirrors the bitangent, the map
+/// leans the other way (the ratio inverted). Fails with the green channel read upside down,
+/// with the map read as sRGB (another angle), or with the map ignored (a ratio of 1).
+#[test]
+fn a_normal_map_bends_the_shading_normal_the_way_its_texels_lean() {
+    let dir = tempfile::tempdir().unwrap();
+    let rgb = [128u8, 218, 218];
+    let scene = normal_mapped_quad(dir.path(), rgb, None);
+    let map = scene.materials[0]
+        .normal_map
+        .as_ref()
+        .expect("the normal map");
+    assert!(!map.srgb, "normal maps hold linear values");
+    assert_eq!(scene.mesh.tangents.len(), 2);
+    for t in scene.mesh.tangents.iter().flatten() {
+        assert!(close(t.truncate(), Vec3::X), "tangent {t}");
+        assert!(
+            close(Vec3::Z.cross(t.truncate()) * t.w, Vec3::Y),
+            "sign {t}"
+        );
+    }
+    // Far away, so that where in the centre pixel the sample lands does not matter.
+    let (up, down) = (Vec3::new(0.0, 200.0, 400.0), Vec3::new(0.0, -200.0, 400.0));
+    let m = Vec3::from(rgb.map(|c| c as f32 / 255.0 * 2.0 - 1.0)).normalize();
+    let expected = m.dot(up.normalize()) / m.dot(down.normalize());
+    assert!(expected > 2.5, "{expected}");
+    let l = |c: Vec3| c.x + c.y + c.z;
+    let ratio = |s: &Scene| {
+        let (a, b) = (centre_radiance(s, up), centre_radiance(s, down));
+        assert!(l(a) > 0.0 && l(b) > 0.0, "{a} {b}");
+        l(a) / l(b)
+    };
+    let r = ratio(&scene);
+    assert!((r / expected - 1.0).abs() < 1e-3, "{r} against {expected}");
+    // Without the map, the two lights light the centre alike.
+    let mut plain = scene.clone();
+    plain.materials[0].normal_map = None;
+    let r = ratio(&plain);
+    assert!((r - 1.0).abs() < 1e-3, "{r}");
+    // The file's own tangents are used: a sign of -1 turns the bitangent to -y.
+    let mirrored = normal_mapped_quad(dir.path(), rgb, Some([1.0, 0.0, 0.0, -1.0]));
+    assert!(mirrored.mesh.tangents.iter().flatten().all(|t| t.w == -1.0));
+    let r = ratio(&mirrored);
+    assert!(
+        (r * expected - 1.0).abs() < 1e-3,
+        "{r} against 1 / {expected}"
+    );
+}
+
+/// An OBJ quad whose MTL names a normal map: `map_Bump` with a colour image (as exporters
+/// write normal maps, `-bm` its scale) and `norm` are read as tangent-space normal maps, with
+/// MikkTSpace tangents, and bend the shading normal as the glTF one does (the same ratio); a
+/// grey `map_Bump` is a height map, left out with a warning that says so, as is a `-bm`
+/// that is not a number.
+#[test]
+fn an_obj_normal_map_bends_like_gltf_and_a_grey_bump_map_is_said_unread() {
+    let dir = tempfile::tempdir().unwrap();
+    let rgb = [128u8, 218, 218];
+    std::fs::write(dir.path().join("n.png"), png_1x1(rgb)).unwrap();
+    std::fs::write(dir.path().join("grey.png"), png_1x1([90, 90, 90])).unwrap();
+    let obj = "mtllib quad.mtl\nv -1 -1 0\nv 1 -1 0\nv 1 1 0\nv -1 1 0\n\
+               vt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\nvn 0 0 1\nusemtl m\n\
+               f 1/1/1 2/2/1 3/3/1\nf 1/1/1 3/3/1 4/4/1\n";
+    std::fs::write(dir.path().join("quad.obj"), obj).unwrap();
+    let load = |mtl: &str| {
+        std::fs::write(
+            dir.path().join("quad.mtl"),
+            format!("newmtl m\nKd 0.8 0.8 0.8\n{mtl}\n"),
+        )
+        .unwrap();
+        Scene::load(&dir.path().join("quad.obj")).unwrap()
+    };
+    let (up, down) = (Vec3::new(0.0, 200.0, 400.0), Vec3::new(0.0, -200.0, 400.0));
+    let m = Vec3::from(rgb.map(|c| c as f32 / 255.0 * 2.0 - 1.0)).normalize();
+    let expected = m.dot(up.normalize()) / m.dot(down.normalize());
+    let l = |c: Vec3| c.x + c.y + c.z;
+    for mtl in ["map_Bump -bm 1.0 n.png", "norm n.png"] {
+        let s = load(mtl);
+        assert!(s.warnings.is_empty(), "{mtl}: {:?}", s.warnings);
+        assert_eq!(s.materials[0].normal_scale, 1.0);
+        assert!(!s.materials[0].normal_map.as_ref().expect(mtl).srgb);
+        let r = l(centre_radiance(&s, up)) / l(centre_radiance(&s, down));
+        assert!(
+            (r / expected - 1.0).abs() < 1e-3,
+            "{mtl}: {r} against {expected}"
+        );
+    }
+    assert_eq!(load("bump -bm 0.25 n.png").materials[0].normal_scale, 0.25);
+    for (mtl, why) in [
+        ("map_Bump grey.png", "height map"),
+        ("map_Bump -bm x n.png", "-bm"),
+        ("norm missing.png", "missing.png"),
+    ] {
+        let s = load(mtl);
+        assert!(s.materials[0].normal_map.is_none(), "{mtl}");
+        assert!(
+            s.mesh.tangents.is_empty(),
+            "{mtl}: no tangents without a map"
+        );
+        assert!(
+            s.warnings
+                .iter()
+                .any(|w| w.contains(why) && w.contains("quad.obj")),
+            "{mtl}: {:?}",
+            s.warnings
+        );
+    }
+}

@@ -158,13 +158,19 @@ impl<'a> Tracer<'a> {
         let outward = face_normal(tri);
         let entering = outward.dot(ray.dir) < 0.0;
         let ng = if entering { outward } else { -outward };
-        let mut n = (ns[0] * (1.0 - u - v) + ns[1] * u + ns[2] * v)
-            .try_normalize()
-            .unwrap_or(ng);
-        if n.dot(ng) < 0.0 {
-            n = -n;
-        }
         let material = scene.material_of(prim);
+        let interpolated = ns[0] * (1.0 - u - v) + ns[1] * u + ns[2] * v;
+        let mut n = interpolated.try_normalize().unwrap_or(ng);
+        // Both turned towards the ray when the interpolated normal faces away from it: a
+        // normal map bends the normal of the side the ray sees as it does the other's.
+        let side = if n.dot(ng) < 0.0 { -1.0 } else { 1.0 };
+        n *= side;
+        if let Some(mapped) = normal_mapped(scene, material, prim, u, v, interpolated) {
+            // A map bending the normal past the surface's horizon is not followed there.
+            if (mapped * side).dot(ng) > 0.0 {
+                n = mapped * side;
+            }
+        }
         let Look {
             diffuse,
             emission,
@@ -485,6 +491,28 @@ pub(super) fn textured(scene: &Scene, m: &Material, prim: u32, u: f32, v: f32) -
             .map_or(m.emission, |t| m.emission * t.sample(uv).truncate()),
         opacity: m.opacity_at(base.map_or(1.0, |b| b.w)),
     }
+}
+
+/// The shading normal a material's normal map gives at barycentric `(u, v)` of triangle
+/// `prim`, about the interpolated normal `n` (`None` without a map, without a tangent there,
+/// or where the frame is degenerate: the caller keeps `n`). The map bends the normal on the
+/// side of the surface `n` is on; [`Tracer::surface`] then turns the result towards the ray
+/// as it does `n`.
+pub(super) fn normal_mapped(
+    scene: &Scene,
+    m: &Material,
+    prim: u32,
+    u: f32,
+    v: f32,
+    n: Vec3,
+) -> Option<Vec3> {
+    let map = m.normal_map.as_ref()?;
+    let t = scene.mesh.tangent_at(prim, u, v);
+    if t == glam::Vec4::ZERO {
+        return None;
+    }
+    let texel = map.sample(scene.mesh.uv_at(prim, u, v)).truncate();
+    crate::scene::tangents::perturbed(n, t, texel, m.normal_scale)
 }
 
 /// Barycentric `(u, v)` (the weights of the second and third vertex) of a point `p` lying on

@@ -473,6 +473,8 @@ fn material_from_def(name: &str, m: &MaterialDef) -> Material {
         diffuse_map: None,
         emission_map: None,
         alpha_mode: super::AlphaMode::Opaque,
+        normal_map: None,
+        normal_scale: 1.0,
     }
 }
 

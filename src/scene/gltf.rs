@@ -7,9 +7,12 @@
 //!   several nodes is placed once per node.
 //! - Triangle primitives (`TRIANGLES`, `TRIANGLE_STRIP`, `TRIANGLE_FAN`), indexed or not;
 //!   points and lines are counted and left out with a warning. Positions, `NORMAL` (flat
-//!   normals where a primitive has none, as the glTF specification asks) and `TEXCOORD_0`.
-//!   Triangles with a non-finite vertex are left out, with a warning.
-//! - Materials (metallic-roughness) as [`Material`]s: see [`convert_material`].
+//!   normals where a primitive has none, as the glTF specification asks), `TEXCOORD_0` and
+//!   `TANGENT` (MikkTSpace tangents where a normal-mapped primitive has none, as the
+//!   specification asks: [`super::tangents`]). Triangles with a non-finite vertex are left
+//!   out, with a warning.
+//! - Materials (metallic-roughness) as [`Material`]s: see [`convert_material`]; their base
+//!   colour, emissive and normal textures (`normalTexture` with its `scale`).
 //! - The first perspective camera in the scene becomes the scene camera;
 //!   `KHR_lights_punctual` lights become point lights (see [`Scene`] assembly in [`load_from`]).
 //!   With no light, the default lighting of a bare mesh.
@@ -30,7 +33,7 @@ use ::gltf::accessor::{DataType, Dimensions};
 use ::gltf::mesh::Mode;
 use anyhow::{Result, anyhow, bail};
 use base64::Engine as _;
-use glam::{DMat3, DMat4, DVec3, Vec2, Vec3};
+use glam::{DMat3, DMat4, DVec3, Vec2, Vec3, Vec4};
 
 use super::{Camera, Environment, Light, Material, Mesh, NormalRule, Scene, Texture, Wrap};
 
@@ -208,6 +211,7 @@ pub fn load_from(
         positions: Vec::new(),
         normals: Vec::new(),
         uvs: Vec::new(),
+        tangents: Vec::new(),
         material_ids: Vec::new(),
         primitives: HashMap::new(),
         materials: Vec::new(),
@@ -439,6 +443,8 @@ struct Primitive {
     /// Per-corner normals computed by the loader's rule where the file gives none.
     corner_normals: Option<Vec<[Vec3; 3]>>,
     uvs: Option<Vec<Vec2>>,
+    /// The file's `TANGENT`s, read only when the material has a normal map.
+    tangents: Option<Vec<Vec4>>,
     triangles: Vec<[u32; 3]>,
     material: u32,
 }
@@ -457,6 +463,10 @@ struct Loader<'a> {
     /// World normals, three per triangle (`None` for flat).
     normals: Vec<Option<[Vec3; 3]>>,
     uvs: Vec<[Vec2; 3]>,
+    /// World tangents, three per triangle, for normal-mapped primitives with `TANGENT`
+    /// (`None` otherwise: MikkTSpace's are made in [`Loader::finish`] where the material has
+    /// a normal map).
+    tangents: Vec<Option<[Vec4; 3]>>,
     material_ids: Vec<u32>,
     /// Primitives read once, by (mesh, primitive), for every node that places them.
     primitives: HashMap<(usize, usize), Option<Arc<Primitive>>>,
@@ -464,7 +474,7 @@ struct Loader<'a> {
     /// glTF material index (`None`: the default material) to index in `materials`.
     material_index: HashMap<Option<usize>, u32>,
     /// Decoded images by (image, sRGB), each decoded once.
-    textures: HashMap<usize, Option<Arc<Texture>>>,
+    textures: HashMap<(usize, bool), Option<Arc<Texture>>>,
     camera: Option<GltfCamera>,
     lights: Vec<GltfLight>,
     /// Primitives left out, by reason.
@@ -624,6 +634,13 @@ impl Loader<'_> {
                 Some(uv) => c.map(|i| uv[i]),
                 None => [Vec2::ZERO; 3],
             });
+            // Tangents turn as positions do; a mirror turns the bitangent's handedness.
+            self.tangents.push(p.tangents.as_ref().map(|t| {
+                c.map(|i| {
+                    let v = (linear * t[i].truncate().as_dvec3()).normalize_or_zero();
+                    v.as_vec3().extend(if flip { -t[i].w } else { t[i].w })
+                })
+            }));
             self.material_ids.push(p.material);
         }
         Ok(())
@@ -689,6 +706,16 @@ impl Loader<'_> {
             }
             None => None,
         };
+        let material = self.material(prim.material())?;
+        let normal_mapped = self.materials[material as usize].normal_map.is_some();
+        let tangents = match prim.get(&::gltf::Semantic::Tangents) {
+            Some(acc) if normal_mapped => {
+                self.check_accessor(&at, "TANGENT", &acc, &[DataType::F32], Dimensions::Vec4)?;
+                let tangents = reader.read_tangents().map(|r| r.map(Vec4::from).collect());
+                self.per_vertex(&at, "TANGENT", tangents, n, "MikkTSpace's used")
+            }
+            _ => None,
+        };
 
         let indices: Vec<u32> = match prim.indices() {
             Some(acc) => {
@@ -750,12 +777,12 @@ impl Loader<'_> {
             )),
             _ => None,
         };
-        let material = self.material(prim.material())?;
         Ok(Some(Primitive {
             positions,
             normals,
             corner_normals,
             uvs,
+            tangents,
             triangles,
             material,
         }))
@@ -864,10 +891,33 @@ impl Loader<'_> {
         };
         let pbr = m.pbr_metallic_roughness();
         if let Some(info) = pbr.base_color_texture() {
-            mat.diffuse_map = self.texture(&label, "baseColorTexture", &info);
+            mat.diffuse_map = self.texture(&label, "baseColorTexture", &info, true);
         }
         if let Some(info) = m.emissive_texture() {
-            mat.emission_map = self.texture(&label, "emissiveTexture", &info);
+            mat.emission_map = self.texture(&label, "emissiveTexture", &info, true);
+        }
+        if let Some(n) = m.normal_texture() {
+            let scale = n.scale();
+            if scale.is_finite() {
+                // The gltf crate reads no KHR_texture_transform on a normal texture: its JSON
+                // is read here.
+                let transform = n
+                    .extension_value("KHR_texture_transform")
+                    .map(|t| self.transform_json(&label, "normalTexture", t));
+                mat.normal_scale = scale;
+                mat.normal_map = self.image_texture(
+                    &label,
+                    "normalTexture",
+                    n.texture(),
+                    n.tex_coord(),
+                    transform,
+                    false,
+                );
+            } else {
+                self.warnings.push(format!(
+                    "{label}: normalTexture.scale {scale} is not finite; the normal map is not used"
+                ));
+            }
         }
         let id = self.materials.len() as u32;
         self.materials.push(mat);
@@ -875,29 +925,58 @@ impl Loader<'_> {
         Ok(id)
     }
 
-    /// A colour texture (sRGB), or `None` with a warning when its image cannot be had.
+    /// A texture of a material (`srgb`: a colour texture, else linear values), or `None` with
+    /// a warning when its image cannot be had.
     fn texture(
         &mut self,
         label: &str,
         what: &str,
         info: &::gltf::texture::Info,
+        srgb: bool,
     ) -> Option<Arc<Texture>> {
-        if info.tex_coord() != 0 {
+        let transform = info.texture_transform().map(|t| {
+            if t.tex_coord().is_some_and(|c| c != 0) {
+                self.warnings.push(format!(
+                    "{label}: {what}'s KHR_texture_transform asks for another texture coordinate set; TEXCOORD_0 is read"
+                ));
+            }
+            uv_transform(t.offset(), t.rotation(), t.scale())
+        });
+        self.image_texture(
+            label,
+            what,
+            info.texture(),
+            info.tex_coord(),
+            transform,
+            srgb,
+        )
+    }
+
+    /// [`Loader::texture`] from its parts: the texture, its coordinate set and its
+    /// `KHR_texture_transform`.
+    fn image_texture(
+        &mut self,
+        label: &str,
+        what: &str,
+        tex: ::gltf::Texture,
+        tex_coord: u32,
+        transform: Option<glam::Affine2>,
+        srgb: bool,
+    ) -> Option<Arc<Texture>> {
+        if tex_coord != 0 {
             self.warnings.push(format!(
-                "{label}: {what} uses TEXCOORD_{}; only TEXCOORD_0 is read",
-                info.tex_coord()
+                "{label}: {what} uses TEXCOORD_{tex_coord}; only TEXCOORD_0 is read"
             ));
         }
-        let tex = info.texture();
         let image = tex.source();
-        let key = image.index();
+        let key = (image.index(), srgb);
         let decoded = match self.textures.get(&key) {
             Some(t) => t.clone(),
             None => {
                 let t = match self.image_bytes(&image) {
                     Ok(bytes) => {
                         let name = format!("{}#images[{}]", self.name, image.index());
-                        Texture::decode(&name, &bytes, true).map(Arc::new)
+                        Texture::decode(&name, &bytes, srgb).map(Arc::new)
                     }
                     Err(e) => Err(e),
                 };
@@ -920,14 +999,6 @@ impl Loader<'_> {
             ::gltf::texture::WrappingMode::Repeat => Wrap::Repeat,
         };
         let (wu, wv) = (wrap(sampler.wrap_s()), wrap(sampler.wrap_t()));
-        let transform = info.texture_transform().map(|t| {
-            if t.tex_coord().is_some_and(|c| c != 0) {
-                self.warnings.push(format!(
-                    "{label}: {what}'s KHR_texture_transform asks for another texture coordinate set; TEXCOORD_0 is read"
-                ));
-            }
-            uv_transform(t.offset(), t.rotation(), t.scale())
-        });
         if decoded.wrap_u == wu && decoded.wrap_v == wv && decoded.transform == transform {
             return Some(decoded);
         }
@@ -937,6 +1008,54 @@ impl Loader<'_> {
         t.wrap_v = wv;
         t.transform = transform;
         Some(Arc::new(t))
+    }
+
+    /// A `KHR_texture_transform` object as [`uv_transform`] (defaults where a field is missing
+    /// or malformed, with a warning for the latter).
+    fn transform_json(&mut self, label: &str, what: &str, t: &serde_json::Value) -> glam::Affine2 {
+        let mut bad = Vec::new();
+        let mut pair = |key: &str, default: [f32; 2]| match t.get(key) {
+            None => default,
+            Some(v) => match v
+                .as_array()
+                .map(|a| a.iter().map(serde_json::Value::as_f64).collect::<Vec<_>>())
+            {
+                Some(a) if a.len() == 2 && a.iter().all(|x| x.is_some_and(f64::is_finite)) => {
+                    [a[0].unwrap_or(0.0) as f32, a[1].unwrap_or(0.0) as f32]
+                }
+                _ => {
+                    bad.push(key.to_string());
+                    default
+                }
+            },
+        };
+        let offset = pair("offset", [0.0, 0.0]);
+        let scale = pair("scale", [1.0, 1.0]);
+        let rotation = match t.get("rotation") {
+            None => 0.0,
+            Some(v) => match v.as_f64().filter(|x| x.is_finite()) {
+                Some(r) => r as f32,
+                None => {
+                    bad.push("rotation".to_string());
+                    0.0
+                }
+            },
+        };
+        if !bad.is_empty() {
+            self.warnings.push(format!(
+                "{label}: {what}'s KHR_texture_transform has a malformed {}; its default used",
+                bad.join(", ")
+            ));
+        }
+        if t.get("texCoord")
+            .and_then(serde_json::Value::as_u64)
+            .is_some_and(|c| c != 0)
+        {
+            self.warnings.push(format!(
+                "{label}: {what}'s KHR_texture_transform asks for another texture coordinate set; TEXCOORD_0 is read"
+            ));
+        }
+        uv_transform(offset, rotation, scale)
     }
 
     /// The encoded bytes of an image: a buffer view or a URI.
@@ -977,7 +1096,7 @@ impl Loader<'_> {
         }
         let (origin, local) = super::local_frame(&self.positions);
         let triangles: Vec<[Vec3; 3]> = local.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect();
-        let normals = triangles
+        let normals: Vec<[Vec3; 3]> = triangles
             .iter()
             .zip(&self.normals)
             .map(|(t, n)| {
@@ -1002,12 +1121,32 @@ impl Loader<'_> {
         if materials.is_empty() {
             materials.push(Material::default());
         }
+        let mapped = |i: usize| {
+            materials[self.material_ids[i] as usize]
+                .normal_map
+                .is_some()
+        };
+        let tangents = if self.any_uvs && (0..triangles.len()).any(mapped) {
+            // MikkTSpace's where the file gives none, the file's where it does.
+            let mut t = super::tangents::mikktspace(&triangles, &normals, &self.uvs, |i| {
+                mapped(i) && self.tangents[i].is_none()
+            });
+            for (i, given) in self.tangents.iter().enumerate() {
+                if let (Some(given), true) = (given, mapped(i)) {
+                    t[i] = given.map(|v| if v.is_finite() { v } else { Vec4::ZERO });
+                }
+            }
+            t
+        } else {
+            Vec::new()
+        };
         Ok(GltfData {
             mesh: Mesh {
                 triangles,
                 normals,
                 material_ids: self.material_ids,
                 uvs: if self.any_uvs { self.uvs } else { Vec::new() },
+                tangents,
                 origin,
             },
             materials,
@@ -1109,6 +1248,8 @@ pub fn convert_material(m: &::gltf::Material) -> Material {
         diffuse_map: None,
         emission_map: None,
         alpha_mode,
+        normal_map: None,
+        normal_scale: 1.0,
     }
 }
 

@@ -11,13 +11,14 @@ pub mod normals;
 pub mod obj;
 pub mod ply;
 pub mod shapes;
+pub mod tangents;
 pub mod texture;
 
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use anyhow::{Context, Result, bail};
-use glam::{DVec3, Vec2, Vec3};
+use glam::{DVec3, Vec2, Vec3, Vec4};
 
 use crate::geometry::Aabb;
 pub use normals::NormalRule;
@@ -53,6 +54,11 @@ pub struct Material {
     pub emission_map: Option<Arc<Texture>>,
     /// How `diffuse_map`'s alpha channel changes `opacity` (glTF `alphaMode`).
     pub alpha_mode: AlphaMode,
+    /// Tangent-space normal map (glTF `normalTexture`, linear values), bending the shading
+    /// normal where the mesh has tangents ([`Mesh::tangents`], [`tangents`]).
+    pub normal_map: Option<Arc<Texture>>,
+    /// Scale of the normal map's X and Y (glTF `normalTexture.scale`; 1 as the map is).
+    pub normal_scale: f32,
 }
 
 /// How a material's opacity depends on the alpha channel of its diffuse texture (glTF
@@ -85,6 +91,8 @@ impl Default for Material {
             diffuse_map: None,
             emission_map: None,
             alpha_mode: AlphaMode::Opaque,
+            normal_map: None,
+            normal_scale: 1.0,
         }
     }
 }
@@ -337,6 +345,10 @@ pub struct Mesh {
     /// Texture coordinates, three per triangle; empty when no triangle has any (a triangle
     /// without them among others that have them gets `(0, 0)`).
     pub uvs: Vec<[Vec2; 3]>,
+    /// Tangents for normal maps, three per triangle (xyz along `+u`, w the bitangent's sign:
+    /// see [`tangents`]); empty when no triangle has any, [`Vec4::ZERO`] for a triangle
+    /// without (its material has no normal map).
+    pub tangents: Vec<[Vec4; 3]>,
     /// World position of the mesh's local origin (what the user sees is `origin + position`).
     pub origin: DVec3,
 }
@@ -369,6 +381,14 @@ impl Mesh {
                 self.uvs.extend(other.uvs);
             }
         }
+        if !self.tangents.is_empty() || !other.tangents.is_empty() {
+            self.tangents.resize(before, [Vec4::ZERO; 3]);
+            if other.tangents.is_empty() {
+                self.tangents.resize(self.normals.len(), [Vec4::ZERO; 3]);
+            } else {
+                self.tangents.extend(other.tangents);
+            }
+        }
         self.material_ids
             .extend(other.material_ids.into_iter().map(|m| m + material_offset));
     }
@@ -379,6 +399,20 @@ impl Mesh {
         match self.uvs.get(prim as usize) {
             Some(t) => t[0] * (1.0 - u - v) + t[1] * u + t[2] * v,
             None => Vec2::ZERO,
+        }
+    }
+
+    /// The tangent at barycentric `(u, v)` of triangle `prim` ([`Vec4::ZERO`] when it has
+    /// none): the corners' tangents interpolated, the sign that of the first corner (a
+    /// triangle's corners share one unless the texture is mirrored across it).
+    pub fn tangent_at(&self, prim: u32, u: f32, v: f32) -> Vec4 {
+        match self.tangents.get(prim as usize) {
+            Some(t) => {
+                let xyz =
+                    t[0].truncate() * (1.0 - u - v) + t[1].truncate() * u + t[2].truncate() * v;
+                xyz.extend(t[0].w)
+            }
+            None => Vec4::ZERO,
         }
     }
 
@@ -402,6 +436,7 @@ impl Mesh {
             normals,
             material_ids: vec![material; indices.len()],
             uvs: Vec::new(),
+            tangents: Vec::new(),
             origin: DVec3::ZERO,
         }
     }
@@ -415,6 +450,7 @@ impl Mesh {
             normals,
             material_ids,
             uvs: Vec::new(),
+            tangents: Vec::new(),
             origin: DVec3::ZERO,
         }
     }
@@ -431,6 +467,23 @@ impl Mesh {
         }
         for n in &mut self.normals {
             *n = n.map(|v| Vec3::from(normal_m * glam::Vec3A::from(v)).normalize_or_zero());
+        }
+        // Tangents lie in the surface: they turn as positions do; a mirroring transform turns
+        // the bitangent's handedness.
+        let sign = if linear.determinant() < 0.0 {
+            -1.0
+        } else {
+            1.0
+        };
+        for t in &mut self.tangents {
+            *t = t.map(|v| {
+                if v == Vec4::ZERO {
+                    return v;
+                }
+                (linear * v.truncate())
+                    .normalize_or_zero()
+                    .extend(v.w * sign)
+            });
         }
     }
 

@@ -3,7 +3,10 @@
 //! Polygons are fan-triangulated as `(0, k, k + 1)` in file order (the benchmark convention),
 //! negative (relative) indices are resolved by `tobj`, missing normals follow the file's
 //! smoothing groups (`s`; flat outside them, see [`super::normals`]), and the MTL fields `Kd Ks Ns Ke d Tr Ni illum` become a
-//! [`Material`], `map_Kd` its diffuse texture (an image that cannot be read is a warning). `tobj` reports what went wrong but not where; the loader then finds the first
+//! [`Material`], `map_Kd` its diffuse texture (an image that cannot be read is a warning), and
+//! `norm` or a `map_Bump` / `bump` holding a colour image its normal map (tangent space, `+Y`
+//! up, `-bm` its scale; a grey `map_Bump` is a height map, which is not read: a warning says
+//! so), with MikkTSpace tangents ([`super::tangents`]). `tobj` reports what went wrong but not where; the loader then finds the first
 //! offending line itself so that the error reads `file:line: message`.
 
 use std::io::BufReader;
@@ -18,22 +21,42 @@ use glam::{Vec2, Vec3};
 use super::normals::NormalRule;
 use super::{Material, Mesh, Texture, face_normal, read_file};
 
-/// Images named by the MTL file, each decoded once however many materials use it.
+/// Images named by the MTL file, each decoded once (per colour encoding) however many
+/// materials use it.
 #[derive(Default)]
-struct TextureCache(HashMap<String, Arc<Texture>>);
+struct TextureCache(HashMap<(String, bool), Arc<Texture>>);
 
 impl TextureCache {
-    /// The colour image a `map_Kd` line names (its last word: options such as `-s 1 1 1` come
-    /// before the file name), read beside the OBJ through `read`.
-    fn get(&mut self, spec: &str, read: &dyn Fn(&Path) -> Result<Vec<u8>>) -> Result<Arc<Texture>> {
+    /// The image a texture line names (its last word: options such as `-s 1 1 1` come before
+    /// the file name), read beside the OBJ through `read`; `srgb` for a colour image, linear
+    /// values for a normal map.
+    fn get(
+        &mut self,
+        spec: &str,
+        srgb: bool,
+        read: &dyn Fn(&Path) -> Result<Vec<u8>>,
+    ) -> Result<Arc<Texture>> {
         let file = spec.split_whitespace().last().unwrap_or(spec).to_string();
-        if let Some(t) = self.0.get(&file) {
+        if let Some(t) = self.0.get(&(file.clone(), srgb)) {
             return Ok(t.clone());
         }
         let bytes = read(Path::new(&file))?;
-        let t = Arc::new(Texture::decode(&file, &bytes, true)?);
-        self.0.insert(file, t.clone());
+        let t = Arc::new(Texture::decode(&file, &bytes, srgb)?);
+        self.0.insert((file, srgb), t.clone());
         Ok(t)
+    }
+}
+
+/// The scale a texture line's `-bm` option gives (1 without one; `None` when its value is not
+/// a finite number).
+fn bump_multiplier(spec: &str) -> Option<f32> {
+    let words: Vec<&str> = spec.split_whitespace().collect();
+    match words.iter().position(|&w| w == "-bm") {
+        None => Some(1.0),
+        Some(i) => words
+            .get(i + 1)
+            .and_then(|w| w.parse::<f32>().ok())
+            .filter(|x| x.is_finite()),
     }
 }
 
@@ -152,13 +175,40 @@ pub fn load_from(
                 .map(|tm| {
                     let mut mat = convert_material(tm);
                     if let Some(spec) = &tm.diffuse_texture {
-                        match cache.get(spec, read_mtl) {
+                        match cache.get(spec, true, read_mtl) {
                             Ok(t) => mat.diffuse_map = Some(t),
                             Err(e) => warnings.push(format!(
                                 "{}: material {}: map_Kd not used ({e:#})",
                                 path.display(),
                                 tm.name
                             )),
+                        }
+                    }
+                    // `norm` is a normal map by name; `map_Bump` and `bump` are one when
+                    // their image has colour (exporters write normal maps there too).
+                    let normal = match tm.unknown_param.get("norm") {
+                        Some(spec) => Some(("norm", spec)),
+                        None => tm.normal_texture.as_ref().map(|spec| ("map_Bump", spec)),
+                    };
+                    if let Some((key, spec)) = normal {
+                        let say = |why: String| {
+                            format!(
+                                "{}: material {}: {key} not used ({why})",
+                                path.display(),
+                                tm.name
+                            )
+                        };
+                        match (cache.get(spec, false, read_mtl), bump_multiplier(spec)) {
+                            (Err(e), _) => warnings.push(say(format!("{e:#}"))),
+                            (Ok(_), None) => warnings.push(say("its -bm is not a number".into())),
+                            (Ok(t), Some(_)) if key != "norm" && t.is_grey() => warnings.push(say(
+                                "a grey image: a height map, and bump mapping is not supported"
+                                    .into(),
+                            )),
+                            (Ok(t), Some(scale)) => {
+                                mat.normal_map = Some(t);
+                                mat.normal_scale = scale;
+                            }
                         }
                     }
                     mat
@@ -303,6 +353,11 @@ pub fn load_from(
     if need_default || mats.is_empty() {
         mats.push(Material::default());
     }
+    let mapped = |i: usize| mats[mesh.material_ids[i] as usize].normal_map.is_some();
+    if !mesh.uvs.is_empty() && (0..mesh.triangles.len()).any(mapped) {
+        mesh.tangents =
+            super::tangents::mikktspace(&mesh.triangles, &mesh.normals, &mesh.uvs, mapped);
+    }
     mesh.origin = origin;
     Ok(ObjData {
         mesh,
@@ -357,6 +412,8 @@ fn convert_material(m: &tobj::Material) -> Material {
         diffuse_map: None,
         emission_map: None,
         alpha_mode: super::AlphaMode::Opaque,
+        normal_map: None,
+        normal_scale: 1.0,
     }
 }
 

@@ -112,6 +112,12 @@ impl Texture {
         Self::decode(&path.display().to_string(), &bytes, srgb)
     }
 
+    /// True when every texel's red, green and blue are equal (a grey image: a height map,
+    /// not a normal map).
+    pub fn is_grey(&self) -> bool {
+        self.texels.iter().all(|[r, g, b, _]| r == g && g == b)
+    }
+
     /// Width and height in texels.
     pub fn size(&self) -> (u32, u32) {
         (self.width, self.height)
