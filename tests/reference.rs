@@ -188,10 +188,18 @@ fn environment_matches_mitsuba() {
     check("environment", 64);
 }
 
+/// Normal maps (an OBJ's `norm`, MikkTSpace's tangents) against Mitsuba's `normalmap` BSDF:
+/// two panels on the back wall (one turned in its plane), one mirrored and tipped in the room.
+#[test]
+fn normal_maps_match_mitsuba() {
+    check("normal_map", 64);
+}
+
 /// The comparison fails on deliberate errors of a few percent or a fraction of a pixel: a
 /// light 4% too dim, the direct integrator where Mitsuba traced paths, the camera turned by
 /// half a pixel, the mirror turned by a degree, the lens focused 25% too far, the environment
-/// turned by 2 degrees.
+/// turned by 2 degrees, the normal maps ignored, read upside down (Y negated) or at 80% of
+/// their tilt.
 #[test]
 fn deliberate_errors_are_caught() {
     let mut cases: Vec<(&str, Scene, u32, &str)> = Vec::new();
@@ -221,6 +229,22 @@ fn deliberate_errors_are_caught() {
         *rotation_deg += 2.0;
     }
     cases.push(("environment", s, 64, "environment turned 2 degrees"));
+    let mut s = load_scene("normal_map");
+    for m in &mut s.materials {
+        m.normal_map = None;
+    }
+    cases.push(("normal_map", s, 64, "normal maps ignored"));
+    // The bitangent's sign negated: the map's Y read upside down.
+    let mut s = load_scene("normal_map");
+    for t in s.mesh.tangents.iter_mut().flatten() {
+        t.w = -t.w;
+    }
+    cases.push(("normal_map", s, 64, "normal maps upside down"));
+    let mut s = load_scene("normal_map");
+    for m in &mut s.materials {
+        m.normal_scale = 0.8;
+    }
+    cases.push(("normal_map", s, 64, "normal maps at 80% of their tilt"));
     for (name, scene, spp, what) in cases {
         let a = compare(name, &scene, spp);
         assert!(!a.holds(), "{name} with {what} passed the comparison");
