@@ -149,6 +149,8 @@ fn textured_gltf(uri: Option<&str>) -> String {
             },
             "emissiveTexture": {"index": 1},
             "emissiveFactor": [0.5, 0.5, 0.5],
+            "normalTexture": {"index": 1, "scale": 0.7, "extensions": {"KHR_texture_transform":
+                {"offset": [0.5, 0.0], "scale": [3.0, 1.0]}}},
             "alphaMode": "MASK",
             "alphaCutoff": 0.4
         }],
@@ -496,9 +498,15 @@ fn the_unmutated_files_load() {
         assert_eq!(s.triangle_count(), 2, "{f}");
         let m = &s.materials[0];
         assert!(
-            m.diffuse_map.is_some() && m.emission_map.is_some(),
-            "{f}: both textures"
+            m.diffuse_map.is_some() && m.emission_map.is_some() && m.normal_map.is_some(),
+            "{f}: the three textures"
         );
+        assert_eq!(m.normal_scale, 0.7, "{f}");
+        assert!(
+            m.normal_map.as_ref().unwrap().transform.is_some(),
+            "{f}: the normal map's texture transform"
+        );
+        assert_eq!(s.mesh.tangents.len(), 2, "{f}: MikkTSpace's tangents");
         assert_eq!(s.lights.len(), 1, "{f}: the spot light");
         let eye = s.camera.position + s.mesh.origin.as_vec3();
         assert!(
