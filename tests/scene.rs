@@ -531,3 +531,76 @@ intensity = 5.0
         "{e}"
     );
 }
+
+/// A scene file's material can name a normal map (`normal_map`, `normal_scale`): a mesh given
+/// that material gets MikkTSpace's tangents, turned with the mesh's transform (an OBJ quad
+/// whose `u` runs along +x, turned 90 degrees about z, has its tangents along +y); a shape
+/// without texture coordinates keeps its normals, with a warning naming the line; a missing
+/// image or a scale that is not a number is an error naming the file and line.
+#[test]
+fn scene_file_materials_can_name_a_normal_map() {
+    let dir = tempfile::tempdir().unwrap();
+    let img = image::RgbImage::from_raw(1, 1, vec![128, 218, 218]).unwrap();
+    img.save(dir.path().join("n.png")).unwrap();
+    write(
+        dir.path(),
+        "quad.obj",
+        b"v -1 -1 0\nv 1 -1 0\nv 1 1 0\nv -1 1 0\nvt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\n\
+          f 1/1 2/2 3/3\nf 1/1 3/3 4/4\n",
+    );
+    let scene = |extra: &str| {
+        format!(
+            "[materials.bumpy]\ndiffuse = [0.8, 0.8, 0.8]\nnormal_map = \"n.png\"\nnormal_scale = 0.5\n\n\
+             [[meshes]]\npath = \"quad.obj\"\nrotate = [0.0, 0.0, 90.0]\nmaterial = \"bumpy\"\n{extra}"
+        )
+    };
+    let p = write(dir.path(), "s.toml", scene("").as_bytes());
+    let s = Scene::load(&p).unwrap();
+    assert!(s.warnings.is_empty(), "{:?}", s.warnings);
+    let m = s.material_of(0);
+    assert!(
+        m.normal_map.as_ref().is_some_and(|t| !t.srgb),
+        "a linear map"
+    );
+    assert_eq!(m.normal_scale, 0.5);
+    assert_eq!(s.mesh.tangents.len(), 2);
+    for t in s.mesh.tangents.iter().flatten() {
+        assert!(
+            (t.truncate() - Vec3::Y).length() < 1e-5 && t.w == 1.0,
+            "turned with the quad: {t}"
+        );
+    }
+    // A cube (no texture coordinates) with the same material: a warning, no tangents for it.
+    let p = write(
+        dir.path(),
+        "s.toml",
+        scene("\n[[meshes]]\nshape = \"cube\"\nmaterial = \"bumpy\"\n").as_bytes(),
+    );
+    let s = Scene::load(&p).unwrap();
+    assert_eq!(s.mesh.tangents.len(), 2 + 12);
+    assert!(
+        s.mesh.tangents[2..]
+            .iter()
+            .flatten()
+            .all(|t| *t == glam::Vec4::ZERO)
+    );
+    assert!(
+        s.warnings
+            .iter()
+            .any(|w| w.contains("s.toml:11") && w.contains("no texture coordinates")),
+        "{:?}",
+        s.warnings
+    );
+    for (from, to, line) in [
+        ("\"n.png\"", "\"missing.png\"", 3),
+        ("normal_scale = 0.5", "normal_scale = nan", 4),
+    ] {
+        let p = write(
+            dir.path(),
+            "bad.toml",
+            scene("").replace(from, to).as_bytes(),
+        );
+        let e = err(Scene::load(&p));
+        assert!(e.contains(&format!("bad.toml:{line}")), "{to}: {e}");
+    }
+}

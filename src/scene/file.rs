@@ -11,6 +11,11 @@
 //! [materials.white]
 //! diffuse = [0.73, 0.73, 0.73]
 //!
+//! [materials.bumpy]
+//! diffuse = [0.8, 0.8, 0.8]
+//! normal_map = "bumps.png"   # tangent-space normal map (+Y up); needs texture coordinates
+//! normal_scale = 1.0         # its X and Y scaled (default 1)
+//!
 //! [[meshes]]
 //! path = "../models/cornell_box.obj"
 //!
@@ -55,8 +60,8 @@ use serde::Deserialize;
 use toml::Spanned;
 
 use super::{
-    Camera, Environment, Integrator, Light, Material, Mesh, NormalRule, Scene, line_of, name_of,
-    obj, ply, read_file, shapes,
+    Camera, Environment, Integrator, Light, Material, Mesh, NormalRule, Scene, Texture, line_of,
+    name_of, obj, ply, read_file, shapes,
 };
 
 #[derive(Deserialize)]
@@ -101,6 +106,8 @@ struct MaterialDef {
     ior: Option<f32>,
     mirror: Option<[f32; 3]>,
     absorption: Option<[f32; 3]>,
+    normal_map: Option<Spanned<String>>,
+    normal_scale: Option<Spanned<f32>>,
 }
 
 #[derive(Deserialize, Clone, Copy)]
@@ -230,7 +237,24 @@ pub fn parse(path: &Path, text: &str, read: ReadFn, check_files: bool) -> Result
     let mut by_name: BTreeMap<String, u32> = BTreeMap::new();
     for (name, m) in &def.materials {
         by_name.insert(name.clone(), materials.len() as u32);
-        materials.push(material_from_def(name, m));
+        let mut mat = material_from_def(name, m);
+        if let Some(scale) = &m.normal_scale {
+            if !scale.get_ref().is_finite() {
+                return Err(at(
+                    scale.span().start,
+                    format!("normal_scale {} is not a finite number", scale.get_ref()),
+                ));
+            }
+            mat.normal_scale = *scale.get_ref();
+        }
+        if let Some(map) = &m.normal_map {
+            let file = resolve(map.get_ref());
+            let texture = read(&file)
+                .and_then(|bytes| Texture::decode(&file.display().to_string(), &bytes, false))
+                .map_err(|e| at(map.span().start, format!("normal_map: {e:#}")))?;
+            mat.normal_map = Some(std::sync::Arc::new(texture));
+        }
+        materials.push(mat);
     }
 
     let mut mesh = Mesh::default();
@@ -295,6 +319,26 @@ pub fn parse(path: &Path, text: &str, read: ReadFn, check_files: bool) -> Result
                 ));
             }
         };
+        if let Some(id) = override_id
+            && materials[id as usize].normal_map.is_some()
+        {
+            // The mesh's own tangents were made for its own materials: MikkTSpace's for the
+            // whole mesh, in its own frame (turned with it below).
+            if part.uvs.is_empty() {
+                warnings.push(format!(
+                    "{}:{}: material `{}` has a normal map, but the mesh has no texture coordinates: not applied",
+                    path.display(),
+                    line_of(text, span.start),
+                    materials[id as usize].name
+                ));
+                part.tangents = Vec::new();
+            } else {
+                part.tangents =
+                    super::tangents::mikktspace(&part.triangles, &part.normals, &part.uvs, |_| {
+                        true
+                    });
+            }
+        }
         part.transform(&transform_of(m));
         match override_id {
             Some(id) => {
