@@ -353,6 +353,27 @@ pub struct Mesh {
     pub origin: DVec3,
 }
 
+/// Appends per-triangle values that a mesh may leave empty (texture coordinates, tangents):
+/// `mine` holds them for triangles `..before` or is empty, `other` for the triangles appended
+/// (up to `after`) or is empty; an empty side is filled with `none` when the other has some.
+fn append_optional<T: Copy>(
+    mine: &mut Vec<T>,
+    other: Vec<T>,
+    before: usize,
+    after: usize,
+    none: T,
+) {
+    if mine.is_empty() && other.is_empty() {
+        return;
+    }
+    mine.resize(before, none);
+    if other.is_empty() {
+        mine.resize(after, none);
+    } else {
+        mine.extend(other);
+    }
+}
+
 impl Mesh {
     /// Appends another mesh, shifting its material ids by `material_offset`.
     pub fn append(&mut self, other: Mesh, material_offset: u32) {
@@ -373,22 +394,15 @@ impl Mesh {
         }
         let before = self.normals.len();
         self.normals.extend(other.normals);
-        if !self.uvs.is_empty() || !other.uvs.is_empty() {
-            self.uvs.resize(before, [Vec2::ZERO; 3]);
-            if other.uvs.is_empty() {
-                self.uvs.resize(self.normals.len(), [Vec2::ZERO; 3]);
-            } else {
-                self.uvs.extend(other.uvs);
-            }
-        }
-        if !self.tangents.is_empty() || !other.tangents.is_empty() {
-            self.tangents.resize(before, [Vec4::ZERO; 3]);
-            if other.tangents.is_empty() {
-                self.tangents.resize(self.normals.len(), [Vec4::ZERO; 3]);
-            } else {
-                self.tangents.extend(other.tangents);
-            }
-        }
+        let after = self.normals.len();
+        append_optional(&mut self.uvs, other.uvs, before, after, [Vec2::ZERO; 3]);
+        append_optional(
+            &mut self.tangents,
+            other.tangents,
+            before,
+            after,
+            [Vec4::ZERO; 3],
+        );
         self.material_ids
             .extend(other.material_ids.into_iter().map(|m| m + material_offset));
     }
