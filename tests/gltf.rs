@@ -1306,6 +1306,28 @@ fn a_normal_map_bends_the_shading_normal_the_way_its_texels_lean() {
     plain.materials[0].normal_map = None;
     let r = ratio(&plain);
     assert!((r - 1.0).abs() < 1e-3, "{r}");
+    // The render plan reads normal maps only where a material has one; switched off (the
+    // viewer's toggle), the picture is the one without the map, bit for bit.
+    let settings = RenderSettings {
+        width: 9,
+        height: 9,
+        spp: 2,
+        ..RenderSettings::default()
+    };
+    let plan = tracery::render::RenderPlan::new(&scene, &settings);
+    assert!(plan.normal_maps);
+    assert!(!tracery::render::RenderPlan::new(&plain, &settings).normal_maps);
+    let bvh = Bvh::build(&scene.mesh.triangles, &BuildOptions::sah());
+    let env = tracery::render::EnvironmentMap::None;
+    let off = tracery::render::RenderPlan {
+        normal_maps: false,
+        ..plan
+    };
+    let with_plan =
+        |s: &Scene, p| tracery::render::render_with_plan(s, &bvh, &env, &settings, p, &|_| {}).film;
+    let plain_plan = tracery::render::RenderPlan::new(&plain, &settings);
+    assert_eq!(with_plan(&scene, off), with_plan(&plain, plain_plan));
+    assert_ne!(with_plan(&scene, plan), with_plan(&plain, plain_plan));
     // The file's own tangents are used: a sign of -1 turns the bitangent to -y.
     let mirrored = normal_mapped_quad(dir.path(), rgb, Some([1.0, 0.0, 0.0, -1.0]));
     assert!(mirrored.mesh.tangents.iter().flatten().all(|t| t.w == -1.0));

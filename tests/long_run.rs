@@ -60,6 +60,8 @@ fn ten_thousand_frames_of_random_changes_run_flat() {
         scene_path("cornell_mirror_glass.toml"),
         scene_path("transparent_shadow.toml"),
         scene_path("cornell_box.toml"),
+        // Normal-mapped panels (the normal-map switch above then changes the picture).
+        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/reference/scenes/normal_map.toml"),
         bad.path().to_path_buf(),
     ];
 
@@ -98,6 +100,7 @@ fn ten_thousand_frames_of_random_changes_run_flat() {
                     s.max_depth = pick(7) as u32;
                     s.shadows = pick(4) != 0;
                     s.transparent_shadows = pick(2) == 0;
+                    s.normal_maps = pick(2) == 0;
                     s.sampler = [SamplerKind::Sobol, SamplerKind::Random][pick(2) as usize];
                 }
                 5 => {

@@ -28,6 +28,9 @@ pub struct RenderPlan {
     pub absorption: bool,
     /// Camera rays start on a thin lens (else a pinhole).
     pub thin_lens: bool,
+    /// Materials' normal maps bend the shading normal (else the interpolated normal is
+    /// used, and no normal map is read).
+    pub normal_maps: bool,
     /// At most this many shadow samples per area light and shading point (`None`: each
     /// light's own count). The viewer's moving preview takes 1: noisier, several times cheaper.
     pub max_light_samples: Option<u32>,
@@ -63,6 +66,7 @@ impl RenderPlan {
             transmission: bounces && transparent,
             absorption: absorbing,
             thin_lens: scene.camera.lens_radius > 0.0,
+            normal_maps: scene.materials.iter().any(|m| m.normal_map.is_some()),
             max_light_samples: None,
         }
     }
@@ -79,6 +83,7 @@ impl RenderPlan {
             transmission: true,
             absorption: true,
             thin_lens: true,
+            normal_maps: true,
             max_light_samples: None,
         }
     }
@@ -158,6 +163,20 @@ impl fmt::Display for Explain<'_> {
                 format!("yes, up to {} surfaces", s.max_depth)
             } else {
                 "no transparent material: camera rays stop at the first hit".into()
+            }
+        )?;
+        writeln!(
+            f,
+            "  normal maps          {}",
+            if p.normal_maps {
+                let n = scene
+                    .materials
+                    .iter()
+                    .filter(|m| m.normal_map.is_some())
+                    .count();
+                format!("yes, {n} material(s) bend the shading normal")
+            } else {
+                "no normal map: interpolated normals".into()
             }
         )?;
         writeln!(

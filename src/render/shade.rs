@@ -165,7 +165,12 @@ impl<'a> Tracer<'a> {
         // normal map bends the normal of the side the ray sees as it does the other's.
         let side = if n.dot(ng) < 0.0 { -1.0 } else { 1.0 };
         n *= side;
-        if let Some(mapped) = normal_mapped(scene, material, prim, u, v, interpolated) {
+        if let Some(mapped) = self
+            .plan
+            .normal_maps
+            .then(|| normal_mapped(scene, material, prim, u, v, interpolated))
+            .flatten()
+        {
             // A map bending the normal past the surface's horizon is not followed there.
             if (mapped * side).dot(ng) > 0.0 {
                 n = mapped * side;

@@ -406,6 +406,10 @@ fn render_section(
                 s.shadows,
                 egui::Checkbox::new(&mut s.transparent_shadows, "transparent shadows"),
             );
+            ui.checkbox(&mut s.normal_maps, "normal maps")
+                .on_hover_text(
+                    "materials' normal maps bend the shading normal (off: the mesh's own normals)",
+                );
             egui::ComboBox::from_label("sampler")
                 .selected_text(s.sampler.to_string())
                 .show_ui(ui, |ui| {

@@ -111,6 +111,8 @@ pub struct ViewSettings {
     pub shadows: bool,
     /// Shadow rays pass through transparent surfaces.
     pub transparent_shadows: bool,
+    /// Materials' normal maps bend the shading normal.
+    pub normal_maps: bool,
     /// How samples are drawn.
     pub sampler: SamplerKind,
     /// Seed of the random streams.
@@ -161,6 +163,7 @@ impl Default for ViewSettings {
             integrator: None,
             shadows: true,
             transparent_shadows: true,
+            normal_maps: true,
             sampler: r.sampler,
             seed: r.seed,
             exposure: 1.0,
@@ -223,6 +226,7 @@ impl ViewSettings {
         plan.shadows &= self.shadows;
         plan.transparent_shadows &= self.transparent_shadows && self.shadows;
         plan.thin_lens = self.depth_of_field && self.lens_radius > 0.0;
+        plan.normal_maps &= self.normal_maps;
         plan
     }
 }
