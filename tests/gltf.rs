@@ -1183,9 +1183,15 @@ fn png_1x1(rgb: [u8; 3]) -> Vec<u8> {
 }
 
 /// A 2x2 quad in the xy plane facing +z, its texture's top row (`v = 0`) along y = 1, as an
-/// exporter writes it, with a normal map of one texel `rgb` and, if given, a `TANGENT` for
-/// every vertex; a dielectric grey material.
-fn normal_mapped_quad(dir: &Path, rgb: [u8; 3], tangent: Option<[f32; 4]>) -> Scene {
+/// exporter writes it, with a normal map of one texel `rgb` (its `normalTexture` given the
+/// fields of `extra` too) and, if given, a `TANGENT` for every vertex; a dielectric grey
+/// material. The load's warnings are returned with the scene.
+fn normal_mapped_quad_warned(
+    dir: &Path,
+    rgb: [u8; 3],
+    tangent: Option<[f32; 4]>,
+    extra: Value,
+) -> Scene {
     let mut bin = f32_bytes(&[-1., -1., 0., 1., -1., 0., 1., 1., 0., -1., 1., 0.]);
     bin.extend(f32_bytes(&[0., 0., 1.].repeat(4)));
     bin.extend(f32_bytes(&[0., 1., 1., 1., 1., 0., 0., 0.]));
@@ -1210,7 +1216,7 @@ fn normal_mapped_quad(dir: &Path, rgb: [u8; 3], tangent: Option<[f32; 4]>) -> Sc
         attributes["TANGENT"] = json!(4);
     }
     let png = png_1x1(rgb);
-    let d = json!({
+    let mut d = json!({
         "asset": {"version": "2.0"},
         "scene": 0,
         "scenes": [{"nodes": [0]}],
@@ -1226,7 +1232,13 @@ fn normal_mapped_quad(dir: &Path, rgb: [u8; 3], tangent: Option<[f32; 4]>) -> Sc
         "bufferViews": views,
         "accessors": accessors
     });
-    let scene = Scene::load(&write(dir, "normal_mapped.gltf", &d)).unwrap();
+    merge(&mut d["materials"][0]["normalTexture"], extra);
+    Scene::load(&write(dir, "normal_mapped.gltf", &d)).unwrap()
+}
+
+/// [`normal_mapped_quad_warned`] of a file that must load without warnings.
+fn normal_mapped_quad(dir: &Path, rgb: [u8; 3], tangent: Option<[f32; 4]>) -> Scene {
+    let scene = normal_mapped_quad_warned(dir, rgb, tangent, json!({}));
     assert!(scene.warnings.is_empty(), "{:?}", scene.warnings);
     scene
 }
@@ -1396,4 +1408,52 @@ fn an_obj_normal_map_bends_like_gltf_and_a_grey_bump_map_is_said_unread() {
             s.warnings
         );
     }
+}
+
+/// A normal texture's own `KHR_texture_transform` (which the gltf crate does not read on a
+/// normal texture) is applied; malformed fields (an offset beyond f32, a rotation that is not
+/// a number) fall back to their defaults with a warning naming them; a scale that is not a
+/// number leaves the map out, said.
+#[test]
+fn a_normal_texture_transform_is_read_and_malformed_fields_are_said() {
+    let dir = tempfile::tempdir().unwrap();
+    let rgb = [128u8, 218, 218];
+    let t = |extra: Value| normal_mapped_quad_warned(dir.path(), rgb, None, extra);
+    let s = t(
+        json!({"extensions": {"KHR_texture_transform": {"offset": [0.5, 0.25], "scale": [2.0, 2.0]}}}),
+    );
+    assert!(s.warnings.is_empty(), "{:?}", s.warnings);
+    let map = s.materials[0].normal_map.as_ref().unwrap();
+    let m = map.transform.expect("the transform");
+    assert!((m.transform_point2(Vec2::ZERO) - Vec2::new(0.5, 0.25)).length() < 1e-6);
+    assert!((m.transform_point2(Vec2::X) - Vec2::new(2.5, 0.25)).length() < 1e-6);
+    let s = t(
+        json!({"extensions": {"KHR_texture_transform": {"offset": [1e300, 0.0], "rotation": "x"}}}),
+    );
+    assert!(s.materials[0].normal_map.is_some());
+    assert!(
+        s.warnings
+            .iter()
+            .any(|w| w.contains("normalTexture") && w.contains("offset, rotation")),
+        "{:?}",
+        s.warnings
+    );
+    let m = s.materials[0]
+        .normal_map
+        .as_ref()
+        .unwrap()
+        .transform
+        .unwrap();
+    assert!(
+        (m.transform_point2(Vec2::X) - Vec2::X).length() < 1e-6,
+        "defaults"
+    );
+    let s = t(json!({"scale": 1e39}));
+    assert!(s.materials[0].normal_map.is_none());
+    assert!(s.mesh.tangents.is_empty());
+    assert!(
+        s.warnings.iter().any(|w| w.contains("normalTexture.scale")),
+        "{:?}",
+        s.warnings
+    );
 }

@@ -1020,7 +1020,10 @@ impl Loader<'_> {
                 .as_array()
                 .map(|a| a.iter().map(serde_json::Value::as_f64).collect::<Vec<_>>())
             {
-                Some(a) if a.len() == 2 && a.iter().all(|x| x.is_some_and(f64::is_finite)) => {
+                Some(a)
+                    if a.len() == 2
+                        && a.iter().all(|x| x.is_some_and(|v| (v as f32).is_finite())) =>
+                {
                     [a[0].unwrap_or(0.0) as f32, a[1].unwrap_or(0.0) as f32]
                 }
                 _ => {
@@ -1033,7 +1036,7 @@ impl Loader<'_> {
         let scale = pair("scale", [1.0, 1.0]);
         let rotation = match t.get("rotation") {
             None => 0.0,
-            Some(v) => match v.as_f64().filter(|x| x.is_finite()) {
+            Some(v) => match v.as_f64().filter(|x| (*x as f32).is_finite()) {
                 Some(r) => r as f32,
                 None => {
                     bad.push("rotation".to_string());
