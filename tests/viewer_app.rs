@@ -459,7 +459,19 @@ fn debug_ray_hits_equal_the_cores_closest_hits() {
 
 #[test]
 fn traced_image_equals_the_headless_render_of_the_same_view() {
-    let mut app = app(None);
+    traced_equals_headless(None);
+}
+
+/// The same with normal maps (the normal-mapped panels of the reference scene).
+#[test]
+fn traced_image_with_normal_maps_equals_the_headless_render() {
+    traced_equals_headless(Some("tests/reference/scenes/normal_map.toml"));
+}
+
+/// The viewer's still picture of `scene` (the built-in Cornell box for `None`) at 4 samples
+/// per pixel, from the scene's camera, against the headless render of the same scene.
+fn traced_equals_headless(path: Option<&str>) {
+    let mut app = app(path);
     app.world_mut().resource_mut::<ViewSettings>().max_samples = 4;
     settle(&mut app, "4 samples", |w| {
         let i = w.resource::<TracedImage>();
@@ -467,7 +479,14 @@ fn traced_image_equals_the_headless_render_of_the_same_view() {
     });
     let shown = app.world().resource::<TracedImage>().rgba.clone();
 
-    let scene = Scene::cornell_box();
+    let scene = match path {
+        Some(p) => Scene::load(Path::new(p)).unwrap(),
+        None => Scene::cornell_box(),
+    };
+    assert_eq!(
+        scene.materials.iter().any(|m| m.normal_map.is_some()),
+        path.is_some()
+    );
     let bvh = Bvh::build(&scene.mesh.triangles, &BuildOptions::sah());
     let settings = RenderSettings {
         width: SIZE.x,
