@@ -1457,3 +1457,196 @@ fn a_normal_texture_transform_is_read_and_malformed_fields_are_said() {
         s.warnings
     );
 }
+
+/// A 2x2 quad facing +z (texture coordinates as [`normal_mapped_quad_warned`]'s) with glTF
+/// material `material`; when given, a one-texel base colour image is `textures[0]` and a
+/// one-texel metallic-roughness image `textures[1]` (the material names them).
+fn pbr_quad(
+    dir: &Path,
+    name: &str,
+    material: Value,
+    base: Option<[u8; 3]>,
+    mr: Option<[u8; 3]>,
+) -> Scene {
+    let mut bin = f32_bytes(&[-1., -1., 0., 1., -1., 0., 1., 1., 0., -1., 1., 0.]);
+    bin.extend(f32_bytes(&[0., 0., 1.].repeat(4)));
+    bin.extend(f32_bytes(&[0., 1., 1., 1., 1., 0., 0., 0.]));
+    bin.extend([0u16, 1, 2, 0, 2, 3].iter().flat_map(|i| i.to_le_bytes()));
+    let uri = |rgb: [u8; 3]| json!({"uri": format!("data:image/png;base64,{}", base64::engine::general_purpose::STANDARD.encode(png_1x1(rgb)))});
+    let images = vec![uri(base.unwrap_or([255; 3])), uri(mr.unwrap_or([255; 3]))];
+    let d = json!({
+        "asset": {"version": "2.0"},
+        "scene": 0,
+        "scenes": [{"nodes": [0]}],
+        "nodes": [{"mesh": 0}],
+        "meshes": [{"primitives": [{"attributes": {"POSITION": 0, "NORMAL": 1, "TEXCOORD_0": 2}, "indices": 3, "material": 0}]}],
+        "materials": [material],
+        "textures": [{"source": 0}, {"source": 1}],
+        "images": images,
+        "buffers": [{"byteLength": bin.len(), "uri": data_uri(&bin)}],
+        "bufferViews": [
+            {"buffer": 0, "byteOffset": 0, "byteLength": 48},
+            {"buffer": 0, "byteOffset": 48, "byteLength": 48},
+            {"buffer": 0, "byteOffset": 96, "byteLength": 32},
+            {"buffer": 0, "byteOffset": 128, "byteLength": 12}
+        ],
+        "accessors": [
+            {"bufferView": 0, "componentType": 5126, "count": 4, "type": "VEC3", "min": [-1, -1, 0], "max": [1, 1, 0]},
+            {"bufferView": 1, "componentType": 5126, "count": 4, "type": "VEC3"},
+            {"bufferView": 2, "componentType": 5126, "count": 4, "type": "VEC2"},
+            {"bufferView": 3, "componentType": 5123, "count": 6, "type": "SCALAR"}
+        ]
+    });
+    let scene = Scene::load(&write(dir, name, &d)).unwrap();
+    assert!(scene.warnings.is_empty(), "{:?}", scene.warnings);
+    scene
+}
+
+/// The sky colour of [`pbr_picture`]: what a mirror shows.
+const PBR_SKY: Vec3 = Vec3::new(0.2, 0.5, 1.0);
+
+/// A 9x9 direct-lit picture of a [`pbr_quad`] seen from +z, a point light up and to the side
+/// (its highlight on the quad), a one-colour sky.
+fn pbr_picture(scene: &Scene) -> Vec<Vec3> {
+    let mut scene = scene.clone();
+    scene.lights = vec![Light::Point {
+        position: Vec3::new(1.5, 1.0, 3.0),
+        color: Vec3::ONE,
+        intensity: 30.0,
+    }];
+    scene.camera = tracery::scene::Camera {
+        position: Vec3::new(0.0, 0.0, 5.0),
+        look_at: Vec3::ZERO,
+        up: Vec3::Y,
+        vfov_deg: 30.0,
+        lens_radius: 0.0,
+        focus_distance: 5.0,
+    };
+    scene.environment = tracery::scene::Environment::Color(PBR_SKY);
+    scene.integrator = tracery::scene::Integrator::Direct;
+    let bvh = Bvh::build(&scene.mesh.triangles, &BuildOptions::sah());
+    let settings = RenderSettings {
+        width: 9,
+        height: 9,
+        spp: 1,
+        ..RenderSettings::default()
+    };
+    render(&scene, &bvh, &settings, &|_| {})
+        .unwrap()
+        .film
+        .mean()
+}
+
+/// Largest difference between two pictures, relative to the brighter pixel.
+fn picture_difference(a: &[Vec3], b: &[Vec3]) -> f32 {
+    a.iter()
+        .zip(b)
+        .map(|(a, b)| ((*a - *b).abs().max_element()) / a.max(*b).max_element().max(1e-3))
+        .fold(0.0, f32::max)
+}
+
+/// A glTF `metallicRoughnessTexture` multiplies the metalness factor by its blue channel and
+/// the roughness factor by its green channel (linear values; red, packed occlusion, is not
+/// read), at each point the surface is shaded: a quad whose texture holds one texel renders
+/// as the quad whose factors equal the texel's values (a rough dielectric, a half-rough
+/// metal, a mirror showing the sky). A base colour texture colours a metal's reflection as it
+/// does a dielectric's diffuse colour. Fails with the texture ignored, its channels swapped,
+/// read as sRGB, or the base texture applied to the diffuse colour only (each a different
+/// picture, checked).
+#[test]
+fn metallic_roughness_textures_vary_the_factors_per_point() {
+    let dir = tempfile::tempdir().unwrap();
+    let textured = |name: &str, base: Option<[u8; 3]>, mr: [u8; 3], factors: Value| {
+        let mut m = json!({"pbrMetallicRoughness": factors});
+        m["pbrMetallicRoughness"]["metallicRoughnessTexture"] = json!({"index": 1});
+        if base.is_some() {
+            m["pbrMetallicRoughness"]["baseColorTexture"] = json!({"index": 0});
+        }
+        pbr_picture(&pbr_quad(dir.path(), name, m, base, Some(mr)))
+    };
+    let plain = |name: &str, pbr: Value| {
+        pbr_picture(&pbr_quad(
+            dir.path(),
+            name,
+            json!({"pbrMetallicRoughness": pbr}),
+            None,
+            None,
+        ))
+    };
+    let half = 128.0 / 255.0;
+    let cases = [
+        // (texel: occlusion, roughness, metalness; factors it must equal)
+        (
+            [0u8, 255, 0],
+            json!({"metallicFactor": 0.0, "roughnessFactor": 1.0}),
+        ),
+        (
+            [255, 255, 0],
+            json!({"metallicFactor": 0.0, "roughnessFactor": 1.0}),
+        ),
+        (
+            [0, 128, 255],
+            json!({"metallicFactor": 1.0, "roughnessFactor": half}),
+        ),
+        (
+            [0, 0, 255],
+            json!({"metallicFactor": 1.0, "roughnessFactor": 0.0}),
+        ),
+        (
+            [0, 255, 255],
+            json!({"metallicFactor": 1.0, "roughnessFactor": 1.0}),
+        ),
+    ];
+    let mut pictures = Vec::new();
+    for (i, (texel, factors)) in cases.iter().enumerate() {
+        let want = plain(&format!("plain{i}.gltf"), factors.clone());
+        let got = textured(&format!("mr{i}.gltf"), None, *texel, json!({}));
+        let diff = picture_difference(&got, &want);
+        assert!(
+            diff < 1e-4,
+            "texel {texel:?} against {factors}: differs by {diff}"
+        );
+        pictures.push(want);
+    }
+    // The cases are told apart (by 100 times the tolerance), the red channel aside: a texture
+    // ignored, its channels swapped or its values read as sRGB would be seen.
+    for i in 0..pictures.len() {
+        for j in 0..i {
+            if (i, j) != (1, 0) {
+                let d = picture_difference(&pictures[i], &pictures[j]);
+                assert!(d > 1e-2, "cases {j} and {i} render alike ({d})");
+            }
+        }
+    }
+    // The mirror shows the sky at the quad's centre (its base colour white).
+    let centre = pictures[3][4 * 9 + 4];
+    assert!(
+        close(centre, PBR_SKY),
+        "the mirror shows {centre}, not the sky"
+    );
+    // The base colour texture tints a metal's highlight and a mirror's reflection.
+    for (i, rough) in [(0, 0.5f32), (1, 0.0)] {
+        let want = plain(
+            &format!("red{i}.gltf"),
+            json!({"baseColorFactor": [1.0, 0.0, 0.0, 1.0], "metallicFactor": 1.0, "roughnessFactor": rough}),
+        );
+        let got = textured(
+            &format!("red_texture{i}.gltf"),
+            Some([255, 0, 0]),
+            [0, 255, 255],
+            json!({"roughnessFactor": rough}),
+        );
+        let diff = picture_difference(&got, &want);
+        assert!(
+            diff < 1e-4,
+            "a red base texture on a metal of roughness {rough}: differs by {diff}"
+        );
+        // The quad's middle (3 by 3 pixels) reflects red light only.
+        for y in 3..6 {
+            for x in 3..6 {
+                let p = want[y * 9 + x];
+                assert!(p.x > 0.01 && p.y == 0.0 && p.z == 0.0, "{p} at ({x}, {y})");
+            }
+        }
+    }
+}

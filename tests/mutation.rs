@@ -145,7 +145,10 @@ fn textured_gltf(uri: Option<&str>) -> String {
                 "baseColorTexture": {"index": 0, "extensions": {"KHR_texture_transform":
                     {"offset": [0.25, 0.0], "rotation": 0.5, "scale": [2.0, 2.0]}}},
                 "baseColorFactor": [1.0, 0.8, 0.6, 1.0],
-                "metallicFactor": 0.0
+                "metallicFactor": 0.8,
+                "roughnessFactor": 0.6,
+                "metallicRoughnessTexture": {"index": 1, "extensions": {"KHR_texture_transform":
+                    {"offset": [0.0, 0.5], "rotation": -0.3}}}
             },
             "emissiveTexture": {"index": 1},
             "emissiveFactor": [0.5, 0.5, 0.5],
@@ -499,7 +502,12 @@ fn the_unmutated_files_load() {
         let m = &s.materials[0];
         assert!(
             m.diffuse_map.is_some() && m.emission_map.is_some() && m.normal_map.is_some(),
-            "{f}: the three textures"
+            "{f}: the base colour, emissive and normal textures"
+        );
+        let mr = m.pbr.as_ref().and_then(|p| p.map.as_ref());
+        assert!(
+            mr.is_some_and(|t| t.transform.is_some()),
+            "{f}: the metallic-roughness texture and its transform"
         );
         assert_eq!(m.normal_scale, 0.7, "{f}");
         assert!(

@@ -155,8 +155,7 @@ impl Tracer<'_> {
             }),
             nodes,
         });
-        let m = s.material;
-        if m.diffuse != Vec3::ZERO || m.specular != Vec3::ZERO {
+        if s.diffuse != Vec3::ZERO || s.specular != Vec3::ZERO {
             let origin = s.origin;
             for (li, light) in self.scene.lights.iter().enumerate() {
                 let (to_point, t_max) = match *light {
@@ -180,7 +179,7 @@ impl Tracer<'_> {
         if depth >= self.max_depth {
             return;
         }
-        if self.plan.reflections && m.is_mirror() {
+        if self.plan.reflections && s.is_mirror() {
             let r = reflect(ray.dir, s.n);
             if r.dot(s.ng) > 0.0 {
                 let bounce = Ray::new(s.origin, r.normalize());

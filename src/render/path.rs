@@ -234,12 +234,12 @@ impl Tracer<'_> {
         if depth <= self.max_depth {
             l += alpha * self.lights_at(&s, wo, depth, rng, counts);
             l += alpha * self.diffuse_bounce(&s, wo, depth, beta * alpha, rng, counts);
-            if self.plan.reflections && m.is_mirror() {
+            if self.plan.reflections && s.is_mirror() {
                 let r = reflect(ray.dir, s.n);
                 if r.dot(s.ng) > 0.0 {
                     counts.reflection += 1;
                     let bounce = Ray::new(s.origin, r);
-                    let tint = alpha * m.mirror.min(Vec3::ONE);
+                    let tint = alpha * s.mirror.min(Vec3::ONE);
                     let h = self.bvh.intersect(&bounce, f32::INFINITY);
                     l += tint
                         * self.path(

@@ -62,7 +62,7 @@ impl RenderPlan {
                 || (integrator == Integrator::Path
                     && scene.materials.iter().any(|m| m.is_emissive())),
             transparent_shadows: transparent,
-            reflections: bounces && scene.materials.iter().any(|m| m.is_mirror()),
+            reflections: bounces && scene.materials.iter().any(|m| m.may_mirror()),
             transmission: bounces && transparent,
             absorption: absorbing,
             thin_lens: scene.camera.lens_radius > 0.0,

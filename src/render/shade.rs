@@ -53,6 +53,19 @@ pub(super) struct Surface<'a> {
     pub(super) emission: Vec3,
     /// The material's opacity here (its texture's alpha applied, for `BLEND` and `MASK`).
     pub(super) opacity: f32,
+    /// The material's highlight colour here.
+    pub(super) specular: Vec3,
+    /// The material's highlight exponent here.
+    pub(super) shininess: f32,
+    /// The material's mirror reflectance here (zero: no reflection ray).
+    pub(super) mirror: Vec3,
+}
+
+impl Surface<'_> {
+    /// True when the surface reflects like a mirror here.
+    pub(super) fn is_mirror(&self) -> bool {
+        self.mirror.max_element() > 0.0
+    }
 }
 
 impl<'a> Tracer<'a> {
@@ -180,6 +193,9 @@ impl<'a> Tracer<'a> {
             diffuse,
             emission,
             opacity,
+            specular,
+            shininess,
+            mirror,
         } = textured(scene, material, prim, u, v);
         Surface {
             p,
@@ -192,6 +208,9 @@ impl<'a> Tracer<'a> {
             diffuse,
             emission,
             opacity,
+            specular,
+            shininess,
+            mirror,
         }
     }
 
@@ -222,12 +241,12 @@ impl<'a> Tracer<'a> {
         let wo = -ray.dir.normalize();
 
         let mut l = alpha * (s.emission + self.direct(&s, wo, rng, counts));
-        if self.plan.reflections && m.is_mirror() && depth < self.max_depth {
+        if self.plan.reflections && s.is_mirror() && depth < self.max_depth {
             let r = reflect(ray.dir, s.n);
             if r.dot(s.ng) > 0.0 {
                 counts.reflection += 1;
                 let bounce = Ray::new(s.origin, r);
-                l += alpha * m.mirror.min(Vec3::ONE) * self.trace(&bounce, depth + 1, rng, counts);
+                l += alpha * s.mirror.min(Vec3::ONE) * self.trace(&bounce, depth + 1, rng, counts);
             }
         }
         if alpha < 1.0 && depth < self.max_depth {
@@ -389,7 +408,7 @@ impl<'a> Tracer<'a> {
             }
             // A texture's alpha and colour are read where the shadow ray crosses the
             // triangle, as the camera would see them there.
-            let (opacity, diffuse) = if m.alpha_from_map() || m.diffuse_map.is_some() {
+            let (opacity, diffuse) = if m.is_textured() {
                 let tri = &scene.mesh.triangles[prim as usize];
                 let (u, v) = barycentric(tri, origin + to * t);
                 let look = textured(scene, m, prim, u, v);
@@ -473,28 +492,56 @@ pub(super) struct Look {
     pub(super) diffuse: Vec3,
     pub(super) emission: Vec3,
     pub(super) opacity: f32,
+    pub(super) specular: Vec3,
+    pub(super) shininess: f32,
+    pub(super) mirror: Vec3,
 }
 
-/// The diffuse colour, emission and opacity of `m` at barycentric `(u, v)` of triangle
-/// `prim`: the material's factors times its textures, read at the triangle's texture
-/// coordinates (the diffuse texture's alpha for the opacity, as its alpha mode says).
+/// The look of `m` at barycentric `(u, v)` of triangle `prim`: the material's factors times
+/// its textures, read at the triangle's texture coordinates (the diffuse texture's alpha for
+/// the opacity, as its alpha mode says). A glTF material's base colour and
+/// metallic-roughness textures vary its base colour, metalness and roughness, from which its
+/// lobes are made here ([`crate::scene::pbr`]); other materials' textures multiply the diffuse
+/// colour.
 pub(super) fn textured(scene: &Scene, m: &Material, prim: u32, u: f32, v: f32) -> Look {
     if !m.is_textured() {
         return Look {
             diffuse: m.diffuse,
             emission: m.emission,
             opacity: m.opacity_at(1.0),
+            specular: m.specular,
+            shininess: m.shininess,
+            mirror: m.mirror,
         };
     }
     let uv = scene.mesh.uv_at(prim, u, v);
     let base = m.diffuse_map.as_ref().map(|t| t.sample(uv));
-    Look {
-        diffuse: base.map_or(m.diffuse, |b| m.diffuse * b.truncate()),
-        emission: m
-            .emission_map
-            .as_ref()
-            .map_or(m.emission, |t| m.emission * t.sample(uv).truncate()),
-        opacity: m.opacity_at(base.map_or(1.0, |b| b.w)),
+    let emission = m
+        .emission_map
+        .as_ref()
+        .map_or(m.emission, |t| m.emission * t.sample(uv).truncate());
+    let opacity = m.opacity_at(base.map_or(1.0, |b| b.w));
+    match &m.pbr {
+        Some(pbr) => {
+            let mr = pbr.map.as_ref().map(|t| t.sample(uv));
+            let lobes = pbr.lobes_at(base.map(|b| b.truncate()), mr);
+            Look {
+                diffuse: lobes.diffuse,
+                emission,
+                opacity,
+                specular: lobes.specular,
+                shininess: lobes.shininess,
+                mirror: lobes.mirror,
+            }
+        }
+        None => Look {
+            diffuse: base.map_or(m.diffuse, |b| m.diffuse * b.truncate()),
+            emission,
+            opacity,
+            specular: m.specular,
+            shininess: m.shininess,
+            mirror: m.mirror,
+        },
     }
 }
 
@@ -534,15 +581,15 @@ pub(super) fn barycentric(t: &[Vec3; 3], p: Vec3) -> (f32, f32) {
 }
 
 /// Blinn-Phong, energy-normalized: `Kd / pi + Ks (Ns + 8) / (8 pi) cos^Ns(n, h)`, with the
-/// surface's (textured) diffuse colour.
+/// surface's colours and exponent at the shading point (its textures applied).
 pub(super) fn brdf(s: &Surface, wi: Vec3, wo: Vec3) -> Vec3 {
-    let (m, n) = (s.material, s.n);
+    let n = s.n;
     let mut f = s.diffuse * std::f32::consts::FRAC_1_PI;
-    if m.specular != Vec3::ZERO {
+    if s.specular != Vec3::ZERO {
         let h = (wi + wo).normalize_or_zero();
         let c = n.dot(h).max(0.0);
-        let ns = m.shininess.max(0.0);
-        f += m.specular * (ns + 8.0) / (8.0 * std::f32::consts::PI) * c.powf(ns);
+        let ns = s.shininess.max(0.0);
+        f += s.specular * (ns + 8.0) / (8.0 * std::f32::consts::PI) * c.powf(ns);
     }
     f
 }

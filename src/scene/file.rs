@@ -519,6 +519,7 @@ fn material_from_def(name: &str, m: &MaterialDef) -> Material {
         alpha_mode: super::AlphaMode::Opaque,
         normal_map: None,
         normal_scale: 1.0,
+        pbr: None,
     }
 }
 

@@ -12,7 +12,8 @@
 //!   specification asks: [`super::tangents`]). Triangles with a non-finite vertex are left
 //!   out, with a warning.
 //! - Materials (metallic-roughness) as [`Material`]s: see [`convert_material`]; their base
-//!   colour, emissive and normal textures (`normalTexture` with its `scale`).
+//!   colour, metallic-roughness, emissive and normal textures (`normalTexture` with its
+//!   `scale`).
 //! - The first perspective camera in the scene becomes the scene camera;
 //!   `KHR_lights_punctual` lights become point lights (see [`Scene`] assembly in [`load_from`]).
 //!   With no light, the default lighting of a bare mesh.
@@ -893,6 +894,12 @@ impl Loader<'_> {
         if let Some(info) = pbr.base_color_texture() {
             mat.diffuse_map = self.texture(&label, "baseColorTexture", &info, true);
         }
+        if let Some(info) = pbr.metallic_roughness_texture() {
+            let map = self.texture(&label, "metallicRoughnessTexture", &info, false);
+            if let Some(p) = mat.pbr.as_mut() {
+                p.map = map;
+            }
+        }
         if let Some(info) = m.emissive_texture() {
             mat.emission_map = self.texture(&label, "emissiveTexture", &info, true);
         }
@@ -1196,10 +1203,9 @@ fn triangles_of(mode: Mode, idx: &[u32]) -> Vec<[u32; 3]> {
 
 /// A glTF metallic-roughness material as the renderer's [`Material`] (textures are attached by
 /// the loader):
-/// - diffuse: base colour times `1 - metallic` (texture applied when shading);
-/// - specular: Blinn-Phong with the Fresnel colour at normal incidence (`0.04` for a
-///   dielectric, the base colour for a metal) and exponent `2 / a^2 - 2`, `a = roughness^2`;
-/// - mirror instead, with that colour, when metallic >= 0.5 and roughness <= 0.2;
+/// - diffuse, specular, shininess and mirror from the base colour, metalness and roughness
+///   factors ([`super::pbr::lobes`]); the factors are kept in [`Material::pbr`], for the
+///   base colour and metallic-roughness textures to vary them where a ray meets the surface;
 /// - emission: emissive factor times `KHR_materials_emissive_strength`;
 /// - opacity: base alpha (times the base colour texture's) for `BLEND`, 0 or 1 against the
 ///   cutoff for `MASK`, 1 for `OPAQUE`; light through `BLEND` and `MASK` is not tinted;
@@ -1211,10 +1217,7 @@ pub fn convert_material(m: &::gltf::Material) -> Material {
     let base = Vec3::new(r, g, b).clamp(Vec3::ZERO, Vec3::ONE);
     let metallic = pbr.metallic_factor().clamp(0.0, 1.0);
     let roughness = pbr.roughness_factor().clamp(0.0, 1.0);
-    let f0 = Vec3::splat(0.04).lerp(base, metallic);
-    let a = (roughness * roughness).max(1e-3);
-    let shininess = (2.0 / (a * a) - 2.0).clamp(0.0, 10_000.0);
-    let mirror_like = metallic >= 0.5 && roughness <= 0.2;
+    let lobes = super::pbr::lobes(base, metallic, roughness);
     let strength = m.emissive_strength().unwrap_or(1.0).max(0.0);
     let emission = Vec3::from(m.emissive_factor()).max(Vec3::ZERO) * strength;
     // BLEND and MASK: the base alpha here, times the base colour texture's where shaded
@@ -1236,16 +1239,15 @@ pub fn convert_material(m: &::gltf::Material) -> Material {
             ior = m.ior().unwrap_or(1.5);
         }
     }
-    let diffuse = base * (1.0 - metallic);
     Material {
         name: m.name().unwrap_or("material").to_string(),
-        diffuse,
-        specular: if mirror_like { Vec3::ZERO } else { f0 },
-        shininess,
+        diffuse: lobes.diffuse,
+        specular: lobes.specular,
+        shininess: lobes.shininess,
         emission,
         opacity,
         ior,
-        mirror: if mirror_like { f0 } else { Vec3::ZERO },
+        mirror: lobes.mirror,
         absorption: Vec3::ZERO,
         illum: 2,
         diffuse_map: None,
@@ -1253,6 +1255,12 @@ pub fn convert_material(m: &::gltf::Material) -> Material {
         alpha_mode,
         normal_map: None,
         normal_scale: 1.0,
+        pbr: Some(super::pbr::MetallicRoughness {
+            base,
+            metallic,
+            roughness,
+            map: None,
+        }),
     }
 }
 

@@ -9,6 +9,7 @@ pub mod file;
 pub mod gltf;
 pub mod normals;
 pub mod obj;
+pub mod pbr;
 pub mod ply;
 pub mod shapes;
 pub mod tangents;
@@ -59,6 +60,12 @@ pub struct Material {
     pub normal_map: Option<Arc<Texture>>,
     /// Scale of the normal map's X and Y (glTF `normalTexture.scale`; 1 as the map is).
     pub normal_scale: f32,
+    /// A glTF material's metallic-roughness parameters (`None` for OBJ and scene-file
+    /// materials). `diffuse`, `specular`, `shininess` and `mirror` hold what its factors give
+    /// ([`pbr::lobes`]); where the material has textures, its base colour and
+    /// metallic-roughness textures are applied to these parameters at each shading point
+    /// instead.
+    pub pbr: Option<pbr::MetallicRoughness>,
 }
 
 /// How a material's opacity depends on the alpha channel of its diffuse texture (glTF
@@ -93,6 +100,7 @@ impl Default for Material {
             alpha_mode: AlphaMode::Opaque,
             normal_map: None,
             normal_scale: 1.0,
+            pbr: None,
         }
     }
 }
@@ -134,14 +142,23 @@ impl Material {
         (1.0 - opacity) * tint
     }
 
-    /// True when the surface reflects like a mirror.
+    /// True when the surface reflects like a mirror (everywhere: its factors say so).
     pub fn is_mirror(&self) -> bool {
         self.mirror.max_element() > 0.0
     }
 
-    /// True when the surface reflects light (some diffuse or specular colour).
+    /// True when some point of the surface may reflect like a mirror: it is one, or its
+    /// metallic-roughness texture may make it one ([`pbr::MetallicRoughness::may_mirror`]).
+    pub fn may_mirror(&self) -> bool {
+        self.is_mirror() || self.pbr.as_ref().is_some_and(|p| p.may_mirror())
+    }
+
+    /// True when some point of the surface may reflect light diffusely or in a highlight
+    /// (some diffuse or specular colour, or a metallic-roughness texture that may give one).
     pub fn reflects(&self) -> bool {
-        self.diffuse != Vec3::ZERO || self.specular != Vec3::ZERO
+        self.diffuse != Vec3::ZERO
+            || self.specular != Vec3::ZERO
+            || self.pbr.as_ref().is_some_and(|p| p.map.is_some())
     }
 
     /// True when the surface emits light.
@@ -149,9 +166,12 @@ impl Material {
         self.emission.max_element() > 0.0
     }
 
-    /// True when a texture changes the surface's colour from point to point.
+    /// True when a texture changes the surface's colour (or, through a metallic-roughness
+    /// texture, its lobes) from point to point.
     pub fn is_textured(&self) -> bool {
-        self.diffuse_map.is_some() || self.emission_map.is_some()
+        self.diffuse_map.is_some()
+            || self.emission_map.is_some()
+            || self.pbr.as_ref().is_some_and(|p| p.map.is_some())
     }
 }
 

@@ -414,6 +414,7 @@ fn convert_material(m: &tobj::Material) -> Material {
         alpha_mode: super::AlphaMode::Opaque,
         normal_map: None,
         normal_scale: 1.0,
+        pbr: None,
     }
 }
 

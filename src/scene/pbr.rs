@@ -1,0 +1,162 @@
+//! glTF's metallic-roughness material model as the renderer's lobes: a Lambertian diffuse
+//! colour, an energy-normalised Blinn-Phong highlight and, for smooth metals, a mirror.
+//!
+//! [`lobes`] is the one mapping, used twice: by the glTF loader for a material's factors
+//! ([`super::gltf::convert_material`]), and at every shading point of a material whose
+//! textures vary those factors over its surface (the base colour texture, the
+//! `metallicRoughnessTexture`), so that a texel equal to 1 everywhere gives the same picture as
+//! the factors alone.
+
+use std::sync::Arc;
+
+use glam::{Vec3, Vec4};
+
+use super::Texture;
+
+/// A glTF metallic-roughness material's parameters, kept on [`super::Material::pbr`] so that
+/// its textures can be applied where a ray meets it.
+#[derive(Clone, Debug, PartialEq)]
+pub struct MetallicRoughness {
+    /// Base colour factor (linear RGB in `[0, 1]`); the base colour texture multiplies it.
+    pub base: Vec3,
+    /// Metalness factor in `[0, 1]`.
+    pub metallic: f32,
+    /// Perceptual roughness factor in `[0, 1]`.
+    pub roughness: f32,
+    /// The `metallicRoughnessTexture` (linear values): its blue channel multiplies
+    /// `metallic`, its green channel `roughness` (red and alpha are not read: packed
+    /// occlusion, say).
+    pub map: Option<Arc<Texture>>,
+}
+
+impl MetallicRoughness {
+    /// The lobes where the base colour texture reads `base_texel` (linear RGB, `None`: no
+    /// texture) and the metallic-roughness texture `mr_texel` (`None`: no texture).
+    pub fn lobes_at(&self, base_texel: Option<Vec3>, mr_texel: Option<Vec4>) -> Lobes {
+        let base = base_texel.map_or(self.base, |t| self.base * t);
+        let (metallic, roughness) = match mr_texel {
+            Some(t) => (self.metallic * t.z, self.roughness * t.y),
+            None => (self.metallic, self.roughness),
+        };
+        lobes(base, metallic, roughness)
+    }
+
+    /// True when some point of the surface may reflect as a mirror: the factors say so, or a
+    /// texture may lower the roughness enough where the metalness factor allows it.
+    pub fn may_mirror(&self) -> bool {
+        self.metallic >= MIRROR_METALLIC
+            && (self.roughness <= MIRROR_ROUGHNESS || self.map.is_some())
+    }
+}
+
+/// What the renderer's shading reads of a material at one point.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Lobes {
+    /// Lambertian colour.
+    pub diffuse: Vec3,
+    /// Blinn-Phong highlight colour (zero where the point is a mirror).
+    pub specular: Vec3,
+    /// Blinn-Phong exponent.
+    pub shininess: f32,
+    /// Mirror reflectance (zero unless the point is a smooth metal).
+    pub mirror: Vec3,
+}
+
+/// Metalness from which a smooth surface is drawn as a mirror.
+const MIRROR_METALLIC: f32 = 0.5;
+/// Roughness up to which a metal is drawn as a mirror.
+const MIRROR_ROUGHNESS: f32 = 0.2;
+
+/// The lobes of base colour `base`, metalness `metallic` and roughness `roughness` (each
+/// clamped to `[0, 1]`):
+/// - diffuse: `base (1 - metallic)`;
+/// - specular: the Fresnel colour at normal incidence, `F0 = mix(0.04, base, metallic)`
+///   (`0.04` for a dielectric, the base colour for a metal), with the Blinn-Phong exponent
+///   `2 / a^2 - 2`, `a = roughness^2` (Walter et al. 2007's correspondence with GGX), at most
+///   10,000;
+/// - a mirror of colour `F0` instead of the highlight where `metallic >= 0.5` and
+///   `roughness <= 0.2`.
+pub fn lobes(base: Vec3, metallic: f32, roughness: f32) -> Lobes {
+    let base = base.clamp(Vec3::ZERO, Vec3::ONE);
+    let metallic = metallic.clamp(0.0, 1.0);
+    let roughness = roughness.clamp(0.0, 1.0);
+    let f0 = Vec3::splat(0.04).lerp(base, metallic);
+    let a = (roughness * roughness).max(1e-3);
+    let shininess = (2.0 / (a * a) - 2.0).clamp(0.0, 10_000.0);
+    let mirror_like = metallic >= MIRROR_METALLIC && roughness <= MIRROR_ROUGHNESS;
+    Lobes {
+        diffuse: base * (1.0 - metallic),
+        specular: if mirror_like { Vec3::ZERO } else { f0 },
+        shininess,
+        mirror: if mirror_like { f0 } else { Vec3::ZERO },
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn dielectrics_metals_and_mirrors() {
+        let red = Vec3::new(0.8, 0.1, 0.1);
+        let paint = lobes(red, 0.0, 1.0);
+        assert_eq!(paint.diffuse, red);
+        assert_eq!(paint.specular, Vec3::splat(0.04));
+        assert_eq!(paint.shininess, 0.0, "roughness 1: a = 1, exponent 0");
+        assert_eq!(paint.mirror, Vec3::ZERO);
+        let brushed = lobes(red, 1.0, 0.5);
+        assert_eq!(brushed.diffuse, Vec3::ZERO);
+        assert_eq!(brushed.specular, red);
+        assert_eq!(brushed.shininess, 2.0 / 0.0625 - 2.0);
+        let chrome = lobes(red, 1.0, 0.1);
+        assert_eq!((chrome.specular, chrome.mirror), (Vec3::ZERO, red));
+        // Out of range and NaN-free inputs are clamped, never passed on.
+        let wild = lobes(Vec3::splat(4.0), 2.0, -1.0);
+        assert_eq!(wild.mirror, Vec3::ONE);
+        assert_eq!(wild.shininess, 10_000.0);
+    }
+
+    #[test]
+    fn texels_multiply_the_factors_blue_metalness_green_roughness() {
+        let m = MetallicRoughness {
+            base: Vec3::new(1.0, 0.5, 0.25),
+            metallic: 1.0,
+            roughness: 1.0,
+            map: None,
+        };
+        // Blue 1, green 0.5: a metal of roughness 0.5.
+        let at = m.lobes_at(
+            Some(Vec3::new(0.5, 1.0, 1.0)),
+            Some(Vec4::new(0.0, 0.5, 1.0, 1.0)),
+        );
+        assert_eq!(at, lobes(Vec3::new(0.5, 0.5, 0.25), 1.0, 0.5));
+        // Blue 0, green 1: a rough dielectric.
+        let at = m.lobes_at(None, Some(Vec4::new(1.0, 1.0, 0.0, 0.0)));
+        assert_eq!(at, lobes(m.base, 0.0, 1.0));
+        assert_eq!(m.lobes_at(None, None), lobes(m.base, 1.0, 1.0));
+    }
+
+    #[test]
+    fn a_texture_may_make_a_metal_a_mirror_but_not_a_dielectric() {
+        let mut m = MetallicRoughness {
+            base: Vec3::ONE,
+            metallic: 1.0,
+            roughness: 1.0,
+            map: None,
+        };
+        assert!(!m.may_mirror(), "rough everywhere");
+        m.map = Some(Arc::new(Texture::from_rgba8(
+            "t".into(),
+            1,
+            1,
+            vec![[0, 0, 255, 255]],
+            false,
+        )));
+        assert!(m.may_mirror(), "a texel may lower the roughness");
+        m.metallic = 0.4;
+        assert!(
+            !m.may_mirror(),
+            "no texel raises the metalness past its factor"
+        );
+    }
+}
