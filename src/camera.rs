@@ -1,6 +1,6 @@
 //! Camera rays: pinhole and thin lens, pixel row 0 at the top.
 
-use glam::{Quat, Vec2, Vec3};
+use glam::{Mat3, Quat, Vec2, Vec3};
 
 use crate::geometry::Ray;
 use crate::scene::Camera;
@@ -33,18 +33,11 @@ pub struct CameraRays {
 
 impl CameraRays {
     /// Frames `camera` for a `width x height` image. A view direction parallel to `up` (or a
-    /// zero or non-finite one) falls back to a valid frame instead of producing NaN.
+    /// zero or non-finite one) falls back to a valid frame instead of producing NaN. The frame
+    /// is that of [`look_rotation`], turned as [`CameraRays::from_pose`] turns it: the viewer,
+    /// which places its camera at that rotation, traces the same rays bit for bit.
     pub fn new(camera: &Camera, width: u32, height: u32) -> Self {
-        let forward = (camera.look_at - camera.position)
-            .try_normalize()
-            .unwrap_or(Vec3::NEG_Z);
-        let right = forward
-            .cross(camera.up)
-            .try_normalize()
-            .or_else(|| forward.cross(Vec3::Z).try_normalize())
-            .or_else(|| forward.cross(Vec3::X).try_normalize())
-            .unwrap_or(Vec3::X);
-        let up = right.cross(forward);
+        let (forward, right, up) = frame(look_rotation(camera));
         let vfov = camera.vfov_deg.clamp(1e-3, 179.0).to_radians();
         let focus = valid_focus(camera.focus_distance);
         Self {
@@ -75,11 +68,7 @@ impl CameraRays {
         lens_radius: f32,
         focus_distance: f32,
     ) -> Self {
-        let rotation = if rotation.is_finite() && rotation.length_squared() > 1e-12 {
-            rotation.normalize()
-        } else {
-            Quat::IDENTITY
-        };
+        let (forward, right, up) = frame(rotation);
         let vfov = if vfov_rad.is_finite() {
             vfov_rad.clamp(1e-5, 3.12)
         } else {
@@ -87,9 +76,9 @@ impl CameraRays {
         };
         Self {
             eye,
-            forward: rotation * Vec3::NEG_Z,
-            right: rotation * Vec3::X,
-            up: rotation * Vec3::Y,
+            forward,
+            right,
+            up,
             tan_half: (vfov * 0.5).tan(),
             aspect: width.max(1) as f32 / height.max(1) as f32,
             width,
@@ -158,6 +147,39 @@ impl CameraRays {
         }
         rays
     }
+}
+
+/// The orientation of `camera` as a rotation of a camera that looks down its local `-z` with
+/// `+y` up (Bevy's convention): its view direction towards `look_at`, its up as close to `up`
+/// as the view allows. A view direction parallel to `up` (or a zero or non-finite one) falls
+/// back to a valid rotation instead of producing NaN.
+pub fn look_rotation(camera: &Camera) -> Quat {
+    let forward = (camera.look_at - camera.position)
+        .try_normalize()
+        .unwrap_or(Vec3::NEG_Z);
+    let right = forward
+        .cross(camera.up)
+        .try_normalize()
+        .or_else(|| forward.cross(Vec3::Z).try_normalize())
+        .or_else(|| forward.cross(Vec3::X).try_normalize())
+        .unwrap_or(Vec3::X);
+    let up = right.cross(forward);
+    Quat::from_mat3(&Mat3::from_cols(right, up, -forward))
+}
+
+/// The view direction, right and up of a camera turned by `rotation` (normalised first; not
+/// finite or zero: no turn).
+fn frame(rotation: Quat) -> (Vec3, Vec3, Vec3) {
+    let rotation = if rotation.is_finite() && rotation.length_squared() > 1e-12 {
+        rotation.normalize()
+    } else {
+        Quat::IDENTITY
+    };
+    (
+        rotation * Vec3::NEG_Z,
+        rotation * Vec3::X,
+        rotation * Vec3::Y,
+    )
 }
 
 /// A lens radius the arithmetic can take: negative or NaN is a pinhole, and larger radii

@@ -62,6 +62,8 @@ fn ten_thousand_frames_of_random_changes_run_flat() {
         scene_path("cornell_box.toml"),
         // Normal-mapped panels (the normal-map switch above then changes the picture).
         PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/reference/scenes/normal_map.toml"),
+        // One glTF material whose metallic-roughness texture makes mirrors and rough spheres.
+        scene_path("gltf_metal_rough.toml"),
         bad.path().to_path_buf(),
     ];
 

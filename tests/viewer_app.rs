@@ -459,18 +459,30 @@ fn debug_ray_hits_equal_the_cores_closest_hits() {
 
 #[test]
 fn traced_image_equals_the_headless_render_of_the_same_view() {
-    traced_equals_headless(None);
+    traced_equals_headless(None, |_| true);
 }
 
 /// The same with normal maps (the normal-mapped panels of the reference scene).
 #[test]
 fn traced_image_with_normal_maps_equals_the_headless_render() {
-    traced_equals_headless(Some("tests/reference/scenes/normal_map.toml"));
+    traced_equals_headless(Some("tests/reference/scenes/normal_map.toml"), |m| {
+        m.normal_map.is_some()
+    });
+}
+
+/// The same with a glTF material's metallic-roughness texture (the five spheres, path
+/// traced), seen by a camera that looks down on them.
+#[test]
+fn traced_image_with_metallic_roughness_textures_equals_the_headless_render() {
+    traced_equals_headless(Some("assets/scenes/gltf_metal_rough.toml"), |m| {
+        m.pbr.as_ref().is_some_and(|p| p.map.is_some())
+    });
 }
 
 /// The viewer's still picture of `scene` (the built-in Cornell box for `None`) at 4 samples
-/// per pixel, from the scene's camera, against the headless render of the same scene.
-fn traced_equals_headless(path: Option<&str>) {
+/// per pixel, from the scene's camera, against the headless render of the same scene, which
+/// must have a material that `has` accepts.
+fn traced_equals_headless(path: Option<&str>, has: fn(&tracery::scene::Material) -> bool) {
     let mut app = app(path);
     app.world_mut().resource_mut::<ViewSettings>().max_samples = 4;
     settle(&mut app, "4 samples", |w| {
@@ -483,9 +495,9 @@ fn traced_equals_headless(path: Option<&str>) {
         Some(p) => Scene::load(Path::new(p)).unwrap(),
         None => Scene::cornell_box(),
     };
-    assert_eq!(
-        scene.materials.iter().any(|m| m.normal_map.is_some()),
-        path.is_some()
+    assert!(
+        scene.materials.iter().any(has),
+        "{path:?}: no such material"
     );
     let bvh = Bvh::build(&scene.mesh.triangles, &BuildOptions::sah());
     let settings = RenderSettings {

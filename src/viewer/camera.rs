@@ -26,12 +26,11 @@ pub struct FlyCamera;
 
 /// The transform and projection that show `camera` as the scene file describes it.
 pub fn pose_of(camera: &SceneCamera) -> (Transform, Projection) {
-    let up = if camera.up.is_finite() && camera.up.length_squared() > 0.0 {
-        camera.up
-    } else {
-        Vec3::Y
-    };
-    let transform = Transform::from_translation(camera.position).looking_at(camera.look_at, up);
+    // The headless renderer's own rotation (not Bevy's `looking_at`, which rounds
+    // differently): the still picture from the scene's camera is the headless render's, bit
+    // for bit, for every camera.
+    let transform = Transform::from_translation(camera.position)
+        .with_rotation(crate::camera::look_rotation(camera));
     let projection = Projection::Perspective(PerspectiveProjection {
         fov: camera.vfov_deg.clamp(1.0, 170.0).to_radians(),
         ..default()
