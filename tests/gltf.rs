@@ -1182,6 +1182,28 @@ fn png_1x1(rgb: [u8; 3]) -> Vec<u8> {
     out.into_inner()
 }
 
+/// The buffer of a 2x2 quad in the xy plane facing +z (positions, normals, texture
+/// coordinates with `v = 0` along y = 1, indices) with its views and accessors 0 to 3.
+fn quad_buffer() -> (Vec<u8>, Vec<Value>, Vec<Value>) {
+    let mut bin = f32_bytes(&[-1., -1., 0., 1., -1., 0., 1., 1., 0., -1., 1., 0.]);
+    bin.extend(f32_bytes(&[0., 0., 1.].repeat(4)));
+    bin.extend(f32_bytes(&[0., 1., 1., 1., 1., 0., 0., 0.]));
+    bin.extend([0u16, 1, 2, 0, 2, 3].iter().flat_map(|i| i.to_le_bytes()));
+    let views = vec![
+        json!({"buffer": 0, "byteOffset": 0, "byteLength": 48}),
+        json!({"buffer": 0, "byteOffset": 48, "byteLength": 48}),
+        json!({"buffer": 0, "byteOffset": 96, "byteLength": 32}),
+        json!({"buffer": 0, "byteOffset": 128, "byteLength": 12}),
+    ];
+    let accessors = vec![
+        json!({"bufferView": 0, "componentType": 5126, "count": 4, "type": "VEC3", "min": [-1, -1, 0], "max": [1, 1, 0]}),
+        json!({"bufferView": 1, "componentType": 5126, "count": 4, "type": "VEC3"}),
+        json!({"bufferView": 2, "componentType": 5126, "count": 4, "type": "VEC2"}),
+        json!({"bufferView": 3, "componentType": 5123, "count": 6, "type": "SCALAR"}),
+    ];
+    (bin, views, accessors)
+}
+
 /// A 2x2 quad in the xy plane facing +z, its texture's top row (`v = 0`) along y = 1, as an
 /// exporter writes it, with a normal map of one texel `rgb` (its `normalTexture` given the
 /// fields of `extra` too) and, if given, a `TANGENT` for every vertex; a dielectric grey
@@ -1192,23 +1214,8 @@ fn normal_mapped_quad_warned(
     tangent: Option<[f32; 4]>,
     extra: Value,
 ) -> Scene {
-    let mut bin = f32_bytes(&[-1., -1., 0., 1., -1., 0., 1., 1., 0., -1., 1., 0.]);
-    bin.extend(f32_bytes(&[0., 0., 1.].repeat(4)));
-    bin.extend(f32_bytes(&[0., 1., 1., 1., 1., 0., 0., 0.]));
-    bin.extend([0u16, 1, 2, 0, 2, 3].iter().flat_map(|i| i.to_le_bytes()));
+    let (mut bin, mut views, mut accessors) = quad_buffer();
     let mut attributes = json!({"POSITION": 0, "NORMAL": 1, "TEXCOORD_0": 2});
-    let mut views = vec![
-        json!({"buffer": 0, "byteOffset": 0, "byteLength": 48}),
-        json!({"buffer": 0, "byteOffset": 48, "byteLength": 48}),
-        json!({"buffer": 0, "byteOffset": 96, "byteLength": 32}),
-        json!({"buffer": 0, "byteOffset": 128, "byteLength": 12}),
-    ];
-    let mut accessors = vec![
-        json!({"bufferView": 0, "componentType": 5126, "count": 4, "type": "VEC3", "min": [-1, -1, 0], "max": [1, 1, 0]}),
-        json!({"bufferView": 1, "componentType": 5126, "count": 4, "type": "VEC3"}),
-        json!({"bufferView": 2, "componentType": 5126, "count": 4, "type": "VEC2"}),
-        json!({"bufferView": 3, "componentType": 5123, "count": 6, "type": "SCALAR"}),
-    ];
     if let Some(t) = tangent {
         bin.extend(f32_bytes(&t.repeat(4)));
         views.push(json!({"buffer": 0, "byteOffset": 140, "byteLength": 64}));
@@ -1248,10 +1255,23 @@ fn normal_mapped_quad(dir: &Path, rgb: [u8; 3], tangent: Option<[f32; 4]>) -> Sc
 fn centre_radiance(scene: &Scene, light: Vec3) -> Vec3 {
     let mut scene = scene.clone();
     scene.materials[0].specular = Vec3::ZERO;
+    quad_picture(&scene, light, 1e5, tracery::scene::Environment::None)[4 * 9 + 4]
+}
+
+/// A 9x9 direct-lit picture of a quad about the origin facing +z, seen from +z (the centre
+/// pixel on the origin), lit by a point light of `intensity` at `light` alone, with
+/// `environment` as the sky.
+fn quad_picture(
+    scene: &Scene,
+    light: Vec3,
+    intensity: f32,
+    environment: tracery::scene::Environment,
+) -> Vec<Vec3> {
+    let mut scene = scene.clone();
     scene.lights = vec![Light::Point {
         position: light,
         color: Vec3::ONE,
-        intensity: 1e5,
+        intensity,
     }];
     scene.camera = tracery::scene::Camera {
         position: Vec3::new(0.0, 0.0, 5.0),
@@ -1261,7 +1281,7 @@ fn centre_radiance(scene: &Scene, light: Vec3) -> Vec3 {
         lens_radius: 0.0,
         focus_distance: 5.0,
     };
-    scene.environment = tracery::scene::Environment::None;
+    scene.environment = environment;
     scene.integrator = tracery::scene::Integrator::Direct;
     let bvh = Bvh::build(&scene.mesh.triangles, &BuildOptions::sah());
     let settings = RenderSettings {
@@ -1270,8 +1290,10 @@ fn centre_radiance(scene: &Scene, light: Vec3) -> Vec3 {
         spp: 1,
         ..RenderSettings::default()
     };
-    let film = render(&scene, &bvh, &settings, &|_| {}).unwrap().film;
-    mean_of(&film, 4, 5, 4, 5)
+    render(&scene, &bvh, &settings, &|_| {})
+        .unwrap()
+        .film
+        .mean()
 }
 
 /// A glTF normal map (`normalTexture`) on a quad facing the camera, its one texel leaning 45
@@ -1468,10 +1490,7 @@ fn pbr_quad(
     base: Option<[u8; 3]>,
     mr: Option<[u8; 3]>,
 ) -> Scene {
-    let mut bin = f32_bytes(&[-1., -1., 0., 1., -1., 0., 1., 1., 0., -1., 1., 0.]);
-    bin.extend(f32_bytes(&[0., 0., 1.].repeat(4)));
-    bin.extend(f32_bytes(&[0., 1., 1., 1., 1., 0., 0., 0.]));
-    bin.extend([0u16, 1, 2, 0, 2, 3].iter().flat_map(|i| i.to_le_bytes()));
+    let (bin, views, accessors) = quad_buffer();
     let uri = |rgb: [u8; 3]| json!({"uri": format!("data:image/png;base64,{}", base64::engine::general_purpose::STANDARD.encode(png_1x1(rgb)))});
     let images = vec![uri(base.unwrap_or([255; 3])), uri(mr.unwrap_or([255; 3]))];
     let d = json!({
@@ -1484,18 +1503,8 @@ fn pbr_quad(
         "textures": [{"source": 0}, {"source": 1}],
         "images": images,
         "buffers": [{"byteLength": bin.len(), "uri": data_uri(&bin)}],
-        "bufferViews": [
-            {"buffer": 0, "byteOffset": 0, "byteLength": 48},
-            {"buffer": 0, "byteOffset": 48, "byteLength": 48},
-            {"buffer": 0, "byteOffset": 96, "byteLength": 32},
-            {"buffer": 0, "byteOffset": 128, "byteLength": 12}
-        ],
-        "accessors": [
-            {"bufferView": 0, "componentType": 5126, "count": 4, "type": "VEC3", "min": [-1, -1, 0], "max": [1, 1, 0]},
-            {"bufferView": 1, "componentType": 5126, "count": 4, "type": "VEC3"},
-            {"bufferView": 2, "componentType": 5126, "count": 4, "type": "VEC2"},
-            {"bufferView": 3, "componentType": 5123, "count": 6, "type": "SCALAR"}
-        ]
+        "bufferViews": views,
+        "accessors": accessors
     });
     let scene = Scene::load(&write(dir, name, &d)).unwrap();
     assert!(scene.warnings.is_empty(), "{:?}", scene.warnings);
@@ -1508,33 +1517,8 @@ const PBR_SKY: Vec3 = Vec3::new(0.2, 0.5, 1.0);
 /// A 9x9 direct-lit picture of a [`pbr_quad`] seen from +z, a point light up and to the side
 /// (its highlight on the quad), a one-colour sky.
 fn pbr_picture(scene: &Scene) -> Vec<Vec3> {
-    let mut scene = scene.clone();
-    scene.lights = vec![Light::Point {
-        position: Vec3::new(1.5, 1.0, 3.0),
-        color: Vec3::ONE,
-        intensity: 30.0,
-    }];
-    scene.camera = tracery::scene::Camera {
-        position: Vec3::new(0.0, 0.0, 5.0),
-        look_at: Vec3::ZERO,
-        up: Vec3::Y,
-        vfov_deg: 30.0,
-        lens_radius: 0.0,
-        focus_distance: 5.0,
-    };
-    scene.environment = tracery::scene::Environment::Color(PBR_SKY);
-    scene.integrator = tracery::scene::Integrator::Direct;
-    let bvh = Bvh::build(&scene.mesh.triangles, &BuildOptions::sah());
-    let settings = RenderSettings {
-        width: 9,
-        height: 9,
-        spp: 1,
-        ..RenderSettings::default()
-    };
-    render(&scene, &bvh, &settings, &|_| {})
-        .unwrap()
-        .film
-        .mean()
+    let sky = tracery::scene::Environment::Color(PBR_SKY);
+    quad_picture(scene, Vec3::new(1.5, 1.0, 3.0), 30.0, sky)
 }
 
 /// Largest difference between two pictures, relative to the brighter pixel.
