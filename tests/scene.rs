@@ -604,3 +604,65 @@ fn scene_file_materials_can_name_a_normal_map() {
         assert!(e.contains(&format!("bad.toml:{line}")), "{to}: {e}");
     }
 }
+
+/// A scene file's material with `metallic` or `roughness` is glTF's metallic-roughness model
+/// (`diffuse` the base colour; metallic 0 and roughness 1 by default): the same lobes as a
+/// glTF material of those factors. Out of range values, and either mixed with Blinn-Phong's
+/// `specular`/`shininess` or a `mirror`, are errors naming the file and line.
+#[test]
+fn scene_file_materials_can_be_metallic_roughness() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = |body: &str| {
+        format!(
+            "[materials.metal]\ndiffuse = [0.9, 0.6, 0.3]\n{body}\n\n\
+             [[meshes]]\nshape = \"cube\"\nmaterial = \"metal\"\n"
+        )
+    };
+    let load = |body: &str| Scene::load(&write(dir.path(), "m.toml", scene(body).as_bytes()));
+    let s = load("metallic = 1.0\nroughness = 0.5").unwrap();
+    let m = &s.materials[0];
+    let p = m.pbr.as_ref().expect("metallic-roughness parameters");
+    assert_eq!(
+        (p.base, p.metallic, p.roughness),
+        (Vec3::new(0.9, 0.6, 0.3), 1.0, 0.5)
+    );
+    let lobes = tracery::scene::pbr::lobes(p.base, 1.0, 0.5);
+    assert_eq!(
+        (m.diffuse, m.specular, m.mirror),
+        (lobes.diffuse, lobes.f0, lobes.mirror)
+    );
+    assert_eq!(m.diffuse, Vec3::ZERO, "a metal has no diffuse part");
+    // Roughness alone: a rough dielectric, the base colour its diffuse colour.
+    let s = load("roughness = 0.4").unwrap();
+    let p = s.materials[0].pbr.as_ref().unwrap();
+    assert_eq!((p.metallic, p.roughness), (0.0, 0.4));
+    assert_eq!(s.materials[0].diffuse, Vec3::new(0.9, 0.6, 0.3));
+    assert_eq!(s.materials[0].specular, Vec3::splat(0.04));
+    // Smooth enough, a metal is a mirror of its base colour.
+    let s = load("metallic = 1.0\nroughness = 0.05").unwrap();
+    assert_eq!(s.materials[0].mirror, Vec3::new(0.9, 0.6, 0.3));
+    assert!(s.materials[0].may_mirror());
+    // Without either key: Blinn-Phong as before.
+    assert!(load("").unwrap().materials[0].pbr.is_none());
+    for (body, line, says) in [
+        ("metallic = 1.5", 3, "metallic 1.5 is not in [0, 1]"),
+        ("roughness = -0.1", 3, "roughness -0.1 is not in [0, 1]"),
+        ("roughness = nan", 3, "roughness NaN is not in [0, 1]"),
+        (
+            "shininess = 20.0\nroughness = 0.5",
+            4,
+            "cannot be combined with `specular`",
+        ),
+        (
+            "metallic = 1.0\nmirror = [1.0, 1.0, 1.0]",
+            3,
+            "cannot be combined with `specular`",
+        ),
+    ] {
+        let e = err(load(body));
+        assert!(
+            e.contains(&format!("m.toml:{line}")) && e.contains(says),
+            "{body}: {e}"
+        );
+    }
+}

@@ -4,6 +4,7 @@
 //! Every pixel draws its samples from its own random stream, seeded from the pixel index and
 //! the sample index, so an image is the same for any number of threads.
 
+pub mod bsdf;
 pub mod cache;
 pub mod debug;
 pub mod environment;

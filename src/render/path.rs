@@ -1,10 +1,12 @@
 //! The `path` integrator: unidirectional path tracing.
 //!
 //! At every surface a path meets, next-event estimation samples the lights (point lights,
-//! rectangle lights and the scene's emissive triangles), and a cosine-weighted bounce carries
-//! the path on. Light a bounce finds by hitting an emitter that next-event estimation also
-//! samples is weighted against it by multiple importance sampling (the power heuristic, Veach
-//! 1997), so each path counts every light once. Mirrors and transparent surfaces are followed
+//! rectangle lights and the scene's emissive triangles), and a bounce carries the path on,
+//! sampled from the surface's lobes (cosine-weighted for the diffuse one, by half vector or
+//! visible normal for the glossy one: [`super::bsdf`]). Light a bounce finds by hitting an
+//! emitter that next-event estimation also samples is weighted against it by multiple
+//! importance sampling (the power heuristic, Veach 1997, against the density of the mixture
+//! of lobes), so each path counts every light once. Mirrors and transparent surfaces are followed
 //! as in the `direct` integrator. Russian roulette ends paths whose throughput has become
 //! small, and a depth limit ends the rest: with `max_depth = D`, the vertices up to `D`
 //! bounces after the camera's hit take light samples and bounce, and the bounce from the last
@@ -20,10 +22,11 @@ use std::collections::HashMap;
 use glam::{Vec2, Vec3};
 
 use super::RayCounts;
+use super::bsdf::Sample;
 use super::shade::{RectLight, Surface, Tracer, brdf, reflect, transmit};
 use crate::bvh::Hit;
 use crate::geometry::{Ray, offset_ray_origin};
-use crate::sampling::{PathSampler, concentric_disk};
+use crate::sampling::PathSampler;
 use crate::scene::{Light, Scene, face_normal};
 
 /// Bounce depth from which Russian roulette may end a path.
@@ -180,21 +183,12 @@ fn power(n: f32, p: f32, q: f32) -> f32 {
     }
 }
 
-/// Cosine-weighted direction about `n` (Malley's method on the concentric disk).
-fn cosine_direction(n: Vec3, u: Vec2) -> Vec3 {
-    let d = concentric_disk(u);
-    let z = (1.0 - d.length_squared()).max(0.0).sqrt();
-    let (t, b) = n.any_orthonormal_pair();
-    // Unit length already: an orthonormal frame and a point of the unit hemisphere.
-    t * d.x + b * d.y + n * z
-}
-
 /// How the ray that reached a surface was chosen: says how emission found there counts.
 #[derive(Clone, Copy, Debug)]
 pub(super) enum Arrival {
     /// From the camera or a mirror: emission counts in full.
     Specular,
-    /// A diffuse bounce from a surface at bounce depth `from`, with solid-angle density `pdf`,
+    /// A bounce from a surface at bounce depth `from`, with solid-angle density `pdf`,
     /// `travelled` units ago (straight through transparent surfaces on the way): emission from a
     /// light that next-event estimation samples is weighted against it.
     Bounce { pdf: f32, from: u32, travelled: f32 },
@@ -233,7 +227,7 @@ impl Tracer<'_> {
         // The bounce from the last vertex only collects emission.
         if depth <= self.max_depth {
             l += alpha * self.lights_at(&s, wo, depth, rng, counts);
-            l += alpha * self.diffuse_bounce(&s, wo, depth, beta * alpha, rng, counts);
+            l += alpha * self.bounce(&s, wo, depth, beta * alpha, rng, counts);
             if self.plan.reflections && s.is_mirror() {
                 let r = reflect(ray.dir, s.n);
                 if r.dot(s.ng) > 0.0 {
@@ -355,6 +349,7 @@ impl Tracer<'_> {
             return Vec3::ZERO;
         }
         let origin = s.origin;
+        let bsdf = s.bsdf();
         let mut sum = Vec3::ZERO;
         for (i, light) in self.scene.lights.iter().enumerate() {
             sum += match *light {
@@ -381,10 +376,10 @@ impl Tracer<'_> {
                         samples: n,
                     };
                     let visible = self.lights.visible[i];
-                    self.rect_light(s, wo, &rect, rng, counts, |sample, cos, area| {
+                    self.rect_light(s, wo, &rect, rng, counts, |sample, _, area| {
                         if visible {
                             let p_light = sample.d2 / (sample.cos_l * area);
-                            power(n as f32, p_light, cos * std::f32::consts::FRAC_1_PI)
+                            power(n as f32, p_light, bsdf.pdf(sample.wi, wo))
                         } else {
                             1.0
                         }
@@ -405,7 +400,7 @@ impl Tracer<'_> {
             let cos = s.n.dot(wi);
             if cos > 0.0 && cos_l > 0.0 && s.ng.dot(to) > 0.0 {
                 let p_light = d2 / (cos_l * self.lights.area);
-                let weight = power(1.0, p_light, cos * std::f32::consts::FRAC_1_PI);
+                let weight = power(1.0, p_light, bsdf.pdf(wi, wo));
                 if weight > 0.0 {
                     let pass = self.shadow(origin, q - origin, 1.0 - 1e-4, counts);
                     let mat = self.scene.material_of(prim);
@@ -417,9 +412,9 @@ impl Tracer<'_> {
         sum
     }
 
-    /// The cosine-weighted bounce from `s` and the light it brings back (weighted by the
-    /// surface's reflectance over the sampling density).
-    fn diffuse_bounce(
+    /// The bounce from `s`, sampled from its lobes, and the light it brings back (weighted by
+    /// the surface's reflectance over the sampling density).
+    fn bounce(
         &self,
         s: &Surface,
         wo: Vec3,
@@ -437,13 +432,15 @@ impl Tracer<'_> {
             return Vec3::ZERO;
         }
         let u = rng.next_2d();
-        let wi = cosine_direction(s.n, u);
+        let bsdf = s.bsdf();
+        let Some(Sample { wi, pdf }) = bsdf.sample(wo, u) else {
+            return Vec3::ZERO;
+        };
         let cos = s.n.dot(wi);
-        if cos <= 0.0 || wi.dot(s.ng) <= 0.0 {
+        if cos <= 0.0 || wi.dot(s.ng) <= 0.0 || pdf <= 0.0 {
             return Vec3::ZERO;
         }
-        let pdf = cos * std::f32::consts::FRAC_1_PI;
-        let mut weight = brdf(s, wi, wo) * cos / pdf;
+        let mut weight = bsdf.eval(wi, wo) * cos / pdf;
         if depth >= ROULETTE_DEPTH {
             let survive = (beta * weight).max_element().min(MAX_SURVIVAL);
             if rng.next_2d().x >= survive {

@@ -4,12 +4,14 @@
 
 use glam::Vec3;
 
+use super::bsdf::{Bsdf, Gloss};
 use super::environment::EnvironmentMap;
 use super::path::{Arrival, LightSet};
 use super::{RayCounts, RenderPlan};
 use crate::bvh::{Bvh, Hit};
 use crate::geometry::{Ray, interpolation_error, offset_ray_origin};
 use crate::sampling::PathSampler;
+use crate::scene::pbr::Lobes;
 use crate::scene::{Integrator, Light, Material, Scene, face_normal};
 
 /// What a ray that cannot be traced (zero, NaN or infinite direction or origin) returns:
@@ -53,15 +55,22 @@ pub(super) struct Surface<'a> {
     pub(super) emission: Vec3,
     /// The material's opacity here (its texture's alpha applied, for `BLEND` and `MASK`).
     pub(super) opacity: f32,
-    /// The material's highlight colour here.
-    pub(super) specular: Vec3,
-    /// The material's highlight exponent here.
-    pub(super) shininess: f32,
+    /// The material's glossy lobe here.
+    pub(super) gloss: Gloss,
     /// The material's mirror reflectance here (zero: no reflection ray).
     pub(super) mirror: Vec3,
 }
 
 impl Surface<'_> {
+    /// What the surface reflects here, about its shading normal.
+    pub(super) fn bsdf(&self) -> Bsdf {
+        Bsdf {
+            n: self.n,
+            diffuse: self.diffuse,
+            gloss: self.gloss,
+        }
+    }
+
     /// True when the surface reflects like a mirror here.
     pub(super) fn is_mirror(&self) -> bool {
         self.mirror.max_element() > 0.0
@@ -193,8 +202,7 @@ impl<'a> Tracer<'a> {
             diffuse,
             emission,
             opacity,
-            specular,
-            shininess,
+            gloss,
             mirror,
         } = textured(scene, material, prim, u, v);
         Surface {
@@ -208,8 +216,7 @@ impl<'a> Tracer<'a> {
             diffuse,
             emission,
             opacity,
-            specular,
-            shininess,
+            gloss,
             mirror,
         }
     }
@@ -492,8 +499,7 @@ pub(super) struct Look {
     pub(super) diffuse: Vec3,
     pub(super) emission: Vec3,
     pub(super) opacity: f32,
-    pub(super) specular: Vec3,
-    pub(super) shininess: f32,
+    pub(super) gloss: Gloss,
     pub(super) mirror: Vec3,
 }
 
@@ -505,13 +511,19 @@ pub(super) struct Look {
 /// colour.
 pub(super) fn textured(scene: &Scene, m: &Material, prim: u32, u: f32, v: f32) -> Look {
     if !m.is_textured() {
+        let (gloss, mirror) = match &m.pbr {
+            Some(pbr) => {
+                let lobes = pbr.lobes_at(None, None);
+                (ggx(&lobes), lobes.mirror)
+            }
+            None => (phong(m), m.mirror),
+        };
         return Look {
             diffuse: m.diffuse,
             emission: m.emission,
             opacity: m.opacity_at(1.0),
-            specular: m.specular,
-            shininess: m.shininess,
-            mirror: m.mirror,
+            gloss,
+            mirror,
         };
     }
     let uv = scene.mesh.uv_at(prim, u, v);
@@ -529,8 +541,7 @@ pub(super) fn textured(scene: &Scene, m: &Material, prim: u32, u: f32, v: f32) -
                 diffuse: lobes.diffuse,
                 emission,
                 opacity,
-                specular: lobes.specular,
-                shininess: lobes.shininess,
+                gloss: ggx(&lobes),
                 mirror: lobes.mirror,
             }
         }
@@ -538,10 +549,33 @@ pub(super) fn textured(scene: &Scene, m: &Material, prim: u32, u: f32, v: f32) -
             diffuse: base.map_or(m.diffuse, |b| m.diffuse * b.truncate()),
             emission,
             opacity,
-            specular: m.specular,
-            shininess: m.shininess,
+            gloss: phong(m),
             mirror: m.mirror,
         },
+    }
+}
+
+/// The GGX lobe of metallic-roughness lobes (none where the point is a mirror).
+fn ggx(lobes: &Lobes) -> Gloss {
+    if lobes.f0 == Vec3::ZERO {
+        Gloss::None
+    } else {
+        Gloss::Ggx {
+            f0: lobes.f0,
+            alpha: lobes.alpha,
+        }
+    }
+}
+
+/// The Blinn-Phong lobe of a material without metallic-roughness parameters.
+fn phong(m: &Material) -> Gloss {
+    if m.specular == Vec3::ZERO {
+        Gloss::None
+    } else {
+        Gloss::Phong {
+            color: m.specular,
+            exponent: m.shininess,
+        }
     }
 }
 
@@ -580,18 +614,10 @@ pub(super) fn barycentric(t: &[Vec3; 3], p: Vec3) -> (f32, f32) {
     ((d22 * d1 - d12 * d2) / den, (d11 * d2 - d12 * d1) / den)
 }
 
-/// Blinn-Phong, energy-normalized: `Kd / pi + Ks (Ns + 8) / (8 pi) cos^Ns(n, h)`, with the
-/// surface's colours and exponent at the shading point (its textures applied).
+/// The surface's reflectance from `wi` towards `wo` at the shading point (its textures
+/// applied): Lambertian plus its glossy lobe ([`super::bsdf`]).
 pub(super) fn brdf(s: &Surface, wi: Vec3, wo: Vec3) -> Vec3 {
-    let n = s.n;
-    let mut f = s.diffuse * std::f32::consts::FRAC_1_PI;
-    if s.specular != Vec3::ZERO {
-        let h = (wi + wo).normalize_or_zero();
-        let c = n.dot(h).max(0.0);
-        let ns = s.shininess.max(0.0);
-        f += s.specular * (ns + 8.0) / (8.0 * std::f32::consts::PI) * c.powf(ns);
-    }
-    f
+    s.bsdf().eval(wi, wo)
 }
 
 /// Mirror direction of `d` about the normal `n`.

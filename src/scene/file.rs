@@ -11,6 +11,11 @@
 //! [materials.white]
 //! diffuse = [0.73, 0.73, 0.73]
 //!
+//! [materials.brass]
+//! diffuse = [0.9, 0.7, 0.3]  # the base colour when metallic or roughness is set
+//! metallic = 1.0             # glTF's metallic-roughness model, a GGX lobe (default 0)
+//! roughness = 0.3            # (default 1); not with specular, shininess or mirror
+//!
 //! [materials.bumpy]
 //! diffuse = [0.8, 0.8, 0.8]
 //! normal_map = "bumps.png"   # tangent-space normal map (+Y up); needs texture coordinates
@@ -108,6 +113,8 @@ struct MaterialDef {
     absorption: Option<[f32; 3]>,
     normal_map: Option<Spanned<String>>,
     normal_scale: Option<Spanned<f32>>,
+    metallic: Option<Spanned<f32>>,
+    roughness: Option<Spanned<f32>>,
 }
 
 #[derive(Deserialize, Clone, Copy)]
@@ -238,6 +245,41 @@ pub fn parse(path: &Path, text: &str, read: ReadFn, check_files: bool) -> Result
     for (name, m) in &def.materials {
         by_name.insert(name.clone(), materials.len() as u32);
         let mut mat = material_from_def(name, m);
+        let (metallic, roughness) = (&m.metallic, &m.roughness);
+        if let Some(first) = metallic.as_ref().or(roughness.as_ref()) {
+            for (key, value) in [("metallic", metallic), ("roughness", roughness)] {
+                if let Some(value) = value
+                    && !(0.0..=1.0).contains(value.get_ref())
+                {
+                    return Err(at(
+                        value.span().start,
+                        format!("{key} {} is not in [0, 1]", value.get_ref()),
+                    ));
+                }
+            }
+            if m.specular.is_some() || m.shininess.is_some() || m.mirror.is_some() {
+                return Err(at(
+                    first.span().start,
+                    format!(
+                        "material `{name}`: `metallic` and `roughness` (a GGX lobe) cannot be \
+                         combined with `specular`, `shininess` or `mirror` (Blinn-Phong and a \
+                         mirror)"
+                    ),
+                ));
+            }
+            let pbr = super::pbr::MetallicRoughness {
+                base: mat.diffuse.clamp(Vec3::ZERO, Vec3::ONE),
+                metallic: metallic.as_ref().map_or(0.0, |v| *v.get_ref()),
+                roughness: roughness.as_ref().map_or(1.0, |v| *v.get_ref()),
+                map: None,
+            };
+            let lobes = pbr.lobes_at(None, None);
+            mat.diffuse = lobes.diffuse;
+            mat.specular = lobes.f0;
+            mat.shininess = super::pbr::phong_exponent(lobes.alpha);
+            mat.mirror = lobes.mirror;
+            mat.pbr = Some(pbr);
+        }
         if let Some(scale) = &m.normal_scale {
             if !scale.get_ref().is_finite() {
                 return Err(at(

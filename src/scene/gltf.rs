@@ -1203,9 +1203,11 @@ fn triangles_of(mode: Mode, idx: &[u32]) -> Vec<[u32; 3]> {
 
 /// A glTF metallic-roughness material as the renderer's [`Material`] (textures are attached by
 /// the loader):
-/// - diffuse, specular, shininess and mirror from the base colour, metalness and roughness
-///   factors ([`super::pbr::lobes`]); the factors are kept in [`Material::pbr`], for the
-///   base colour and metallic-roughness textures to vary them where a ray meets the surface;
+/// - diffuse, specular (the GGX lobe's `f0`) and mirror from the base colour, metalness and
+///   roughness factors ([`super::pbr::lobes`]), shininess the Blinn-Phong exponent of about
+///   the GGX lobe's width (shown, not shaded with); the factors are kept in
+///   [`Material::pbr`], from which shading makes the GGX lobe, with the base colour and
+///   metallic-roughness textures varying them where a ray meets the surface;
 /// - emission: emissive factor times `KHR_materials_emissive_strength`;
 /// - opacity: base alpha (times the base colour texture's) for `BLEND`, 0 or 1 against the
 ///   cutoff for `MASK`, 1 for `OPAQUE`; light through `BLEND` and `MASK` is not tinted;
@@ -1242,8 +1244,8 @@ pub fn convert_material(m: &::gltf::Material) -> Material {
     Material {
         name: m.name().unwrap_or("material").to_string(),
         diffuse: lobes.diffuse,
-        specular: lobes.specular,
-        shininess: lobes.shininess,
+        specular: lobes.f0,
+        shininess: super::pbr::phong_exponent(lobes.alpha),
         emission,
         opacity,
         ior,

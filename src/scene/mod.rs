@@ -60,11 +60,12 @@ pub struct Material {
     pub normal_map: Option<Arc<Texture>>,
     /// Scale of the normal map's X and Y (glTF `normalTexture.scale`; 1 as the map is).
     pub normal_scale: f32,
-    /// A glTF material's metallic-roughness parameters (`None` for OBJ and scene-file
-    /// materials). `diffuse`, `specular`, `shininess` and `mirror` hold what its factors give
-    /// ([`pbr::lobes`]); where the material has textures, its base colour and
-    /// metallic-roughness textures are applied to these parameters at each shading point
-    /// instead.
+    /// Metallic-roughness parameters (glTF materials, and scene-file materials that set
+    /// `metallic` or `roughness`; `None` for the others). When set, the surface is shaded
+    /// with a GGX lobe made from them ([`pbr::lobes`]) instead of `specular` and `shininess`;
+    /// `diffuse`, `specular` (the lobe's `f0`) and `mirror` hold what its factors give, and
+    /// where the material has textures, its base colour and metallic-roughness textures are
+    /// applied to the factors at each shading point.
     pub pbr: Option<pbr::MetallicRoughness>,
 }
 

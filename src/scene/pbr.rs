@@ -1,5 +1,6 @@
 //! glTF's metallic-roughness material model as the renderer's lobes: a Lambertian diffuse
-//! colour, an energy-normalised Blinn-Phong highlight and, for smooth metals, a mirror.
+//! colour, a GGX microfacet lobe (the glTF 2.0 specification's BRDF, evaluated in
+//! [`crate::render::bsdf`]) and, for smooth metals, a mirror.
 //!
 //! [`lobes`] is the one mapping, used twice: by the glTF loader for a material's factors
 //! ([`super::gltf::convert_material`]), and at every shading point of a material whose
@@ -52,44 +53,52 @@ impl MetallicRoughness {
 /// What the renderer's shading reads of a material at one point.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Lobes {
-    /// Lambertian colour.
+    /// Lambertian colour (under the dielectric's Fresnel, see [`crate::render::bsdf`]).
     pub diffuse: Vec3,
-    /// Blinn-Phong highlight colour (zero where the point is a mirror).
-    pub specular: Vec3,
-    /// Blinn-Phong exponent.
-    pub shininess: f32,
+    /// GGX lobe's reflectance at normal incidence (zero where the point is a mirror).
+    pub f0: Vec3,
+    /// GGX width `roughness^2`, at least [`MIN_ALPHA`].
+    pub alpha: f32,
     /// Mirror reflectance (zero unless the point is a smooth metal).
     pub mirror: Vec3,
 }
 
+/// Narrowest GGX lobe drawn: roughness below 0.1 is drawn as this width, or, for a metal, as
+/// a mirror.
+pub const MIN_ALPHA: f32 = MIRROR_ROUGHNESS * MIRROR_ROUGHNESS;
+
 /// Metalness from which a smooth surface is drawn as a mirror.
 const MIRROR_METALLIC: f32 = 0.5;
-/// Roughness up to which a metal is drawn as a mirror.
-const MIRROR_ROUGHNESS: f32 = 0.2;
+/// Roughness up to which a metal is drawn as a mirror (a GGX lobe of width 0.01 shows its
+/// surroundings almost as sharply, and the `direct` integrator traces mirror rays only).
+const MIRROR_ROUGHNESS: f32 = 0.1;
 
 /// The lobes of base colour `base`, metalness `metallic` and roughness `roughness` (each
 /// clamped to `[0, 1]`):
 /// - diffuse: `base (1 - metallic)`;
-/// - specular: the Fresnel colour at normal incidence, `F0 = mix(0.04, base, metallic)`
-///   (`0.04` for a dielectric, the base colour for a metal), with the Blinn-Phong exponent
-///   `2 / a^2 - 2`, `a = roughness^2` (Walter et al. 2007's correspondence with GGX), at most
-///   10,000;
-/// - a mirror of colour `F0` instead of the highlight where `metallic >= 0.5` and
-///   `roughness <= 0.2`.
+/// - GGX: the Fresnel colour at normal incidence, `f0 = mix(0.04, base, metallic)` (`0.04`
+///   for a dielectric, the base colour for a metal), width `alpha = roughness^2`;
+/// - mirror: a metal (metalness at least 0.5) with roughness at most 0.1 is drawn as a mirror
+///   of reflectance `f0` instead of a GGX lobe.
 pub fn lobes(base: Vec3, metallic: f32, roughness: f32) -> Lobes {
     let base = base.clamp(Vec3::ZERO, Vec3::ONE);
     let metallic = metallic.clamp(0.0, 1.0);
     let roughness = roughness.clamp(0.0, 1.0);
     let f0 = Vec3::splat(0.04).lerp(base, metallic);
-    let a = (roughness * roughness).max(1e-3);
-    let shininess = (2.0 / (a * a) - 2.0).clamp(0.0, 10_000.0);
+    let alpha = (roughness * roughness).max(MIN_ALPHA);
     let mirror_like = metallic >= MIRROR_METALLIC && roughness <= MIRROR_ROUGHNESS;
     Lobes {
         diffuse: base * (1.0 - metallic),
-        specular: if mirror_like { Vec3::ZERO } else { f0 },
-        shininess,
+        f0: if mirror_like { Vec3::ZERO } else { f0 },
+        alpha,
         mirror: if mirror_like { f0 } else { Vec3::ZERO },
     }
+}
+
+/// The Blinn-Phong exponent of about the width of a GGX lobe of width `alpha` (`2 / alpha^2 -
+/// 2`, Walter et al. 2007), for showing a material's figures; shading uses the GGX lobe.
+pub fn phong_exponent(alpha: f32) -> f32 {
+    (2.0 / (alpha * alpha) - 2.0).clamp(0.0, 10_000.0)
 }
 
 #[cfg(test)]
@@ -101,19 +110,26 @@ mod tests {
         let red = Vec3::new(0.8, 0.1, 0.1);
         let paint = lobes(red, 0.0, 1.0);
         assert_eq!(paint.diffuse, red);
-        assert_eq!(paint.specular, Vec3::splat(0.04));
-        assert_eq!(paint.shininess, 0.0, "roughness 1: a = 1, exponent 0");
+        assert_eq!(paint.f0, Vec3::splat(0.04));
+        assert_eq!(paint.alpha, 1.0);
+        assert_eq!(phong_exponent(paint.alpha), 0.0, "roughness 1: exponent 0");
         assert_eq!(paint.mirror, Vec3::ZERO);
         let brushed = lobes(red, 1.0, 0.5);
         assert_eq!(brushed.diffuse, Vec3::ZERO);
-        assert_eq!(brushed.specular, red);
-        assert_eq!(brushed.shininess, 2.0 / 0.0625 - 2.0);
+        assert_eq!(brushed.f0, red);
+        assert_eq!(brushed.alpha, 0.25);
         let chrome = lobes(red, 1.0, 0.1);
-        assert_eq!((chrome.specular, chrome.mirror), (Vec3::ZERO, red));
+        assert_eq!((chrome.f0, chrome.mirror), (Vec3::ZERO, red));
+        let glossy = lobes(red, 1.0, 0.11);
+        assert_eq!((glossy.f0, glossy.mirror), (red, Vec3::ZERO));
+        // A smooth dielectric keeps the narrowest GGX lobe.
+        let lacquer = lobes(red, 0.0, 0.0);
+        assert_eq!((lacquer.alpha, lacquer.mirror), (MIN_ALPHA, Vec3::ZERO));
         // Out of range and NaN-free inputs are clamped, never passed on.
         let wild = lobes(Vec3::splat(4.0), 2.0, -1.0);
         assert_eq!(wild.mirror, Vec3::ONE);
-        assert_eq!(wild.shininess, 10_000.0);
+        assert_eq!(wild.alpha, MIN_ALPHA);
+        assert_eq!(phong_exponent(1e-3), 10_000.0);
     }
 
     #[test]
