@@ -1,4 +1,4 @@
-//! Shading: Blinn-Phong under point and rectangular lights, shadows that let light through
+//! Shading: the surfaces' lobes ([`super::bsdf`]) under point and rectangular lights, shadows that let light through
 //! transparent surfaces (with Beer-Lambert absorption inside closed meshes), mirror
 //! reflections and transmission, each only where the [`RenderPlan`] says the scene needs it.
 

@@ -577,7 +577,7 @@ pub enum Integrator {
     /// shadows, and mirror and transparent surfaces followed.
     #[default]
     Direct,
-    /// Unidirectional path tracing: diffuse bounces (cosine-weighted) carry indirect light,
+    /// Unidirectional path tracing: bounces sampled from the surfaces' lobes carry indirect light,
     /// next-event estimation on the lights is combined with emission found by bounces by
     /// multiple importance sampling, Russian roulette ends long paths.
     Path,
