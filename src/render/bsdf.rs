@@ -384,17 +384,11 @@ mod tests {
         let mut rng = Rng(11);
         for bsdf in lobes() {
             let n = bsdf.n;
-            let (t, b) = n.any_orthonormal_pair();
             for wo in views(n) {
                 let count = 400_000;
                 let mut integral = 0.0f64;
                 for _ in 0..count {
-                    // Uniform over the hemisphere: density 1 / (2 pi).
-                    let u = rng.next_2d();
-                    let z = u.x;
-                    let r = (1.0 - z * z).max(0.0).sqrt();
-                    let phi = 2.0 * PI * u.y;
-                    let wi = t * (r * phi.cos()) + b * (r * phi.sin()) + n * z;
+                    let wi = uniform_direction(n, rng.next_2d());
                     integral += (bsdf.pdf(wi, wo) * 2.0 * PI) as f64;
                 }
                 integral /= count as f64;
@@ -485,19 +479,23 @@ mod tests {
 
     /// `f cos` integrated over the hemisphere with uniform directions.
     fn uniform_estimate(bsdf: &Bsdf, wo: Vec3, rng: &mut Rng) -> Vec3 {
-        let n = bsdf.n;
-        let (t, b) = n.any_orthonormal_pair();
         let count = 300_000;
         let mut sum = Vec3::ZERO;
         for _ in 0..count {
-            let u = rng.next_2d();
-            let z = u.x;
-            let r = (1.0 - z * z).max(0.0).sqrt();
-            let phi = 2.0 * PI * u.y;
-            let wi = t * (r * phi.cos()) + b * (r * phi.sin()) + n * z;
-            sum += bsdf.eval(wi, wo) * z * 2.0 * PI;
+            let wi = uniform_direction(bsdf.n, rng.next_2d());
+            sum += bsdf.eval(wi, wo) * bsdf.n.dot(wi) * 2.0 * PI;
         }
         sum / count as f32
+    }
+
+    /// A direction of the hemisphere about `n`, uniform over solid angle (density
+    /// `1 / (2 pi)`).
+    fn uniform_direction(n: Vec3, u: Vec2) -> Vec3 {
+        let (t, b) = n.any_orthonormal_pair();
+        let z = u.x;
+        let r = (1.0 - z * z).max(0.0).sqrt();
+        let phi = 2.0 * PI * u.y;
+        t * (r * phi.cos()) + b * (r * phi.sin()) + n * z
     }
 
     /// `f cos` integrated over the hemisphere with GGX half vectors drawn in proportion to
