@@ -135,7 +135,11 @@ impl Bsdf {
 
     /// Density over solid angle with which [`Bsdf::sample`] picks `wi` seen from `wo`.
     pub fn pdf(&self, wi: Vec3, wo: Vec3) -> f32 {
-        let ps = self.gloss_probability(wo);
+        self.mixture_pdf(self.gloss_probability(wo), wi, wo)
+    }
+
+    /// [`Bsdf::pdf`] with the glossy lobe's probability `ps` already found.
+    fn mixture_pdf(&self, ps: f32, wi: Vec3, wo: Vec3) -> f32 {
         let cos = self.n.dot(wi);
         let diffuse = if cos > 0.0 { cos * FRAC_1_PI } else { 0.0 };
         if ps == 0.0 {
@@ -165,7 +169,7 @@ impl Bsdf {
         };
         Some(Sample {
             wi,
-            pdf: self.pdf(wi, wo),
+            pdf: self.mixture_pdf(ps, wi, wo),
         })
     }
 
