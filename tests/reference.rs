@@ -203,6 +203,23 @@ fn rough_metal_matches_mitsuba() {
     check("rough_metal", 256);
 }
 
+/// Narrow GGX lobes under the direct integrator against Mitsuba's `direct`: the ceiling
+/// light's reflection in two white metal spheres (roughness 0.15 and 0.3), found by the
+/// lobes' own directions and by the light's samples, weighted against each other.
+#[test]
+fn glossy_direct_matches_mitsuba() {
+    check("glossy_direct", 64);
+}
+
+/// A rectangle light no triangle covers, path-traced: above the Cornell box's open front, out
+/// of the camera's view, reflected by the narrow-lobed spheres of `glossy_direct`, where
+/// bounces look for it by its rectangle (they cannot hit it) and its samples are weighted
+/// against them.
+#[test]
+fn hidden_light_on_glossy_spheres_matches_mitsuba() {
+    check("glossy_hidden_light", 128);
+}
+
 /// The comparison fails on deliberate errors of a few percent or a fraction of a pixel: a
 /// light 4% too dim, the direct integrator where Mitsuba traced paths, the camera turned by
 /// half a pixel, the mirror turned by a degree, the lens focused 25% too far, the environment

@@ -59,6 +59,8 @@ pub struct LightSet {
     owner: HashMap<u32, Owner>,
     /// Per scene light: true when emissive triangles cover it, so bounces find it.
     visible: Vec<bool>,
+    /// True when some rectangle light has no triangles covering it.
+    hidden_rects: bool,
 }
 
 /// Relative tolerance for a triangle lying in a rectangle light's plane and inside it.
@@ -73,6 +75,7 @@ impl LightSet {
         };
         let emissive: Vec<bool> = scene.materials.iter().map(|m| m.is_emissive()).collect();
         if !emissive.iter().any(|&e| e) {
+            set.hidden_rects = scene.lights.iter().any(|l| matches!(l, Light::Rect { .. }));
             return set;
         }
         let mut covered = vec![0.0f32; scene.lights.len()];
@@ -113,6 +116,7 @@ impl LightSet {
             if let Light::Rect { edge_u, edge_v, .. } = light {
                 let area = edge_u.cross(*edge_v).length();
                 set.visible[i] = covered[i] >= area * (1.0 - 1e-3);
+                set.hidden_rects |= !set.visible[i];
             }
         }
         set
@@ -171,7 +175,7 @@ fn rect_contains(light: &Light, tri: &[Vec3; 3]) -> bool {
 
 /// Power heuristic for a strategy with `n` samples of density `p` against one of density `q`.
 #[inline]
-fn power(n: f32, p: f32, q: f32) -> f32 {
+pub(super) fn power(n: f32, p: f32, q: f32) -> f32 {
     let a = n * p;
     let a2 = a * a;
     if a2.is_infinite() {
@@ -350,6 +354,7 @@ impl Tracer<'_> {
         }
         let origin = s.origin;
         let bsdf = s.bsdf();
+        let glossy = bsdf.gloss_probability(wo) > 0.0;
         let mut sum = Vec3::ZERO;
         for (i, light) in self.scene.lights.iter().enumerate() {
             sum += match *light {
@@ -375,9 +380,11 @@ impl Tracer<'_> {
                         intensity,
                         samples: n,
                     };
-                    let visible = self.lights.visible[i];
+                    // Bounces find the light when its triangles cover it; on a glossy
+                    // surface they look for it by its rectangle when they do not.
+                    let weighted = self.lights.visible[i] || glossy;
                     self.rect_light(s, wo, &rect, rng, counts, |sample, _, area| {
-                        if visible {
+                        if weighted {
                             let p_light = sample.d2 / (sample.cos_l * area);
                             power(n as f32, p_light, bsdf.pdf(sample.wi, wo))
                         } else {
@@ -427,12 +434,19 @@ impl Tracer<'_> {
         if !m.reflects() {
             return Vec3::ZERO;
         }
-        if depth == self.max_depth && self.lights.owner.is_empty() && !self.plan.environment {
+        let bsdf = s.bsdf();
+        // On a glossy surface the bounce also looks for the rectangle lights no triangles
+        // cover (which it cannot hit), as `lights_at` weights their samples.
+        let glossy = bsdf.gloss_probability(wo) > 0.0 && self.lights.hidden_rects;
+        if depth == self.max_depth
+            && self.lights.owner.is_empty()
+            && !self.plan.environment
+            && !glossy
+        {
             // The last bounce only collects emission, and there is none to find.
             return Vec3::ZERO;
         }
         let u = rng.next_2d();
-        let bsdf = s.bsdf();
         let Some(Sample { wi, pdf }) = bsdf.sample(wo, u) else {
             return Vec3::ZERO;
         };
@@ -441,10 +455,20 @@ impl Tracer<'_> {
             return Vec3::ZERO;
         }
         let mut weight = bsdf.eval(wi, wo) * cos / pdf;
+        let mut l = Vec3::ZERO;
+        if glossy {
+            l += weight
+                * self.rects_along(s, wi, pdf, 1, counts, |i, samples| {
+                    (!self.lights.visible[i]).then(|| self.rect_samples(samples, depth))
+                });
+        }
+        if depth == self.max_depth && self.lights.owner.is_empty() && !self.plan.environment {
+            return l;
+        }
         if depth >= ROULETTE_DEPTH {
             let survive = (beta * weight).max_element().min(MAX_SURVIVAL);
             if rng.next_2d().x >= survive {
-                return Vec3::ZERO;
+                return l;
             }
             weight /= survive;
         }
@@ -456,6 +480,6 @@ impl Tracer<'_> {
             from: depth,
             travelled: 0.0,
         };
-        weight * self.path(&bounce, hit, depth + 1, arrival, beta * weight, rng, counts)
+        l + weight * self.path(&bounce, hit, depth + 1, arrival, beta * weight, rng, counts)
     }
 }

@@ -4,9 +4,9 @@
 
 use glam::Vec3;
 
-use super::bsdf::{Bsdf, Gloss};
+use super::bsdf::{Bsdf, Gloss, Sample};
 use super::environment::EnvironmentMap;
-use super::path::{Arrival, LightSet};
+use super::path::{Arrival, LightSet, power};
 use super::{RayCounts, RenderPlan};
 use crate::bvh::{Bvh, Hit};
 use crate::geometry::{Ray, interpolation_error, offset_ray_origin};
@@ -271,12 +271,36 @@ impl<'a> Tracer<'a> {
     }
 
     /// Light arriving directly from the light sources, reflected towards `wo`.
+    ///
+    /// Point and spot lights are sampled at their point. A rectangle light is sampled over its
+    /// area; on a surface with a glossy lobe its light is also sampled by directions drawn
+    /// from the surface's lobes ([`Tracer::rect_lights_by_bsdf`]), the two weighted against
+    /// each other by multiple importance sampling (the power heuristic, Veach 1997), as
+    /// Mitsuba's `direct` does: a narrow lobe under a large light is found by its own
+    /// directions, a small light by its samples. A diffuse surface takes light samples only
+    /// (the lobe's directions would rarely find a light it cannot already sample well).
     fn direct(&self, s: &Surface, wo: Vec3, rng: &mut PathSampler, counts: &mut RayCounts) -> Vec3 {
         let m = s.material;
         if !m.reflects() {
             return Vec3::ZERO;
         }
         let origin = s.origin;
+        let bsdf = s.bsdf();
+        // Directions drawn from the lobes, as many as the most light samples a rectangle
+        // light takes here; none without a glossy lobe.
+        let by_bsdf = if bsdf.gloss_probability(wo) > 0.0 {
+            self.scene
+                .lights
+                .iter()
+                .filter_map(|l| match *l {
+                    Light::Rect { samples, .. } => Some(self.capped_samples(samples).max(1)),
+                    _ => None,
+                })
+                .max()
+                .unwrap_or(0)
+        } else {
+            0
+        };
         let mut sum = Vec3::ZERO;
         for light in &self.scene.lights {
             sum += match *light {
@@ -301,11 +325,97 @@ impl<'a> Tracer<'a> {
                         intensity,
                         samples: self.capped_samples(samples),
                     };
-                    self.rect_light(s, wo, &rect, rng, counts, |_, _, _| 1.0)
+                    let n = rect.samples as f32;
+                    let m = by_bsdf as f32;
+                    self.rect_light(s, wo, &rect, rng, counts, |sample, _, area| {
+                        if by_bsdf == 0 {
+                            return 1.0;
+                        }
+                        let p_light = sample.d2 / (sample.cos_l * area);
+                        power(n, p_light, m * bsdf.pdf(sample.wi, wo))
+                    })
                 }
             };
         }
+        if by_bsdf > 0 {
+            sum += self.rect_lights_by_bsdf(s, wo, by_bsdf, rng, counts);
+        }
         sum
+    }
+
+    /// The rectangle lights' light at `s` towards `wo` estimated from `count` directions drawn
+    /// from the surface's lobes ([`Tracer::rects_along`]), weighted against every rectangle
+    /// light's own samples ([`Tracer::direct`] weights those).
+    fn rect_lights_by_bsdf(
+        &self,
+        s: &Surface,
+        wo: Vec3,
+        count: u32,
+        rng: &mut PathSampler,
+        counts: &mut RayCounts,
+    ) -> Vec3 {
+        let bsdf = s.bsdf();
+        let mut acc = Vec3::ZERO;
+        for _ in 0..count {
+            let Some(Sample { wi, pdf }) = bsdf.sample(wo, rng.next_2d()) else {
+                continue;
+            };
+            let cos = s.n.dot(wi);
+            if cos <= 0.0 || wi.dot(s.ng) <= 0.0 || pdf <= 0.0 {
+                continue;
+            }
+            let f = bsdf.eval(wi, wo) * cos / pdf;
+            acc += self.rects_along(s, wi, pdf, count, counts, |_, samples| {
+                Some(self.capped_samples(samples).max(1))
+            }) * f;
+        }
+        acc / count as f32
+    }
+
+    /// Radiance from the rectangle lights that the direction `wi` from `s` meets on their
+    /// front, each seen through a shadow ray and weighted against the light's own samples by
+    /// the power heuristic: `wi` is one of `count` directions drawn with density `pdf`, and
+    /// `light_samples(i, samples)` says how many samples rectangle light `i` (of `samples`)
+    /// takes here, or `None` to leave it out. Lights do not shadow each other, as with their
+    /// samples: a direction counts every rectangle it meets.
+    pub(super) fn rects_along(
+        &self,
+        s: &Surface,
+        wi: Vec3,
+        pdf: f32,
+        count: u32,
+        counts: &mut RayCounts,
+        light_samples: impl Fn(usize, u32) -> Option<u32>,
+    ) -> Vec3 {
+        let mut acc = Vec3::ZERO;
+        for (i, light) in self.scene.lights.iter().enumerate() {
+            let Light::Rect {
+                corner,
+                edge_u,
+                edge_v,
+                color,
+                intensity,
+                samples,
+            } = *light
+            else {
+                continue;
+            };
+            let Some(n) = light_samples(i, samples) else {
+                continue;
+            };
+            let Some(hit) = rect_hit(s.p, wi, corner, edge_u, edge_v) else {
+                continue;
+            };
+            let area = edge_u.cross(edge_v).length();
+            let p_light = hit.d2 / (hit.cos_l * area);
+            let w = power(count as f32, pdf, n as f32 * p_light);
+            if w == 0.0 {
+                continue;
+            }
+            let pass = self.shadow(s.origin, hit.q - s.origin, 1.0 - 1e-4, counts);
+            acc += color * intensity * pass * w;
+        }
+        acc
     }
 
     /// Light a point light of radiant intensity `intensity` sends to `s` and `s` reflects
@@ -494,6 +604,43 @@ pub(super) fn rect_sample(
     Some(RectSample { q, wi, d2, cos_l })
 }
 
+/// Where the ray from `p` along the unit direction `wi` meets the front of the rectangle
+/// `corner + [0, 1] edge_u + [0, 1] edge_v` (which faces along `edge_u x edge_v`), as the
+/// sample [`rect_sample`] would have drawn there; `None` when it misses the rectangle or
+/// meets its back.
+pub(super) fn rect_hit(
+    p: Vec3,
+    wi: Vec3,
+    corner: Vec3,
+    edge_u: Vec3,
+    edge_v: Vec3,
+) -> Option<RectSample> {
+    let normal = edge_u.cross(edge_v);
+    let ln = normal.try_normalize()?;
+    let cos_l = -ln.dot(wi);
+    if cos_l.is_nan() || cos_l <= 0.0 {
+        return None;
+    }
+    let t = (corner - p).dot(ln) / -cos_l;
+    if !(t > 0.0 && t.is_finite()) {
+        return None;
+    }
+    let q = p + t * wi;
+    // Coordinates along the edges by the dual basis (the edges need not be perpendicular).
+    let d = q - corner;
+    let a = d.dot(edge_v.cross(normal)) / edge_u.dot(edge_v.cross(normal));
+    let b = d.dot(normal.cross(edge_u)) / edge_v.dot(normal.cross(edge_u));
+    if !((0.0..=1.0).contains(&a) && (0.0..=1.0).contains(&b)) {
+        return None;
+    }
+    Some(RectSample {
+        q,
+        wi,
+        d2: t * t,
+        cos_l,
+    })
+}
+
 /// What a material looks like at one point of a surface.
 pub(super) struct Look {
     pub(super) diffuse: Vec3,
@@ -650,4 +797,65 @@ pub fn beer_lambert(sigma: Vec3, d: f32) -> Vec3 {
         (-sigma.y * d).exp(),
         (-sigma.z * d).exp(),
     )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A skewed rectangle (edges not perpendicular) facing along `edge_u x edge_v`.
+    const CORNER: Vec3 = Vec3::new(1.0, 2.0, 0.5);
+    const EDGE_U: Vec3 = Vec3::new(1.5, 0.0, 0.3);
+    const EDGE_V: Vec3 = Vec3::new(0.4, 0.0, 1.2);
+
+    fn towards(p: Vec3, a: f32, b: f32) -> Vec3 {
+        (CORNER + a * EDGE_U + b * EDGE_V - p).normalize()
+    }
+
+    #[test]
+    fn rect_hit_finds_the_point_a_direction_was_aimed_at() {
+        // The front faces -y (edge_u x edge_v), so points below see it.
+        assert!(EDGE_U.cross(EDGE_V).y < 0.0);
+        let ln = EDGE_U.cross(EDGE_V).normalize();
+        for (i, p) in [
+            Vec3::ZERO,
+            Vec3::new(3.0, -1.0, 2.0),
+            Vec3::new(1.2, 1.9, 1.0),
+        ]
+        .into_iter()
+        .enumerate()
+        {
+            for (a, b) in [(0.5, 0.5), (0.01, 0.98), (0.99, 0.02), (0.3, 0.7)] {
+                let q = CORNER + a * EDGE_U + b * EDGE_V;
+                let wi = towards(p, a, b);
+                let hit = rect_hit(p, wi, CORNER, EDGE_U, EDGE_V)
+                    .unwrap_or_else(|| panic!("point {i}, ({a}, {b}): missed"));
+                assert!((hit.q - q).length() < 1e-5, "point {i}: {} vs {q}", hit.q);
+                assert!((hit.d2 - (q - p).length_squared()).abs() < 1e-4 * hit.d2);
+                assert!((hit.cos_l + ln.dot(wi)).abs() < 1e-6 && hit.cos_l > 0.0);
+                assert_eq!(hit.wi, wi);
+            }
+        }
+    }
+
+    #[test]
+    fn rect_hit_misses_outside_the_edges_behind_and_on_the_back() {
+        let p = Vec3::new(1.5, 0.0, 1.0);
+        for (a, b) in [
+            (1.02, 0.5),
+            (-0.02, 0.5),
+            (0.5, 1.02),
+            (0.5, -0.02),
+            (1.1, 1.1),
+        ] {
+            assert!(rect_hit(p, towards(p, a, b), CORNER, EDGE_U, EDGE_V).is_none());
+        }
+        // Looking away from it, and from above (its back).
+        assert!(rect_hit(p, -towards(p, 0.5, 0.5), CORNER, EDGE_U, EDGE_V).is_none());
+        let above = Vec3::new(1.5, 4.0, 1.0);
+        assert!(rect_hit(above, towards(above, 0.5, 0.5), CORNER, EDGE_U, EDGE_V).is_none());
+        // Parallel to its plane, and a rectangle without area.
+        assert!(rect_hit(p, Vec3::X, CORNER, EDGE_U, EDGE_V).is_none());
+        assert!(rect_hit(p, towards(p, 0.5, 0.5), CORNER, EDGE_U, EDGE_U).is_none());
+    }
 }
