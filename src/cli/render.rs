@@ -40,8 +40,8 @@ pub struct RenderArgs {
     /// with the path integrator, diffuse bounces).
     #[arg(long, default_value_t = 5)]
     max_depth: u32,
-    /// How light is gathered: direct (light from the lights only) or path (global
-    /// illumination); default: the scene's (`[render] integrator`, else direct).
+    /// How light is gathered: direct (light from the lights and emissive surfaces only) or
+    /// path (global illumination); default: the scene's (`[render] integrator`, else direct).
     #[arg(long)]
     integrator: Option<Integrator>,
     /// Print the render plan (what the scene needs and what is left out), then render.

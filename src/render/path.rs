@@ -45,8 +45,8 @@ enum Owner {
     Rect(u32),
 }
 
-/// The lights the path integrator samples, besides the scene's point and rectangle lights:
-/// the emissive triangles no rectangle light stands for, chosen by area.
+/// The lights both integrators sample, besides the scene's point and rectangle lights: the
+/// emissive triangles no rectangle light stands for, chosen by area.
 #[derive(Clone, Debug, Default)]
 pub struct LightSet {
     /// Emissive triangles sampled by area.
@@ -185,6 +185,19 @@ pub(super) fn power(n: f32, p: f32, q: f32) -> f32 {
     } else {
         0.0
     }
+}
+
+/// One light sample of the emissive triangles ([`Tracer::emissive_sample`]).
+pub(super) struct EmissiveSample {
+    /// The light reflected towards the viewer, shadow included, before any weight.
+    pub(super) value: Vec3,
+    /// The sample's density over solid angle at the surface.
+    pub(super) p_light: f32,
+    /// Unit direction from the surface to the sampled point.
+    pub(super) wi: Vec3,
+    /// True when its shadow ray went through a transparent surface (or shadows are off): a
+    /// direction drawn from the lobes would not have found the point as its closest hit.
+    pub(super) crossed: bool,
 }
 
 /// How the ray that reached a surface was chosen: says how emission found there counts.
@@ -394,29 +407,75 @@ impl Tracer<'_> {
                 }
             };
         }
-        if !self.lights.tris.is_empty() {
-            let (prim, u) = self.lights.pick(rng.next_2d());
-            let tri = &self.scene.mesh.triangles[prim as usize];
-            let su = u.x.sqrt();
-            let (b1, b2) = (su * (1.0 - u.y), su * u.y);
-            let q = tri[0] * (1.0 - su) + tri[1] * b1 + tri[2] * b2;
-            let to = q - s.p;
-            let d2 = to.length_squared();
-            let wi = to / d2.sqrt();
-            let cos_l = face_normal(tri).dot(wi).abs();
-            let cos = s.n.dot(wi);
-            if cos > 0.0 && cos_l > 0.0 && s.ng.dot(to) > 0.0 {
-                let p_light = d2 / (cos_l * self.lights.area);
-                let weight = power(1.0, p_light, bsdf.pdf(wi, wo));
-                if weight > 0.0 {
-                    let pass = self.shadow(origin, q - origin, 1.0 - 1e-4, counts);
-                    let mat = self.scene.material_of(prim);
-                    let le = super::shade::textured(self.scene, mat, prim, b1, b2).emission;
-                    sum += brdf(s, wi, wo) * cos * le * pass * weight / p_light;
-                }
-            }
+        if let Some(e) = self.emissive_sample(s, wo, rng, counts) {
+            sum += e.value * power(1.0, e.p_light, bsdf.pdf(e.wi, wo));
         }
         sum
+    }
+
+    /// One light sample of the emissive triangles no rectangle light stands for (a triangle
+    /// chosen by area, a point uniform on it), with its shadow ray: the light `s` reflects
+    /// towards `wo` from it, unweighted. `None` when there are none, or the point lies behind
+    /// the surface.
+    pub(super) fn emissive_sample(
+        &self,
+        s: &Surface,
+        wo: Vec3,
+        rng: &mut PathSampler,
+        counts: &mut RayCounts,
+    ) -> Option<EmissiveSample> {
+        if self.lights.tris.is_empty() {
+            return None;
+        }
+        let (prim, u) = self.lights.pick(rng.next_2d());
+        let tri = &self.scene.mesh.triangles[prim as usize];
+        let su = u.x.sqrt();
+        let (b1, b2) = (su * (1.0 - u.y), su * u.y);
+        let q = tri[0] * (1.0 - su) + tri[1] * b1 + tri[2] * b2;
+        let to = q - s.p;
+        let d2 = to.length_squared();
+        let wi = to / d2.sqrt();
+        let cos_l = face_normal(tri).dot(wi).abs();
+        let cos = s.n.dot(wi);
+        if cos <= 0.0 || cos_l <= 0.0 || s.ng.dot(to) <= 0.0 {
+            return None;
+        }
+        let p_light = d2 / (cos_l * self.lights.area);
+        let (pass, crossed) = self.shadow_through(s.origin, q - s.origin, 1.0 - 1e-4, counts);
+        let mat = self.scene.material_of(prim);
+        let le = super::shade::textured(self.scene, mat, prim, b1, b2).emission;
+        Some(EmissiveSample {
+            value: brdf(s, wi, wo) * cos * le * pass / p_light,
+            p_light,
+            wi,
+            crossed,
+        })
+    }
+
+    /// The emission of the triangle `hit` that a direction `wi` from `s` drawn with density
+    /// `pdf` (one of `count`) reached as its closest hit, weighted against one light sample of
+    /// the emissive triangles (the power heuristic); zero when `hit` is not one of them.
+    pub(super) fn emissive_along(
+        &self,
+        s: &Surface,
+        wi: Vec3,
+        hit: &Hit,
+        pdf: f32,
+        count: u32,
+    ) -> Vec3 {
+        if self.lights.owner.get(&hit.prim) != Some(&Owner::Set) {
+            return Vec3::ZERO;
+        }
+        let tri = &self.scene.mesh.triangles[hit.prim as usize];
+        let cos_l = face_normal(tri).dot(wi).abs();
+        if cos_l <= 0.0 {
+            return Vec3::ZERO;
+        }
+        let d = (s.p - (s.origin + hit.t * wi)).length();
+        let p_light = d * d / (cos_l * self.lights.area);
+        let mat = self.scene.material_of(hit.prim);
+        let le = super::shade::textured(self.scene, mat, hit.prim, hit.u, hit.v).emission;
+        le * power(count as f32, pdf, p_light)
     }
 
     /// The bounce from `s`, sampled from its lobes, and the light it brings back (weighted by

@@ -14,8 +14,8 @@ pub struct RenderPlan {
     pub integrator: Integrator,
     /// Rays that leave the scene sample the environment (else they see black).
     pub environment: bool,
-    /// Shadow rays are traced towards the lights (and, with the path integrator, emissive
-    /// triangles); else every light is seen unblocked: no shadows, and no shadow rays.
+    /// Shadow rays are traced towards the lights (and emissive triangles); else every light is
+    /// seen unblocked: no shadows, and no shadow rays.
     pub shadows: bool,
     /// Shadow rays pass through transparent surfaces and are attenuated by them (else a
     /// shadow ray is a plain any-hit occlusion test).
@@ -57,10 +57,8 @@ impl RenderPlan {
         Self {
             integrator,
             environment: !matches!(scene.environment, Environment::None),
-            // The path integrator also samples emissive triangles as lights.
-            shadows: !scene.lights.is_empty()
-                || (integrator == Integrator::Path
-                    && scene.materials.iter().any(|m| m.is_emissive())),
+            // Both integrators also sample emissive triangles as lights.
+            shadows: !scene.lights.is_empty() || scene.materials.iter().any(|m| m.is_emissive()),
             transparent_shadows: transparent,
             reflections: bounces && scene.materials.iter().any(|m| m.may_mirror()),
             transmission: bounces && transparent,
@@ -100,24 +98,23 @@ impl fmt::Display for Explain<'_> {
         match p.integrator {
             Integrator::Direct => writeln!(
                 f,
-                "  integrator           direct: light from the lights only, no bounces off diffuse surfaces"
+                "  integrator           direct: light from the lights and emissive triangles only, no bounces \
+                 off diffuse surfaces (glossy ones also look for rectangle lights along their lobes: MIS)"
             )?,
-            Integrator::Path => {
-                let set = super::path::LightSet::new(scene);
-                writeln!(
-                    f,
-                    "  integrator           path: up to {} diffuse bounces (the last collects emission only), \
-                     Russian roulette, light samples weighted against bounces by MIS",
-                    s.max_depth
-                )?;
-                if set.sampled_triangles() > 0 {
-                    writeln!(
-                        f,
-                        "  emissive triangles   {} sampled as lights by area",
-                        set.sampled_triangles()
-                    )?;
-                }
-            }
+            Integrator::Path => writeln!(
+                f,
+                "  integrator           path: up to {} diffuse bounces (the last collects emission only), \
+                 Russian roulette, light samples weighted against bounces by MIS",
+                s.max_depth
+            )?,
+        }
+        let set = super::path::LightSet::new(scene);
+        if set.sampled_triangles() > 0 {
+            writeln!(
+                f,
+                "  emissive triangles   {} sampled as lights by area",
+                set.sampled_triangles()
+            )?;
         }
         writeln!(
             f,

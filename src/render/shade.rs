@@ -30,7 +30,8 @@ pub struct Tracer<'a> {
     pub max_depth: u32,
     /// The environment, loaded (black when the plan has none).
     pub env: &'a EnvironmentMap,
-    /// What the path integrator samples besides the scene's lights (empty for `direct`).
+    /// What both integrators sample besides the scene's lights: the emissive triangles no
+    /// rectangle light stands for.
     pub lights: std::sync::Arc<LightSet>,
 }
 
@@ -78,8 +79,8 @@ impl Surface<'_> {
 }
 
 impl<'a> Tracer<'a> {
-    /// A tracer of `scene` with the plan's integrator (finding the emissive triangles the
-    /// path integrator samples).
+    /// A tracer of `scene` with the plan's integrator (finding the emissive triangles both
+    /// integrators sample as lights).
     pub fn new(
         scene: &'a Scene,
         bvh: &'a Bvh,
@@ -87,10 +88,7 @@ impl<'a> Tracer<'a> {
         max_depth: u32,
         env: &'a EnvironmentMap,
     ) -> Self {
-        let lights = match plan.integrator {
-            Integrator::Path => LightSet::new(scene),
-            Integrator::Direct => LightSet::default(),
-        };
+        let lights = LightSet::new(scene);
         Self::with_lights(
             scene,
             bvh,
@@ -272,13 +270,16 @@ impl<'a> Tracer<'a> {
 
     /// Light arriving directly from the light sources, reflected towards `wo`.
     ///
-    /// Point and spot lights are sampled at their point. A rectangle light is sampled over its
+    /// Point and spot lights are sampled at their point, the emissive triangles no rectangle
+    /// light stands for by one point chosen by area. A rectangle light is sampled over its
     /// area; on a surface with a glossy lobe its light is also sampled by directions drawn
     /// from the surface's lobes ([`Tracer::rect_lights_by_bsdf`]), the two weighted against
     /// each other by multiple importance sampling (the power heuristic, Veach 1997), as
     /// Mitsuba's `direct` does: a narrow lobe under a large light is found by its own
     /// directions, a small light by its samples. A diffuse surface takes light samples only
-    /// (the lobe's directions would rarely find a light it cannot already sample well).
+    /// (the lobe's directions would rarely find a light it cannot already sample well), and
+    /// the emissive triangles are found by their samples only (a direction that met one would
+    /// need a closest hit, and one through a transparent surface a walk through it).
     fn direct(&self, s: &Surface, wo: Vec3, rng: &mut PathSampler, counts: &mut RayCounts) -> Vec3 {
         let m = s.material;
         if !m.reflects() {
@@ -287,8 +288,9 @@ impl<'a> Tracer<'a> {
         let origin = s.origin;
         let bsdf = s.bsdf();
         // Directions drawn from the lobes, as many as the most light samples a rectangle
-        // light takes here; none without a glossy lobe.
+        // light takes here (one for the emissive triangles); none without a glossy lobe.
         let by_bsdf = if bsdf.gloss_probability(wo) > 0.0 {
+            let triangles = u32::from(self.lights.sampled_triangles() > 0);
             self.scene
                 .lights
                 .iter()
@@ -296,8 +298,7 @@ impl<'a> Tracer<'a> {
                     Light::Rect { samples, .. } => Some(self.capped_samples(samples).max(1)),
                     _ => None,
                 })
-                .max()
-                .unwrap_or(0)
+                .fold(triangles, u32::max)
         } else {
             0
         };
@@ -337,16 +338,28 @@ impl<'a> Tracer<'a> {
                 }
             };
         }
+        if let Some(e) = self.emissive_sample(s, wo, rng, counts) {
+            // Where the lobes' directions could not have found the point, its sample counts
+            // alone.
+            let w = if by_bsdf == 0 || e.crossed {
+                1.0
+            } else {
+                power(1.0, e.p_light, by_bsdf as f32 * bsdf.pdf(e.wi, wo))
+            };
+            sum += e.value * w;
+        }
         if by_bsdf > 0 {
-            sum += self.rect_lights_by_bsdf(s, wo, by_bsdf, rng, counts);
+            sum += self.lights_by_bsdf(s, wo, by_bsdf, rng, counts);
         }
         sum
     }
 
-    /// The rectangle lights' light at `s` towards `wo` estimated from `count` directions drawn
-    /// from the surface's lobes ([`Tracer::rects_along`]), weighted against every rectangle
-    /// light's own samples ([`Tracer::direct`] weights those).
-    fn rect_lights_by_bsdf(
+    /// The light of the rectangle lights and emissive triangles at `s` towards `wo` estimated
+    /// from `count` directions drawn from the surface's lobes, weighted against the lights' own
+    /// samples ([`Tracer::direct`] weights those): a rectangle light met by its rectangle and a
+    /// shadow ray ([`Tracer::rects_along`]), an emissive triangle as the direction's closest hit
+    /// (when shadows are on: with them off, the triangles' samples count alone).
+    fn lights_by_bsdf(
         &self,
         s: &Surface,
         wo: Vec3,
@@ -365,9 +378,16 @@ impl<'a> Tracer<'a> {
                 continue;
             }
             let f = bsdf.eval(wi, wo) * cos / pdf;
-            acc += self.rects_along(s, wi, pdf, count, counts, |_, samples| {
+            let mut l = self.rects_along(s, wi, pdf, count, counts, |_, samples| {
                 Some(self.capped_samples(samples).max(1))
-            }) * f;
+            });
+            if self.plan.shadows && self.lights.sampled_triangles() > 0 {
+                counts.shadow += 1;
+                if let Some(hit) = self.bvh.intersect(&Ray::new(s.origin, wi), f32::INFINITY) {
+                    l += self.emissive_along(s, wi, &hit, pdf, count);
+                }
+            }
+            acc += l * f;
         }
         acc / count as f32
     }
@@ -500,18 +520,33 @@ impl<'a> Tracer<'a> {
         t_max: f32,
         counts: &mut RayCounts,
     ) -> Vec3 {
+        self.shadow_through(origin, to, t_max, counts).0
+    }
+
+    /// [`Tracer::shadow`], and whether the light it passes went through a transparent surface
+    /// (or was not looked at, shadows being off): then a ray along `to` would not have reached
+    /// the light as its closest hit.
+    pub(super) fn shadow_through(
+        &self,
+        origin: Vec3,
+        to: Vec3,
+        t_max: f32,
+        counts: &mut RayCounts,
+    ) -> (Vec3, bool) {
         if !self.plan.shadows {
-            return Vec3::ONE;
+            return (Vec3::ONE, true);
         }
         counts.shadow += 1;
         let ray = Ray::new(origin, to);
         if !self.plan.transparent_shadows {
-            return if self.bvh.occluded(&ray, t_max) {
+            let pass = if self.bvh.occluded(&ray, t_max) {
                 Vec3::ZERO
             } else {
                 Vec3::ONE
             };
+            return (pass, false);
         }
+        let mut crossed = false;
         let scene = self.scene;
         let len = to.length();
         // Absorption needs the distance travelled inside each medium. Summing `+t` over exits
@@ -536,6 +571,7 @@ impl<'a> Tracer<'a> {
             if opacity >= 1.0 {
                 return Vec3::ZERO;
             }
+            crossed = true;
             if self.plan.absorption && m.absorption.max_element() > 0.0 {
                 let id = scene.mesh.material_ids[prim as usize];
                 let entering = face_normal(&scene.mesh.triangles[prim as usize]).dot(to) < 0.0;
@@ -554,7 +590,7 @@ impl<'a> Tracer<'a> {
             let d = (sum + balance.max(0) as f32 * t_max) * len;
             pass *= beer_lambert(scene.materials[id as usize].absorption, d.max(0.0));
         }
-        pass
+        (pass, crossed)
     }
 }
 

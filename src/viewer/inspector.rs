@@ -396,7 +396,9 @@ fn render_section(
                         format!("scene's ({scene_integrator})"),
                     );
                     ui.selectable_value(&mut s.integrator, Some(Integrator::Direct), "direct")
-                        .on_hover_text("light from the lights only, hard shadows");
+                        .on_hover_text(
+                            "light from the lights and emissive surfaces only, no bounces",
+                        );
                     ui.selectable_value(&mut s.integrator, Some(Integrator::Path), "path")
                         .on_hover_text("global illumination: diffuse bounces, colour bleeding");
                 });

@@ -33,7 +33,7 @@ use crate::render::cache::{RenderCache, TILE};
 use crate::render::heatmap::heatmap_rgba8;
 use crate::render::path::LightSet;
 use crate::render::resample::{Filter, resize_rgba8};
-use crate::render::{EnvironmentMap, Integrator, Progressive, RayCounts, RenderPlan, Tracer};
+use crate::render::{EnvironmentMap, Progressive, RayCounts, RenderPlan, Tracer};
 use crate::scene::Scene;
 
 /// While the view stays the same, the moving picture is shown again this often.
@@ -309,7 +309,7 @@ struct State {
     last_shown: Option<Instant>,
     /// Show the picture again though nothing was traced (exposure or display changed).
     reshow: bool,
-    /// The light set of the last scene traced (by scene and integrator).
+    /// The light set of the last scene traced.
     lights: LightCache,
     done: bool,
 }
@@ -449,26 +449,22 @@ fn tracer<'a>(job: &'a Job, light_samples: Option<u32>, lights: Arc<LightSet>) -
     Tracer::with_lights(&job.scene, &job.bvh, plan, max_depth, &job.env, lights)
 }
 
-/// The path integrator's light set for the job's scene: found once per scene and integrator,
-/// not for every slice (with many emissive triangles it walks them all).
+/// The integrators' light set for the job's scene: found once per scene, not for every slice
+/// (with many emissive triangles it walks them all).
 fn lights_for(cache: &mut LightCache, job: &Job) -> Arc<LightSet> {
-    let integrator = job.settings.plan(&job.scene).integrator;
-    let key = (job.content.scene, integrator);
+    let key = job.content.scene;
     if let Some((k, lights)) = cache.as_ref()
         && *k == key
     {
         return lights.clone();
     }
-    let lights = Arc::new(match integrator {
-        Integrator::Path => LightSet::new(&job.scene),
-        Integrator::Direct => LightSet::default(),
-    });
+    let lights = Arc::new(LightSet::new(&job.scene));
     *cache = Some((key, lights.clone()));
     lights
 }
 
-/// The light set kept for a scene (its generation) and integrator.
-type LightCache = Option<((u64, Integrator), Arc<LightSet>)>;
+/// The light set kept for a scene (its generation).
+type LightCache = Option<(u64, Arc<LightSet>)>;
 
 fn same_view(a: &CameraRays, b: &CameraRays) -> bool {
     a.eye == b.eye
