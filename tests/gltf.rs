@@ -618,7 +618,7 @@ fn missing_short_and_overrun_buffers_are_errors_that_say_which() {
 }
 
 #[test]
-fn wrong_types_cycles_depth_and_sparse_accessors_are_errors() {
+fn wrong_types_cycles_and_depth_are_errors() {
     let dir = tempfile::tempdir().unwrap();
     // Wrong JSON type: file, line and column.
     let mut d = doc(json!([{"mesh": 0}]), json!({}));
@@ -653,13 +653,6 @@ fn wrong_types_cycles_depth_and_sparse_accessors_are_errors() {
     d["accessors"][0]["componentType"] = json!(5121);
     let e = error_of(&write(dir.path(), "bytes.gltf", &d));
     assert!(e.contains("POSITION (accessors[0])"), "{e}");
-    // Sparse accessors are refused by name.
-    let mut d = doc(json!([{"mesh": 0}]), json!({}));
-    d["accessors"][0]["sparse"] = json!({"count": 1,
-        "indices": {"bufferView": 3, "componentType": 5123},
-        "values": {"bufferView": 0}});
-    let e = error_of(&write(dir.path(), "sparse.gltf", &d));
-    assert!(e.contains("sparse"), "{e}");
     // A required extension the loader does not read.
     let d = doc(
         json!([{"mesh": 0}]),
@@ -671,6 +664,89 @@ fn wrong_types_cycles_depth_and_sparse_accessors_are_errors() {
     std::fs::write(dir.path().join("text.glb"), b"glTF\x02\0\0\0\x10\0\0\0").unwrap();
     let e = error_of(&dir.path().join("text.glb"));
     assert!(e.contains("GLB"), "{e}");
+}
+
+/// Sparse accessors (glTF 2.0 section 3.6.2.3) substitute some elements of their base, or of
+/// zeros without one; indices that do not rise strictly, run past the accessor, or views too
+/// short for the substitutions are errors that name the accessor.
+#[test]
+fn sparse_accessors_substitute_elements_and_malformed_ones_are_errors() {
+    let dir = tempfile::tempdir().unwrap();
+    let positions = |path: &Path| {
+        let scene = Scene::load(path).unwrap_or_else(|e| panic!("{e:#}"));
+        assert_eq!(scene.mesh.triangles.len(), 1);
+        world(&scene, 0)
+    };
+    let (a, b, c) = (Vec3::ZERO, Vec3::X, Vec3::Y);
+    // Vertex 1 replaced by the first normal, (0, 0, 1): the index is the second u16 of
+    // bufferViews[3] ([0, 1, 2]), the value the start of bufferViews[1].
+    let mut d = doc(json!([{"mesh": 0}]), json!({}));
+    d["accessors"][0]["sparse"] = json!({"count": 1,
+        "indices": {"bufferView": 3, "byteOffset": 2, "componentType": 5123},
+        "values": {"bufferView": 1}});
+    let t = positions(&write(dir.path(), "one.gltf", &d));
+    assert!(
+        close(t[0], a) && close(t[1], Vec3::Z) && close(t[2], c),
+        "{t:?}"
+    );
+    // No base: zeros, all three replaced by the positions themselves.
+    let mut d = doc(json!([{"mesh": 0}]), json!({}));
+    d["accessors"][0]
+        .as_object_mut()
+        .unwrap()
+        .remove("bufferView");
+    d["accessors"][0]["sparse"] = json!({"count": 3,
+        "indices": {"bufferView": 3, "componentType": 5123},
+        "values": {"bufferView": 0}});
+    let t = positions(&write(dir.path(), "no_base.gltf", &d));
+    assert!(close(t[0], a) && close(t[1], b) && close(t[2], c), "{t:?}");
+    // Two of them, the last left as zeros.
+    d["accessors"][0]["sparse"]["count"] = json!(2);
+    let t = positions(&write(dir.path(), "two.gltf", &d));
+    assert!(
+        close(t[0], a) && close(t[1], b) && close(t[2], Vec3::ZERO),
+        "{t:?}"
+    );
+    let malformed = [
+        // u8 indices over the u16 [0, 1, 2]: 0, 0.
+        (
+            json!({"count": 2, "indices": {"bufferView": 3, "componentType": 5121},
+                   "values": {"bufferView": 0}}),
+            "do not rise strictly",
+        ),
+        // u16 at byte 14 of the positions: the high half of 1.0f, 16256.
+        (
+            json!({"count": 1, "indices": {"bufferView": 0, "byteOffset": 14, "componentType": 5123},
+                   "values": {"bufferView": 0}}),
+            "sparse index 16256",
+        ),
+        // A 12-byte value from a 6-byte view.
+        (
+            json!({"count": 1, "indices": {"bufferView": 3, "componentType": 5123},
+                   "values": {"bufferView": 3}}),
+            "sparse values",
+        ),
+        // Indices past their view's end.
+        (
+            json!({"count": 3, "indices": {"bufferView": 3, "byteOffset": 2, "componentType": 5123},
+                   "values": {"bufferView": 0}}),
+            "sparse indices",
+        ),
+        (
+            json!({"count": 4, "indices": {"bufferView": 3, "componentType": 5123},
+                   "values": {"bufferView": 0}}),
+            "sparse count 4",
+        ),
+    ];
+    for (i, (sparse, what)) in malformed.into_iter().enumerate() {
+        let mut d = doc(json!([{"mesh": 0}]), json!({}));
+        d["accessors"][0]["sparse"] = sparse;
+        let e = error_of(&write(dir.path(), &format!("bad{i}.gltf"), &d));
+        assert!(
+            e.contains("POSITION (accessors[0])") && e.contains(what),
+            "{e}"
+        );
+    }
 }
 
 #[test]

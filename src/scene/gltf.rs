@@ -829,30 +829,50 @@ impl Loader<'_> {
                 acc.data_type()
             );
         }
-        if acc.sparse().is_some() {
-            bail!("{at}: sparse accessors are not supported");
-        }
         let count = acc.count();
         if count == 0 {
             bail!("{at}: no elements");
         }
-        let Some(view) = acc.view() else {
-            bail!("{at}: no bufferView");
-        };
         let size = acc.size();
+        match acc.view() {
+            Some(view) => {
+                self.check_span(&at, "elements", &view, acc.offset(), count, size)?;
+            }
+            // Without a bufferView the elements are zeros, which a sparse accessor replaces
+            // in part.
+            None if acc.sparse().is_some() => {}
+            None => bail!("{at}: no bufferView"),
+        }
+        if let Some(sparse) = acc.sparse() {
+            self.check_sparse(&at, &sparse, count, size)?;
+        }
+        Ok(())
+    }
+
+    /// Checks that `count` elements of `size` bytes from byte `offset` of `view` (at its stride)
+    /// lie inside it, and it inside its buffer; `what` names them in the message.
+    fn check_span(
+        &self,
+        at: &str,
+        what: &str,
+        view: &::gltf::buffer::View,
+        offset: usize,
+        count: usize,
+        size: usize,
+    ) -> Result<&[u8]> {
         let stride = view.stride().unwrap_or(size);
         if stride < size {
             bail!("{at}: byteStride {stride} is smaller than an element ({size} bytes)");
         }
-        let span = (count - 1)
-            .checked_mul(stride)
+        let span = count
+            .checked_sub(1)
+            .and_then(|c| c.checked_mul(stride))
             .and_then(|s| s.checked_add(size))
-            .and_then(|s| s.checked_add(acc.offset()));
+            .and_then(|s| s.checked_add(offset));
         match span {
             Some(end) if end <= view.length() => {}
             _ => bail!(
-                "{at}: {count} elements from byte {} (stride {stride}) run past bufferViews[{}] ({} bytes)",
-                acc.offset(),
+                "{at}: {count} {what} from byte {offset} (stride {stride}) run past bufferViews[{}] ({} bytes)",
                 view.index(),
                 view.length()
             ),
@@ -864,7 +884,7 @@ impl Loader<'_> {
             None => bail!("{at}: buffers[{b}] does not exist"),
         };
         match view.offset().checked_add(view.length()) {
-            Some(end) if end <= data.len() => Ok(()),
+            Some(end) if end <= data.len() => Ok(&data[view.offset()..end]),
             _ => bail!(
                 "{at}: bufferViews[{}] (bytes {}..+{}) runs past buffers[{b}] ({} bytes)",
                 view.index(),
@@ -873,6 +893,63 @@ impl Loader<'_> {
                 data.len()
             ),
         }
+    }
+
+    /// Checks a sparse accessor's substitutions into `count` elements of `size` bytes: their
+    /// indices and values lie inside their views, and the indices rise strictly and stay below
+    /// `count`, as the specification asks (a reader applies them in one pass, so any other
+    /// order would silently drop some).
+    fn check_sparse(
+        &self,
+        at: &str,
+        sparse: &::gltf::accessor::sparse::Sparse,
+        count: usize,
+        size: usize,
+    ) -> Result<()> {
+        use ::gltf::accessor::sparse::IndexType;
+        let n = sparse.count() as usize;
+        if n == 0 || n > count {
+            bail!("{at}: sparse count {n} is not between 1 and the accessor's count {count}");
+        }
+        let values = sparse.values();
+        self.check_span(
+            at,
+            "sparse values",
+            &values.view(),
+            values.offset() as usize,
+            n,
+            size,
+        )?;
+        let indices = sparse.indices();
+        let width = match indices.index_type() {
+            IndexType::U8 => 1,
+            IndexType::U16 => 2,
+            IndexType::U32 => 4,
+        };
+        let view = indices.view();
+        let offset = indices.offset() as usize;
+        let bytes = self.check_span(at, "sparse indices", &view, offset, n, width)?;
+        let stride = view.stride().unwrap_or(width);
+        let mut previous: Option<u32> = None;
+        for k in 0..n {
+            let b = &bytes[offset + k * stride..][..width];
+            let i = match width {
+                1 => b[0] as u32,
+                2 => u16::from_le_bytes([b[0], b[1]]) as u32,
+                _ => u32::from_le_bytes([b[0], b[1], b[2], b[3]]),
+            };
+            if i as usize >= count {
+                bail!("{at}: sparse index {i} (entry {k}) is past the accessor's {count} elements");
+            }
+            if previous.is_some_and(|p| i <= p) {
+                bail!(
+                    "{at}: sparse indices do not rise strictly (entry {k}: {i} after {})",
+                    previous.unwrap_or(0)
+                );
+            }
+            previous = Some(i);
+        }
+        Ok(())
     }
 
     /// The index in `materials` of glTF material `m`, converting it on first use.
