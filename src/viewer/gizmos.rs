@@ -122,7 +122,15 @@ fn default_off(mut store: ResMut<GizmoConfigStore>) {
     store.config_mut::<LeafGizmos>().0.enabled = false;
 }
 
-fn index_bvh(current: Res<CurrentScene>, bvh: Res<SceneBvh>, mut index: ResMut<BvhIndex>) {
+/// Indexes each new tree, and brings the level and leaf shown into its range (a `--leaf` or
+/// `--level` past it, or a rebuild with fewer leaves, would otherwise draw nothing), saying so.
+fn index_bvh(
+    current: Res<CurrentScene>,
+    bvh: Res<SceneBvh>,
+    mut index: ResMut<BvhIndex>,
+    mut settings: ResMut<ViewSettings>,
+    mut leaves: ResMut<LeafView>,
+) {
     let Some(tree) = bvh.for_scene(current.generation) else {
         return;
     };
@@ -130,6 +138,25 @@ fn index_bvh(current: Res<CurrentScene>, bvh: Res<SceneBvh>, mut index: ResMut<B
         return;
     }
     *index = BvhIndex::new(tree.clone());
+    if let Some(last) = index.leaves.len().checked_sub(1).map(|l| l as u32)
+        && leaves.index > last
+    {
+        eprintln!(
+            "warning: leaf {} asked for, the tree has {} leaves: leaf {last} shown",
+            leaves.index,
+            last + 1
+        );
+        leaves.index = last;
+    }
+    if let Some(depth) = index.levels.len().checked_sub(1).map(|d| d as u32)
+        && settings.level > depth
+    {
+        eprintln!(
+            "warning: level {} asked for, the tree's deepest is {depth}: level {depth} shown",
+            settings.level
+        );
+        settings.level = depth;
+    }
 }
 
 fn keys(
