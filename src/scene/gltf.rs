@@ -907,7 +907,7 @@ impl Loader<'_> {
         size: usize,
     ) -> Result<()> {
         use ::gltf::accessor::sparse::IndexType;
-        let n = sparse.count() as usize;
+        let n = sparse.count();
         if n == 0 || n > count {
             bail!("{at}: sparse count {n} is not between 1 and the accessor's count {count}");
         }
@@ -916,7 +916,7 @@ impl Loader<'_> {
             at,
             "sparse values",
             &values.view(),
-            values.offset() as usize,
+            values.offset(),
             n,
             size,
         )?;
@@ -927,7 +927,7 @@ impl Loader<'_> {
             IndexType::U32 => 4,
         };
         let view = indices.view();
-        let offset = indices.offset() as usize;
+        let offset = indices.offset();
         let bytes = self.check_span(at, "sparse indices", &view, offset, n, width)?;
         let stride = view.stride().unwrap_or(width);
         let mut previous: Option<u32> = None;
