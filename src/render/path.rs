@@ -16,6 +16,8 @@
 //! the quad the camera sees, and the light that lights the room) are one light: its samples
 //! and a bounce that hits its triangles are weighted against each other; when the triangles do
 //! not cover the whole rectangle, bounces that hit them add nothing (the samples count it all).
+//! A rectangle light no triangles cover at all, which bounces cannot hit, is looked for along
+//! a glossy surface's bounce by its rectangle (with a shadow ray) and weighted the same way.
 
 use std::collections::HashMap;
 
@@ -367,7 +369,8 @@ impl Tracer<'_> {
         }
         let origin = s.origin;
         let bsdf = s.bsdf();
-        let glossy = bsdf.gloss_probability(wo) > 0.0;
+        // Only the rectangle lights no triangles cover need it.
+        let glossy = self.lights.hidden_rects && bsdf.gloss_probability(wo) > 0.0;
         let mut sum = Vec3::ZERO;
         for (i, light) in self.scene.lights.iter().enumerate() {
             sum += match *light {
@@ -496,7 +499,7 @@ impl Tracer<'_> {
         let bsdf = s.bsdf();
         // On a glossy surface the bounce also looks for the rectangle lights no triangles
         // cover (which it cannot hit), as `lights_at` weights their samples.
-        let glossy = bsdf.gloss_probability(wo) > 0.0 && self.lights.hidden_rects;
+        let glossy = self.lights.hidden_rects && bsdf.gloss_probability(wo) > 0.0;
         if depth == self.max_depth
             && self.lights.owner.is_empty()
             && !self.plan.environment

@@ -1,4 +1,5 @@
-//! Shading: the surfaces' lobes ([`super::bsdf`]) under point and rectangular lights, shadows that let light through
+//! Shading: the surfaces' lobes ([`super::bsdf`]) under point, spot and rectangular lights and
+//! emissive triangles, shadows that let light through
 //! transparent surfaces (with Beer-Lambert absorption inside closed meshes), mirror
 //! reflections and transmission, each only where the [`RenderPlan`] says the scene needs it.
 
