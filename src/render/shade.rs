@@ -273,14 +273,14 @@ impl<'a> Tracer<'a> {
     ///
     /// Point and spot lights are sampled at their point, the emissive triangles no rectangle
     /// light stands for by one point chosen by area. A rectangle light is sampled over its
-    /// area; on a surface with a glossy lobe its light is also sampled by directions drawn
-    /// from the surface's lobes ([`Tracer::rect_lights_by_bsdf`]), the two weighted against
-    /// each other by multiple importance sampling (the power heuristic, Veach 1997), as
-    /// Mitsuba's `direct` does: a narrow lobe under a large light is found by its own
-    /// directions, a small light by its samples. A diffuse surface takes light samples only
-    /// (the lobe's directions would rarely find a light it cannot already sample well), and
-    /// the emissive triangles are found by their samples only (a direction that met one would
-    /// need a closest hit, and one through a transparent surface a walk through it).
+    /// area. On a surface with a glossy lobe, the rectangle lights and emissive triangles are
+    /// also found by directions drawn from the surface's lobes ([`Tracer::lights_by_bsdf`]),
+    /// the two weighted against each other by multiple importance sampling (the power
+    /// heuristic, Veach 1997), as Mitsuba's `direct` does: a narrow lobe under a large light is
+    /// found by its own directions, a small light by its samples. A diffuse surface takes
+    /// light samples only (the lobe's directions would rarely find a light it cannot already
+    /// sample well), and so does an emissive triangle seen through a transparent surface
+    /// (which a direction's closest hit cannot reach).
     fn direct(&self, s: &Surface, wo: Vec3, rng: &mut PathSampler, counts: &mut RayCounts) -> Vec3 {
         let m = s.material;
         if !m.reflects() {
@@ -350,12 +350,13 @@ impl<'a> Tracer<'a> {
             sum += e.value * w;
         }
         if by_bsdf > 0 {
-            sum += self.lights_by_bsdf(s, wo, by_bsdf, rng, counts);
+            sum += self.lights_by_bsdf(s, &bsdf, wo, by_bsdf, rng, counts);
         }
         sum
     }
 
-    /// The light of the rectangle lights and emissive triangles at `s` towards `wo` estimated
+    /// The light of the rectangle lights and emissive triangles at `s` (whose lobes are
+    /// `bsdf`) towards `wo` estimated
     /// from `count` directions drawn from the surface's lobes, weighted against the lights' own
     /// samples ([`Tracer::direct`] weights those): a rectangle light met by its rectangle and a
     /// shadow ray ([`Tracer::rects_along`]), an emissive triangle as the direction's closest hit
@@ -363,12 +364,12 @@ impl<'a> Tracer<'a> {
     fn lights_by_bsdf(
         &self,
         s: &Surface,
+        bsdf: &Bsdf,
         wo: Vec3,
         count: u32,
         rng: &mut PathSampler,
         counts: &mut RayCounts,
     ) -> Vec3 {
-        let bsdf = s.bsdf();
         let mut acc = Vec3::ZERO;
         for _ in 0..count {
             let Some(Sample { wi, pdf }) = bsdf.sample(wo, rng.next_2d()) else {
