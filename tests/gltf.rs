@@ -1716,3 +1716,166 @@ fn metallic_roughness_textures_vary_the_factors_per_point() {
         }
     }
 }
+
+/// The quad of [`quad_buffer`] with every vertex's `TEXCOORD_0` on the red texel of
+/// [`common::png_2x2`] and, when `set1`, every `TEXCOORD_1` on its green texel; black and
+/// emissive through the 2x2 image (`emissiveTexture` is `info`, `extra` merged into the
+/// material).
+fn two_set_quad(dir: &Path, name: &str, info: Value, set1: bool, extra: Value) -> Scene {
+    let (mut bin, mut views, mut accessors) = quad_buffer();
+    let mut attributes = json!({"POSITION": 0, "NORMAL": 1, "TEXCOORD_0": 4});
+    for (k, uv) in [[0.25f32, 0.25], [0.75, 0.25]].iter().enumerate() {
+        let offset = bin.len();
+        bin.extend(f32_bytes(&uv.repeat(4)));
+        views.push(json!({"buffer": 0, "byteOffset": offset, "byteLength": 32}));
+        accessors
+            .push(json!({"bufferView": 4 + k, "componentType": 5126, "count": 4, "type": "VEC2"}));
+    }
+    if set1 {
+        attributes["TEXCOORD_1"] = json!(5);
+    }
+    let png = common::png_2x2();
+    let mut d = json!({
+        "asset": {"version": "2.0"},
+        "scene": 0,
+        "scenes": [{"nodes": [0]}],
+        "nodes": [{"mesh": 0}],
+        "meshes": [{"primitives": [{"attributes": attributes, "indices": 3, "material": 0}]}],
+        "materials": [{
+            "pbrMetallicRoughness": {"baseColorFactor": [0.0, 0.0, 0.0, 1.0], "metallicFactor": 0.0},
+            "emissiveTexture": info,
+            "emissiveFactor": [1.0, 1.0, 1.0]
+        }],
+        "textures": [{"source": 0}],
+        "images": [{"uri": format!("data:image/png;base64,{}", base64::engine::general_purpose::STANDARD.encode(&png))}],
+        "buffers": [{"byteLength": bin.len(), "uri": data_uri(&bin)}],
+        "bufferViews": views,
+        "accessors": accessors,
+        "extensionsUsed": ["KHR_texture_transform"]
+    });
+    merge(&mut d["materials"][0], extra);
+    Scene::load(&write(dir, name, &d)).unwrap()
+}
+
+/// A texture reads the coordinate set it names: `texCoord: 1` (or a `KHR_texture_transform`
+/// whose `texCoord` is 1, which replaces the texture's own) shows the quad in the green texel
+/// that `TEXCOORD_1` points at, where set 0 points at the red one; the second set is kept only
+/// when a texture reads it. A set past 1, or a set the primitive does not have, is a warning
+/// that names it. Fails with the texture's `texCoord` ignored (red, and a warning about the set).
+#[test]
+fn textures_read_the_texture_coordinate_set_they_name() {
+    let dir = tempfile::tempdir().unwrap();
+    let centre = |s: &Scene| {
+        quad_picture(
+            s,
+            Vec3::new(0.0, 0.0, 5.0),
+            0.0,
+            tracery::scene::Environment::None,
+        )[4 * 9 + 4]
+    };
+    let (red, green) = (Vec3::X, Vec3::Y);
+
+    let s = two_set_quad(
+        dir.path(),
+        "set1.gltf",
+        json!({"index": 0, "texCoord": 1}),
+        true,
+        json!({}),
+    );
+    assert!(s.warnings.is_empty(), "{:?}", s.warnings);
+    assert_eq!(s.materials[0].emission_map.as_ref().unwrap().uv_set, 1);
+    assert_eq!(
+        s.mesh.uvs1.len(),
+        2,
+        "the second set, kept for both triangles"
+    );
+    assert!(close(centre(&s), green), "set 1: {}", centre(&s));
+
+    let s = two_set_quad(
+        dir.path(),
+        "set0.gltf",
+        json!({"index": 0}),
+        true,
+        json!({}),
+    );
+    assert!(s.warnings.is_empty(), "{:?}", s.warnings);
+    assert!(s.mesh.uvs1.is_empty(), "no texture reads set 1");
+    assert!(close(centre(&s), red), "set 0: {}", centre(&s));
+
+    let s = two_set_quad(
+        dir.path(),
+        "transform_set1.gltf",
+        json!({"index": 0, "texCoord": 0, "extensions": {"KHR_texture_transform": {"texCoord": 1}}}),
+        true,
+        json!({}),
+    );
+    assert!(s.warnings.is_empty(), "{:?}", s.warnings);
+    assert!(
+        close(centre(&s), green),
+        "the transform's set: {}",
+        centre(&s)
+    );
+
+    let s = two_set_quad(
+        dir.path(),
+        "set2.gltf",
+        json!({"index": 0, "texCoord": 2}),
+        true,
+        json!({}),
+    );
+    assert!(
+        s.warnings
+            .iter()
+            .any(|w| w.contains("emissiveTexture uses TEXCOORD_2")),
+        "{:?}",
+        s.warnings
+    );
+    assert!(
+        close(centre(&s), red),
+        "set 2 read as set 0: {}",
+        centre(&s)
+    );
+
+    let s = two_set_quad(
+        dir.path(),
+        "no_set1.gltf",
+        json!({"index": 0, "texCoord": 1}),
+        false,
+        json!({}),
+    );
+    assert!(
+        s.warnings
+            .iter()
+            .any(|w| w.contains("meshes[0].primitives[0]") && w.contains("TEXCOORD_1")),
+        "{:?}",
+        s.warnings
+    );
+
+    // A normal map on set 1 gets its MikkTSpace tangents from set 1: with TEXCOORD_1 the
+    // quad's coordinates with u and v swapped (u along +y, v along +x), the tangent (along +u)
+    // is +y, where set 0's is +x.
+    let (mut bin, mut views, mut accessors) = quad_buffer();
+    let offset = bin.len();
+    bin.extend(f32_bytes(&[0., 0., 0., 1., 1., 1., 1., 0.]));
+    views.push(json!({"buffer": 0, "byteOffset": offset, "byteLength": 32}));
+    accessors.push(json!({"bufferView": 4, "componentType": 5126, "count": 4, "type": "VEC2"}));
+    let png = png_1x1([128, 128, 255]);
+    let d = json!({
+        "asset": {"version": "2.0"},
+        "scene": 0,
+        "scenes": [{"nodes": [0]}],
+        "nodes": [{"mesh": 0}],
+        "meshes": [{"primitives": [{"attributes": {"POSITION": 0, "NORMAL": 1, "TEXCOORD_0": 2, "TEXCOORD_1": 4}, "indices": 3, "material": 0}]}],
+        "materials": [{"normalTexture": {"index": 0, "texCoord": 1}}],
+        "textures": [{"source": 0}],
+        "images": [{"uri": format!("data:image/png;base64,{}", base64::engine::general_purpose::STANDARD.encode(&png))}],
+        "buffers": [{"byteLength": bin.len(), "uri": data_uri(&bin)}],
+        "bufferViews": views,
+        "accessors": accessors
+    });
+    let s = Scene::load(&write(dir.path(), "normal_set1.gltf", &d)).unwrap();
+    assert!(s.warnings.is_empty(), "{:?}", s.warnings);
+    for t in s.mesh.tangents.iter().flatten() {
+        assert!(close(t.truncate(), Vec3::Y), "tangent {t}");
+    }
+}

@@ -711,16 +711,17 @@ pub(super) fn textured(scene: &Scene, m: &Material, prim: u32, u: f32, v: f32) -
             mirror,
         };
     }
-    let uv = scene.mesh.uv_at(prim, u, v);
-    let base = m.diffuse_map.as_ref().map(|t| t.sample(uv));
+    // Each texture reads its own coordinate set (glTF's TEXCOORD_0 or TEXCOORD_1).
+    let sample = |t: &crate::scene::Texture| t.sample(scene.mesh.uv_at(t.uv_set, prim, u, v));
+    let base = m.diffuse_map.as_deref().map(sample);
     let emission = m
         .emission_map
-        .as_ref()
-        .map_or(m.emission, |t| m.emission * t.sample(uv).truncate());
+        .as_deref()
+        .map_or(m.emission, |t| m.emission * sample(t).truncate());
     let opacity = m.opacity_at(base.map_or(1.0, |b| b.w));
     match &m.pbr {
         Some(pbr) => {
-            let mr = pbr.map.as_ref().map(|t| t.sample(uv));
+            let mr = pbr.map.as_deref().map(sample);
             let lobes = pbr.lobes_at(base.map(|b| b.truncate()), mr);
             Look {
                 diffuse: lobes.diffuse,
@@ -782,7 +783,9 @@ pub(super) fn normal_mapped(
     if t == glam::Vec4::ZERO {
         return None;
     }
-    let texel = map.sample(scene.mesh.uv_at(prim, u, v)).truncate();
+    let texel = map
+        .sample(scene.mesh.uv_at(map.uv_set, prim, u, v))
+        .truncate();
     crate::scene::tangents::perturbed(n, t, texel, m.normal_scale)
 }
 

@@ -7,8 +7,8 @@
 //!   several nodes is placed once per node.
 //! - Triangle primitives (`TRIANGLES`, `TRIANGLE_STRIP`, `TRIANGLE_FAN`), indexed or not;
 //!   points and lines are counted and left out with a warning. Positions, `NORMAL` (flat
-//!   normals where a primitive has none, as the glTF specification asks), `TEXCOORD_0` and
-//!   `TANGENT` (MikkTSpace tangents where a normal-mapped primitive has none, as the
+//!   normals where a primitive has none, as the glTF specification asks), `TEXCOORD_0`,
+//!   `TEXCOORD_1` (where a texture of the primitive's material reads it) and `TANGENT` (MikkTSpace tangents where a normal-mapped primitive has none, as the
 //!   specification asks: [`super::tangents`]). Triangles with a non-finite vertex are left
 //!   out, with a warning.
 //! - Materials (metallic-roughness) as [`Material`]s: see [`convert_material`]; their base
@@ -19,8 +19,9 @@
 //!   With no light, the default lighting of a bare mesh.
 //!
 //! Ignored: skins, morph targets, animations, orthographic cameras, texture coordinate sets
-//! other than 0, and the material extensions not named above. `KHR_texture_transform` is
-//! applied to the texture's lookups.
+//! past 1 (read as set 0, with a warning), and the material extensions not named above.
+//! `KHR_texture_transform` is applied to the texture's lookups (its `texCoord` replaces the
+//! texture's own set).
 //!
 //! Bad input never panics: every accessor is checked against its buffer view and buffer before
 //! it is read, and errors name the file and the JSON path (`meshes[0].primitives[1]: index 74
@@ -212,6 +213,7 @@ pub fn load_from(
         positions: Vec::new(),
         normals: Vec::new(),
         uvs: Vec::new(),
+        uvs1: Vec::new(),
         tangents: Vec::new(),
         material_ids: Vec::new(),
         primitives: HashMap::new(),
@@ -222,6 +224,7 @@ pub fn load_from(
         lights: Vec::new(),
         left_out: HashMap::new(),
         any_uvs: false,
+        any_uvs1: false,
         visits: 0,
     };
 
@@ -444,6 +447,8 @@ struct Primitive {
     /// Per-corner normals computed by the loader's rule where the file gives none.
     corner_normals: Option<Vec<[Vec3; 3]>>,
     uvs: Option<Vec<Vec2>>,
+    /// `TEXCOORD_1`, read only when a texture of the material reads it.
+    uvs1: Option<Vec<Vec2>>,
     /// The file's `TANGENT`s, read only when the material has a normal map.
     tangents: Option<Vec<Vec4>>,
     triangles: Vec<[u32; 3]>,
@@ -464,6 +469,8 @@ struct Loader<'a> {
     /// World normals, three per triangle (`None` for flat).
     normals: Vec<Option<[Vec3; 3]>>,
     uvs: Vec<[Vec2; 3]>,
+    /// `TEXCOORD_1`, three per triangle (zero where a primitive has none).
+    uvs1: Vec<[Vec2; 3]>,
     /// World tangents, three per triangle, for normal-mapped primitives with `TANGENT`
     /// (`None` otherwise: MikkTSpace's are made in [`Loader::finish`] where the material has
     /// a normal map).
@@ -481,6 +488,7 @@ struct Loader<'a> {
     /// Primitives left out, by reason.
     left_out: HashMap<String, usize>,
     any_uvs: bool,
+    any_uvs1: bool,
     /// Nodes placed so far (see [`MAX_NODE_VISITS`]).
     visits: usize,
 }
@@ -635,6 +643,10 @@ impl Loader<'_> {
                 Some(uv) => c.map(|i| uv[i]),
                 None => [Vec2::ZERO; 3],
             });
+            self.uvs1.push(match &p.uvs1 {
+                Some(uv) => c.map(|i| uv[i]),
+                None => [Vec2::ZERO; 3],
+            });
             // Tangents turn as positions do; a mirror turns the bitangent's handedness.
             self.tangents.push(p.tangents.as_ref().map(|t| {
                 c.map(|i| {
@@ -691,23 +703,38 @@ impl Loader<'_> {
             }
             None => None,
         };
-        let uvs = match prim.get(&::gltf::Semantic::TexCoords(0)) {
-            Some(acc) => {
-                self.check_accessor(
-                    &at,
-                    "TEXCOORD_0",
-                    &acc,
-                    &[DataType::F32, DataType::U8, DataType::U16],
-                    Dimensions::Vec2,
-                )?;
-                let uvs = reader
-                    .read_tex_coords(0)
-                    .map(|r| r.into_f32().map(Vec2::from).collect());
-                self.per_vertex(&at, "TEXCOORD_0", uvs, n, "ignored")
-            }
-            None => None,
-        };
         let material = self.material(prim.material())?;
+        let mut uvs = [None, None];
+        for set in 0..2 {
+            let reads = |m: &Material| m.textures().any(|t| t.uv_set == set);
+            if set > 0 && !reads(&self.materials[material as usize]) {
+                continue;
+            }
+            let what = format!("TEXCOORD_{set}");
+            uvs[set as usize] = match prim.get(&::gltf::Semantic::TexCoords(set.into())) {
+                Some(acc) => {
+                    self.check_accessor(
+                        &at,
+                        &what,
+                        &acc,
+                        &[DataType::F32, DataType::U8, DataType::U16],
+                        Dimensions::Vec2,
+                    )?;
+                    let uvs = reader
+                        .read_tex_coords(set.into())
+                        .map(|r| r.into_f32().map(Vec2::from).collect());
+                    self.per_vertex(&at, &what, uvs, n, "ignored")
+                }
+                None if set > 0 => {
+                    self.warnings.push(format!(
+                        "{at}: a texture of its material reads {what}, which it does not have; (0, 0) is read"
+                    ));
+                    None
+                }
+                None => None,
+            };
+        }
+        let [uvs, uvs1] = uvs;
         let normal_mapped = self.materials[material as usize].normal_map.is_some();
         let tangents = match prim.get(&::gltf::Semantic::Tangents) {
             Some(acc) if normal_mapped => {
@@ -766,9 +793,8 @@ impl Loader<'_> {
                 before - triangles.len()
             ));
         }
-        if uvs.is_some() {
-            self.any_uvs = true;
-        }
+        self.any_uvs |= uvs.is_some();
+        self.any_uvs1 |= uvs1.is_some();
         let corner_normals = match (&normals, self.rule) {
             (None, Some(rule)) => Some(super::normals::corner_normals(
                 &positions,
@@ -783,6 +809,7 @@ impl Loader<'_> {
             normals,
             corner_normals,
             uvs,
+            uvs1,
             tangents,
             triangles,
             material,
@@ -985,16 +1012,17 @@ impl Loader<'_> {
             if scale.is_finite() {
                 // The gltf crate reads no KHR_texture_transform on a normal texture: its JSON
                 // is read here.
-                let transform = n
+                let read = n
                     .extension_value("KHR_texture_transform")
                     .map(|t| self.transform_json(&label, "normalTexture", t));
+                let set = read.and_then(|(_, set)| set).unwrap_or(n.tex_coord());
                 mat.normal_scale = scale;
                 mat.normal_map = self.image_texture(
                     &label,
                     "normalTexture",
                     n.texture(),
-                    n.tex_coord(),
-                    transform,
+                    set,
+                    read.map(|(transform, _)| transform),
                     false,
                 );
             } else {
@@ -1018,26 +1046,18 @@ impl Loader<'_> {
         info: &::gltf::texture::Info,
         srgb: bool,
     ) -> Option<Arc<Texture>> {
-        let transform = info.texture_transform().map(|t| {
-            if t.tex_coord().is_some_and(|c| c != 0) {
-                self.warnings.push(format!(
-                    "{label}: {what}'s KHR_texture_transform asks for another texture coordinate set; TEXCOORD_0 is read"
-                ));
-            }
-            uv_transform(t.offset(), t.rotation(), t.scale())
-        });
-        self.image_texture(
-            label,
-            what,
-            info.texture(),
-            info.tex_coord(),
-            transform,
-            srgb,
-        )
+        let t = info.texture_transform();
+        // The extension's `texCoord`, when given, replaces the texture's own.
+        let set = t
+            .as_ref()
+            .and_then(|t| t.tex_coord())
+            .unwrap_or(info.tex_coord());
+        let transform = t.map(|t| uv_transform(t.offset(), t.rotation(), t.scale()));
+        self.image_texture(label, what, info.texture(), set, transform, srgb)
     }
 
-    /// [`Loader::texture`] from its parts: the texture, its coordinate set and its
-    /// `KHR_texture_transform`.
+    /// [`Loader::texture`] from its parts: the texture, its coordinate set (`TEXCOORD_0` or
+    /// `TEXCOORD_1`; another is read as 0, with a warning) and its `KHR_texture_transform`.
     fn image_texture(
         &mut self,
         label: &str,
@@ -1047,11 +1067,15 @@ impl Loader<'_> {
         transform: Option<glam::Affine2>,
         srgb: bool,
     ) -> Option<Arc<Texture>> {
-        if tex_coord != 0 {
-            self.warnings.push(format!(
-                "{label}: {what} uses TEXCOORD_{tex_coord}; only TEXCOORD_0 is read"
-            ));
-        }
+        let uv_set = match u8::try_from(tex_coord) {
+            Ok(set @ (0 | 1)) => set,
+            _ => {
+                self.warnings.push(format!(
+                    "{label}: {what} uses TEXCOORD_{tex_coord}; only TEXCOORD_0 and TEXCOORD_1 are read, TEXCOORD_0 is read instead"
+                ));
+                0
+            }
+        };
         let image = tex.source();
         let key = (image.index(), srgb);
         let decoded = match self.textures.get(&key) {
@@ -1083,20 +1107,31 @@ impl Loader<'_> {
             ::gltf::texture::WrappingMode::Repeat => Wrap::Repeat,
         };
         let (wu, wv) = (wrap(sampler.wrap_s()), wrap(sampler.wrap_t()));
-        if decoded.wrap_u == wu && decoded.wrap_v == wv && decoded.transform == transform {
+        if decoded.wrap_u == wu
+            && decoded.wrap_v == wv
+            && decoded.transform == transform
+            && decoded.uv_set == uv_set
+        {
             return Some(decoded);
         }
-        // The same image with another sampler or transform: a copy with its own.
+        // The same image with another sampler, transform or coordinate set: a copy with its
+        // own.
         let mut t = (*decoded).clone();
         t.wrap_u = wu;
         t.wrap_v = wv;
         t.transform = transform;
+        t.uv_set = uv_set;
         Some(Arc::new(t))
     }
 
     /// A `KHR_texture_transform` object as [`uv_transform`] (defaults where a field is missing
-    /// or malformed, with a warning for the latter).
-    fn transform_json(&mut self, label: &str, what: &str, t: &serde_json::Value) -> glam::Affine2 {
+    /// or malformed, with a warning for the latter), and its `texCoord` when it has one.
+    fn transform_json(
+        &mut self,
+        label: &str,
+        what: &str,
+        t: &serde_json::Value,
+    ) -> (glam::Affine2, Option<u32>) {
         let mut bad = Vec::new();
         let mut pair = |key: &str, default: [f32; 2]| match t.get(key) {
             None => default,
@@ -1128,21 +1163,23 @@ impl Loader<'_> {
                 }
             },
         };
+        let set = match t.get("texCoord") {
+            None => None,
+            Some(v) => match v.as_u64().and_then(|c| u32::try_from(c).ok()) {
+                Some(c) => Some(c),
+                None => {
+                    bad.push("texCoord".to_string());
+                    None
+                }
+            },
+        };
         if !bad.is_empty() {
             self.warnings.push(format!(
                 "{label}: {what}'s KHR_texture_transform has a malformed {}; its default used",
                 bad.join(", ")
             ));
         }
-        if t.get("texCoord")
-            .and_then(serde_json::Value::as_u64)
-            .is_some_and(|c| c != 0)
-        {
-            self.warnings.push(format!(
-                "{label}: {what}'s KHR_texture_transform asks for another texture coordinate set; TEXCOORD_0 is read"
-            ));
-        }
-        uv_transform(offset, rotation, scale)
+        (uv_transform(offset, rotation, scale), set)
     }
 
     /// The encoded bytes of an image: a buffer view or a URI.
@@ -1213,9 +1250,19 @@ impl Loader<'_> {
                 .normal_map
                 .is_some()
         };
-        let tangents = if self.any_uvs && (0..triangles.len()).any(mapped) {
-            // MikkTSpace's where the file gives none, the file's where it does.
-            let mut t = super::tangents::mikktspace(&triangles, &normals, &self.uvs, |i| {
+        let tangents = if (self.any_uvs || self.any_uvs1) && (0..triangles.len()).any(mapped) {
+            // MikkTSpace's where the file gives none, the file's where it does; made from the
+            // coordinate set the normal map reads.
+            let set1 = |i: usize| {
+                materials[self.material_ids[i] as usize]
+                    .normal_map
+                    .as_ref()
+                    .is_some_and(|t| t.uv_set == 1)
+            };
+            let uvs: Vec<[Vec2; 3]> = (0..triangles.len())
+                .map(|i| if set1(i) { self.uvs1[i] } else { self.uvs[i] })
+                .collect();
+            let mut t = super::tangents::mikktspace(&triangles, &normals, &uvs, |i| {
                 mapped(i) && self.tangents[i].is_none()
             });
             for (i, given) in self.tangents.iter().enumerate() {
@@ -1233,6 +1280,7 @@ impl Loader<'_> {
                 normals,
                 material_ids: self.material_ids,
                 uvs: if self.any_uvs { self.uvs } else { Vec::new() },
+                uvs1: if self.any_uvs1 { self.uvs1 } else { Vec::new() },
                 tangents,
                 origin,
             },

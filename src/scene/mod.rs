@@ -174,6 +174,18 @@ impl Material {
             || self.emission_map.is_some()
             || self.pbr.as_ref().is_some_and(|p| p.map.is_some())
     }
+
+    /// The material's textures: base colour, emission, metallic-roughness and normal map.
+    pub fn textures(&self) -> impl Iterator<Item = &Arc<Texture>> {
+        [
+            self.diffuse_map.as_ref(),
+            self.emission_map.as_ref(),
+            self.pbr.as_ref().and_then(|p| p.map.as_ref()),
+            self.normal_map.as_ref(),
+        ]
+        .into_iter()
+        .flatten()
+    }
 }
 
 /// A light source.
@@ -366,6 +378,9 @@ pub struct Mesh {
     /// Texture coordinates, three per triangle; empty when no triangle has any (a triangle
     /// without them among others that have them gets `(0, 0)`).
     pub uvs: Vec<[Vec2; 3]>,
+    /// A second set of texture coordinates (glTF `TEXCOORD_1`), read by textures whose
+    /// [`Texture::uv_set`] is 1; empty unless a triangle's material has such a texture.
+    pub uvs1: Vec<[Vec2; 3]>,
     /// Tangents for normal maps, three per triangle (xyz along `+u`, w the bitangent's sign:
     /// see [`tangents`]); empty when no triangle has any, [`Vec4::ZERO`] for a triangle
     /// without (its material has no normal map).
@@ -417,6 +432,7 @@ impl Mesh {
         self.normals.extend(other.normals);
         let after = self.normals.len();
         append_optional(&mut self.uvs, other.uvs, before, after, [Vec2::ZERO; 3]);
+        append_optional(&mut self.uvs1, other.uvs1, before, after, [Vec2::ZERO; 3]);
         append_optional(
             &mut self.tangents,
             other.tangents,
@@ -428,10 +444,11 @@ impl Mesh {
             .extend(other.material_ids.into_iter().map(|m| m + material_offset));
     }
 
-    /// The texture coordinate at barycentric `(u, v)` of triangle `prim` (`(0, 0)` when the
-    /// mesh has none).
-    pub fn uv_at(&self, prim: u32, u: f32, v: f32) -> Vec2 {
-        match self.uvs.get(prim as usize) {
+    /// The texture coordinate of set `set` (0, or 1 for [`Mesh::uvs1`]) at barycentric
+    /// `(u, v)` of triangle `prim` (`(0, 0)` when the mesh has none).
+    pub fn uv_at(&self, set: u8, prim: u32, u: f32, v: f32) -> Vec2 {
+        let uvs = if set == 0 { &self.uvs } else { &self.uvs1 };
+        match uvs.get(prim as usize) {
             Some(t) => t[0] * (1.0 - u - v) + t[1] * u + t[2] * v,
             None => Vec2::ZERO,
         }
@@ -471,6 +488,7 @@ impl Mesh {
             normals,
             material_ids: vec![material; indices.len()],
             uvs: Vec::new(),
+            uvs1: Vec::new(),
             tangents: Vec::new(),
             origin: DVec3::ZERO,
         }
@@ -485,6 +503,7 @@ impl Mesh {
             normals,
             material_ids,
             uvs: Vec::new(),
+            uvs1: Vec::new(),
             tangents: Vec::new(),
             origin: DVec3::ZERO,
         }

@@ -69,6 +69,7 @@ pub fn smooth_sphere(tris: Vec<[Vec3; 3]>) -> Mesh {
         normals,
         material_ids,
         uvs: Vec::new(),
+        uvs1: Vec::new(),
         tangents: Vec::new(),
         origin: glam::DVec3::ZERO,
     }

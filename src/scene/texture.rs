@@ -55,6 +55,9 @@ pub struct Texture {
     pub wrap_v: Wrap,
     /// Applied to texture coordinates before the lookup (glTF `KHR_texture_transform`).
     pub transform: Option<Affine2>,
+    /// Which of the mesh's texture coordinate sets it reads: 0, or 1 for glTF's `TEXCOORD_1`
+    /// (see [`crate::scene::Mesh::uv_at`]).
+    pub uv_set: u8,
 }
 
 impl std::fmt::Debug for Texture {
@@ -91,6 +94,7 @@ impl Texture {
             wrap_u: Wrap::Repeat,
             wrap_v: Wrap::Repeat,
             transform: None,
+            uv_set: 0,
         }
     }
 
