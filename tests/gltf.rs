@@ -1879,3 +1879,216 @@ fn textures_read_the_texture_coordinate_set_they_name() {
         assert!(close(t.truncate(), Vec3::Y), "tangent {t}");
     }
 }
+
+/// [`triangle_buffer`] with more `f32` data appended (each array its own view and accessor of
+/// `ty`, numbered from 4): the buffer, views and accessors.
+fn triangle_with(extra: &[(&[f32], &str, usize)]) -> (Vec<u8>, Vec<Value>, Vec<Value>) {
+    let (mut bin, views, accessors) = triangle_buffer();
+    let (mut views, mut accessors) = (
+        views.as_array().unwrap().clone(),
+        accessors.as_array().unwrap().clone(),
+    );
+    for (data, ty, count) in extra {
+        let offset = bin.len();
+        bin.extend(f32_bytes(data));
+        views.push(json!({"buffer": 0, "byteOffset": offset, "byteLength": data.len() * 4}));
+        accessors.push(json!({"bufferView": views.len() - 1, "componentType": 5126, "count": count, "type": ty}));
+    }
+    (bin, views, accessors)
+}
+
+/// A file of one buffer, the given nodes (roots: those no node lists as a child), meshes and
+/// extra fields.
+fn file_of(
+    bin: &[u8],
+    views: Vec<Value>,
+    accessors: Vec<Value>,
+    nodes: Value,
+    extra: Value,
+) -> Value {
+    let mut d = json!({
+        "asset": {"version": "2.0"},
+        "scene": 0,
+        "scenes": [{"nodes": (0..nodes.as_array().unwrap().len())
+            .filter(|i| !is_child(&nodes, *i)).collect::<Vec<_>>()}],
+        "nodes": nodes,
+        "buffers": [{"byteLength": bin.len(), "uri": data_uri(bin)}],
+        "bufferViews": views,
+        "accessors": accessors
+    });
+    merge(&mut d, extra);
+    d
+}
+
+/// Morph targets are applied at the mesh's default weights, or at a node's own weights where
+/// it has them (the static shape the specification defines when no animation plays): a target
+/// lifting the first vertex by 1 and tilting every normal towards +x, at weight 0.5 under the
+/// mesh's weights and at 1 under a node's, places the vertex at z 0.5 and 1 and bends the
+/// normals by as much. A displacement accessor of the wrong length is an error naming it.
+/// Fails with the targets ignored (z 0 everywhere) or the node's weights ignored.
+#[test]
+fn morph_targets_take_the_mesh_or_node_weights() {
+    let dir = tempfile::tempdir().unwrap();
+    let lift = [0., 0., 1., 0., 0., 0., 0., 0., 0.];
+    let tilt = [1., 0., 0.].repeat(3);
+    let (bin, views, accessors) = triangle_with(&[(&lift, "VEC3", 3), (&tilt, "VEC3", 3)]);
+    let mesh = json!({"meshes": [{
+        "primitives": [{"attributes": {"POSITION": 0, "NORMAL": 1}, "indices": 3,
+                        "targets": [{"POSITION": 4, "NORMAL": 5}]}],
+        "weights": [0.5]
+    }]});
+    let nodes = json!([{"mesh": 0}, {"mesh": 0, "translation": [10, 0, 0], "weights": [1.0]}]);
+    let d = file_of(&bin, views.clone(), accessors.clone(), nodes, mesh.clone());
+    let s = Scene::load(&write(dir.path(), "morph.gltf", &d)).unwrap();
+    assert!(s.warnings.is_empty(), "{:?}", s.warnings);
+    assert_eq!(s.mesh.triangles.len(), 2);
+    let mut placed: Vec<[Vec3; 3]> = (0..2).map(|i| world(&s, i)).collect();
+    placed.sort_by(|a, b| a[0].x.total_cmp(&b[0].x));
+    assert!(
+        close(placed[0][0], Vec3::new(0.0, 0.0, 0.5)),
+        "{:?}",
+        placed[0]
+    );
+    assert!(close(placed[0][1], Vec3::X), "{:?}", placed[0]);
+    assert!(
+        close(placed[1][0], Vec3::new(10.0, 0.0, 1.0)),
+        "{:?}",
+        placed[1]
+    );
+    // The normals tilt by the weight of the node that placed them.
+    for i in 0..2 {
+        let w = if world(&s, i)[0].x < 5.0 { 0.5 } else { 1.0 };
+        let want = Vec3::new(w, 0.0, 1.0).normalize();
+        for n in s.mesh.normals[i] {
+            assert!(close(n, want), "normal {n}, want {want}");
+        }
+    }
+
+    // No weights anywhere: every weight 0, no warning.
+    let mut bare = mesh.clone();
+    bare["meshes"][0].as_object_mut().unwrap().remove("weights");
+    let d = file_of(
+        &bin,
+        views.clone(),
+        accessors.clone(),
+        json!([{"mesh": 0}]),
+        bare,
+    );
+    let s = Scene::load(&write(dir.path(), "morph_bare.gltf", &d)).unwrap();
+    assert!(s.warnings.is_empty(), "{:?}", s.warnings);
+    assert!(close(world(&s, 0)[0], Vec3::ZERO));
+
+    // A displacement of two elements for three vertices.
+    let mut short = accessors.clone();
+    short[4]["count"] = json!(2);
+    let d = file_of(&bin, views, short, json!([{"mesh": 0}]), mesh);
+    let e = error_of(&write(dir.path(), "morph_short.gltf", &d));
+    assert!(
+        e.contains("targets[0].POSITION") && e.contains("3 vertices"),
+        "{e}"
+    );
+}
+
+/// A skinned mesh is placed by its joints, not by its node: each vertex goes where its joints'
+/// world transforms times their inverse bind matrices take it, blended by its weights (the
+/// first vertex on a joint 2 up in z, the second on a joint whose inverse bind matrix undoes
+/// its place, the third half on each), while the translation of the mesh's own node is
+/// ignored, as the specification asks. A joint past the skin's list and too few inverse bind
+/// matrices are errors naming them. Fails with the skin ignored (the node's translation
+/// applied) or the inverse bind matrices left out.
+#[test]
+fn a_skinned_mesh_is_placed_by_its_joints() {
+    let dir = tempfile::tempdir().unwrap();
+    let weights = [1., 0., 0., 0., 1., 0., 0., 0., 0.5, 0.5, 0., 0.];
+    let mut inverse_bind = mat4_identity();
+    inverse_bind.extend(mat4_translation([-5.0, -1.0, 0.0]));
+    let (mut bin, mut views, mut accessors) =
+        triangle_with(&[(&weights, "VEC4", 3), (&inverse_bind, "MAT4", 2)]);
+    // JOINTS_0 as unsigned bytes: joint 0 / joint 1 / joints 0 and 1.
+    let offset = bin.len();
+    bin.extend([0u8, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0]);
+    views.push(json!({"buffer": 0, "byteOffset": offset, "byteLength": 12}));
+    accessors.push(json!({"bufferView": 6, "componentType": 5121, "count": 3, "type": "VEC4"}));
+    let nodes = json!([
+        {"mesh": 0, "skin": 0, "translation": [100, 0, 0]},
+        {"translation": [0, 0, 2]},
+        {"translation": [0, 1, 0], "children": [3]},
+        {"translation": [5, 0, 0]}
+    ]);
+    let extra = |joints: Value| {
+        json!({
+            "meshes": [{"primitives": [{"attributes": {"POSITION": 0, "NORMAL": 1, "JOINTS_0": 6, "WEIGHTS_0": 4}, "indices": 3}]}],
+            "skins": [{"joints": joints, "inverseBindMatrices": 5}]
+        })
+    };
+    let d = file_of(
+        &bin,
+        views.clone(),
+        accessors.clone(),
+        nodes.clone(),
+        extra(json!([1, 3])),
+    );
+    let s = Scene::load(&write(dir.path(), "skin.gltf", &d)).unwrap();
+    assert!(s.warnings.is_empty(), "{:?}", s.warnings);
+    let t = world(&s, 0);
+    assert!(close(t[0], Vec3::new(0.0, 0.0, 2.0)), "{t:?}");
+    assert!(close(t[1], Vec3::X), "{t:?}");
+    assert!(close(t[2], Vec3::new(0.0, 1.0, 1.0)), "{t:?}");
+    for n in s.mesh.normals[0] {
+        assert!(close(n, Vec3::Z), "normal {n}");
+    }
+
+    // Three joints and two inverse bind matrices.
+    let d = file_of(
+        &bin,
+        views.clone(),
+        accessors.clone(),
+        nodes.clone(),
+        extra(json!([1, 3, 2])),
+    );
+    let e = error_of(&write(dir.path(), "skin_short.gltf", &d));
+    assert!(
+        e.contains("skins[0]") && e.contains("2 inverseBindMatrices for 3 joints"),
+        "{e}"
+    );
+
+    // A vertex on joint 1 of a skin with one joint.
+    let mut one = accessors.clone();
+    one[5]["count"] = json!(1);
+    let d = file_of(&bin, views, one, nodes, extra(json!([1])));
+    let e = error_of(&write(dir.path(), "skin_joint.gltf", &d));
+    assert!(
+        e.contains("meshes[0].primitives[0]") && e.contains("joint 1 of a skin with 1 joints"),
+        "{e}"
+    );
+}
+
+/// Column-major 4x4 identity, as glTF stores matrices.
+fn mat4_identity() -> Vec<f32> {
+    glam::Mat4::IDENTITY.to_cols_array().to_vec()
+}
+
+/// Column-major translation matrix.
+fn mat4_translation(t: [f32; 3]) -> Vec<f32> {
+    glam::Mat4::from_translation(Vec3::from(t))
+        .to_cols_array()
+        .to_vec()
+}
+
+/// A file with animations says they are not played (assimp's animated morph cube, fetched).
+#[test]
+fn animations_are_said_not_played() {
+    let Some(p) =
+        common::external("gltf/glTF-Sample-Models/AnimatedMorphCube-glTF/AnimatedMorphCube.gltf")
+    else {
+        return;
+    };
+    let s = Scene::load(&p).unwrap();
+    assert!(
+        s.warnings
+            .iter()
+            .any(|w| w.contains("1 animation(s) not played")),
+        "{:?}",
+        s.warnings
+    );
+}

@@ -64,6 +64,24 @@ fn gltf_bin() -> Vec<u8> {
     d
 }
 
+/// The quad of [`GLTF`] with a morph target (at weight 0.5) and a skin of two joints, its
+/// buffer in `skin.bin` ([`skinned_bin`]).
+const SKINNED: &str = r#"{"asset":{"version":"2.0"},"scene":0,"scenes":[{"nodes":[0,1]}],"nodes":[{"mesh":0,"skin":0,"translation":[9,0,0]},{"translation":[0,0,1],"children":[2]},{"rotation":[0,0,0.7071068,0.7071068]}],"meshes":[{"primitives":[{"attributes":{"POSITION":0,"NORMAL":1,"TEXCOORD_0":2,"JOINTS_0":5,"WEIGHTS_0":6},"indices":3,"targets":[{"POSITION":4}]}],"weights":[0.5]}],"skins":[{"joints":[1,2],"inverseBindMatrices":7}],"buffers":[{"byteLength":400,"uri":"skin.bin"}],"bufferViews":[{"buffer":0,"byteOffset":0,"byteLength":48},{"buffer":0,"byteOffset":48,"byteLength":48,"byteStride":12},{"buffer":0,"byteOffset":96,"byteLength":32},{"buffer":0,"byteOffset":128,"byteLength":12},{"buffer":0,"byteOffset":144,"byteLength":48},{"buffer":0,"byteOffset":192,"byteLength":16},{"buffer":0,"byteOffset":208,"byteLength":64},{"buffer":0,"byteOffset":272,"byteLength":128}],"accessors":[{"bufferView":0,"componentType":5126,"count":4,"type":"VEC3"},{"bufferView":1,"componentType":5126,"count":4,"type":"VEC3"},{"bufferView":2,"componentType":5126,"count":4,"type":"VEC2"},{"bufferView":3,"componentType":5123,"count":6,"type":"SCALAR"},{"bufferView":4,"componentType":5126,"count":4,"type":"VEC3"},{"bufferView":5,"componentType":5121,"count":4,"type":"VEC4"},{"bufferView":6,"componentType":5126,"count":4,"type":"VEC4"},{"bufferView":7,"componentType":5126,"count":2,"type":"MAT4"}]}"#;
+
+/// [`SKINNED`]'s buffer: the quad's, padded to 144 bytes, then the target's displacements
+/// (the first vertex up by 2), joints (the first two vertices on joint 0, the others on joint
+/// 1), weights and two identity inverse bind matrices.
+fn skinned_bin() -> Vec<u8> {
+    let mut d = gltf_bin();
+    d.resize(144, 0);
+    let f32s = |v: &[f32]| v.iter().flat_map(|x| x.to_le_bytes()).collect::<Vec<u8>>();
+    d.extend(f32s(&[0., 0., 2., 0., 0., 0., 0., 0., 0., 0., 0., 0.]));
+    d.extend([0u8, 0, 0, 0, 0, 0, 0, 0, 1, 0, 0, 0, 1, 0, 0, 0]);
+    d.extend(f32s(&[1., 0., 0., 0.].repeat(4)));
+    d.extend(f32s(&glam::Mat4::IDENTITY.to_cols_array().repeat(2)));
+    d
+}
+
 /// The quad as one GLB: its JSON (without the buffer's URI) and its buffer as the BIN chunk.
 fn glb() -> Vec<u8> {
     glb_of(
@@ -471,6 +489,24 @@ proptest! {
     }
 
     #[test]
+    fn mutated_skinned_gltf_files_load_or_fail_naming_the_file(edits in prop::collection::vec(edit(), 1..8)) {
+        let dir = tempfile::tempdir().unwrap();
+        std::fs::write(dir.path().join("skin.bin"), skinned_bin()).unwrap();
+        let p = dir.path().join("mutant.gltf");
+        std::fs::write(&p, apply(SKINNED.as_bytes().to_vec(), &edits)).unwrap();
+        check_rendered(&p, &["mutant.gltf", "skin.bin"])?;
+    }
+
+    #[test]
+    fn mutated_skinned_gltf_buffers_load_or_fail_naming_the_file(edits in prop::collection::vec(edit(), 1..8)) {
+        let dir = tempfile::tempdir().unwrap();
+        std::fs::write(dir.path().join("skin.bin"), apply(skinned_bin(), &edits)).unwrap();
+        let p = dir.path().join("skin.gltf");
+        std::fs::write(&p, SKINNED).unwrap();
+        check_rendered(&p, &["skin.gltf", "skin.bin"])?;
+    }
+
+    #[test]
     fn mutated_scene_files_load_or_fail_naming_the_file(edits in prop::collection::vec(edit(), 1..8)) {
         let dir = tempfile::tempdir().unwrap();
         std::fs::write(dir.path().join("square.ply"), PLY_ASCII).unwrap();
@@ -495,6 +531,24 @@ fn the_unmutated_files_load() {
     std::fs::write(dir.path().join("tex.bin"), textured_bin()).unwrap();
     std::fs::write(dir.path().join("tex.gltf"), textured_gltf(Some("tex.bin"))).unwrap();
     std::fs::write(dir.path().join("tex.glb"), textured_glb()).unwrap();
+    std::fs::write(dir.path().join("skin.bin"), skinned_bin()).unwrap();
+    std::fs::write(dir.path().join("skin.gltf"), SKINNED).unwrap();
+    // The skinned quad: its first vertex lifted by the target (0.5 x 2) and by joint 0 (z 1),
+    // its third turned a quarter about z by joint 1 (under joint 0: z 1), the node's own
+    // translation ignored.
+    let s = Scene::load(&dir.path().join("skin.gltf")).unwrap();
+    assert!(s.warnings.is_empty(), "skin.gltf: {:?}", s.warnings);
+    let v = |t: usize, k: usize| (s.mesh.origin + s.mesh.triangles[t][k].as_dvec3()).as_vec3();
+    assert!(
+        (v(0, 0) - glam::Vec3::new(0.0, 0.0, 2.0)).length() < 1e-5,
+        "{}",
+        v(0, 0)
+    );
+    assert!(
+        (v(0, 2) - glam::Vec3::new(-1.0, 1.0, 1.0)).length() < 1e-5,
+        "{}",
+        v(0, 2)
+    );
     for f in ["tex.gltf", "tex.glb"] {
         let s = Scene::load(&dir.path().join(f)).unwrap();
         assert!(s.warnings.is_empty(), "{f}: {:?}", s.warnings);

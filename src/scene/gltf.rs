@@ -18,8 +18,14 @@
 //!   `KHR_lights_punctual` lights become point lights (see [`Scene`] assembly in [`load_from`]).
 //!   With no light, the default lighting of a bare mesh.
 //!
-//! Ignored: skins, morph targets, animations, orthographic cameras, texture coordinate sets
-//! past 1 (read as set 0, with a warning), and the material extensions not named above.
+//! - Morph targets at the node's weights, else the mesh's (positions, normals, tangents);
+//!   skins in the pose their joint nodes give (each vertex by its joints' world transforms
+//!   times their inverse bind matrices, blended by `WEIGHTS_n`; the skinned node's own
+//!   transform ignored, as the specification asks).
+//!
+//! Ignored: animations (not played, with a warning: the scene is drawn as its nodes place it),
+//! orthographic cameras, texture coordinate sets past 1 (read as set 0, with a warning), and
+//! the material extensions not named above.
 //! `KHR_texture_transform` is applied to the texture's lookups (its `texCoord` replaces the
 //! texture's own set).
 //!
@@ -217,6 +223,16 @@ pub fn load_from(
         tangents: Vec::new(),
         material_ids: Vec::new(),
         primitives: HashMap::new(),
+        parents: {
+            let mut parents = vec![None; doc.nodes().len()];
+            for n in doc.nodes() {
+                for c in n.children() {
+                    parents[c.index()].get_or_insert(n.index());
+                }
+            }
+            parents
+        },
+        skins: HashMap::new(),
         materials: Vec::new(),
         material_index: HashMap::new(),
         textures: HashMap::new(),
@@ -247,11 +263,76 @@ pub fn load_from(
             roots
         }
     };
+    let animations = doc.animations().len();
+    if animations > 0 {
+        loader.warnings.push(format!(
+            "{name}: {animations} animation(s) not played: drawn as the nodes, skins and morph weights place it"
+        ));
+    }
     let mut on_path = vec![false; doc.nodes().len()];
     for root in roots {
         loader.visit(root, DMat4::IDENTITY, &mut on_path, 0)?;
     }
     loader.finish()
+}
+
+/// Each vertex's joints and their weights (zero weights left out).
+type Influences = Vec<Vec<(u16, f32)>>;
+
+/// Most `JOINTS_n` / `WEIGHTS_n` sets read (four influences each).
+const MAX_INFLUENCE_SETS: u32 = 8;
+
+/// Where a vertex goes: its transform, the linear part (tangents), the normals' matrix, and
+/// whether it mirrors (the winding turned back).
+struct Transform {
+    full: DMat4,
+    linear: DMat3,
+    normal: DMat3,
+    flip: bool,
+}
+
+impl Transform {
+    fn of(m: &DMat4) -> Transform {
+        let linear = DMat3::from_mat4(*m);
+        Transform {
+            full: *m,
+            linear,
+            normal: linear.inverse().transpose(),
+            flip: linear.determinant() < 0.0,
+        }
+    }
+}
+
+/// Each vertex's transform under a skin: its joints' matrices blended by its weights
+/// (normalised to sum to 1; a vertex with no weight keeps the node's `world`). A joint past
+/// the skin's list is an error.
+fn skinning(
+    at: &str,
+    joints: &[DMat4],
+    influences: &Influences,
+    world: &DMat4,
+) -> Result<Vec<Transform>> {
+    influences
+        .iter()
+        .map(|inf| {
+            let (mut m, mut sum) = (DMat4::ZERO, 0.0);
+            for &(j, w) in inf {
+                let Some(jm) = joints.get(j as usize) else {
+                    bail!(
+                        "{at}: a vertex names joint {j} of a skin with {} joints",
+                        joints.len()
+                    );
+                };
+                m += *jm * f64::from(w);
+                sum += f64::from(w);
+            }
+            Ok(Transform::of(&if sum > 0.0 {
+                m * (1.0 / sum)
+            } else {
+                *world
+            }))
+        })
+        .collect()
 }
 
 /// A glTF (JSON, not GLB) that the gltf crate refuses only for a field the specification makes
@@ -451,6 +532,9 @@ struct Primitive {
     uvs1: Option<Vec<Vec2>>,
     /// The file's `TANGENT`s, read only when the material has a normal map.
     tangents: Option<Vec<Vec4>>,
+    /// Each vertex's joints and weights (`JOINTS_n` with `WEIGHTS_n`, zero weights left out),
+    /// for a node with a skin; `None` when the primitive has no `JOINTS_0`.
+    influences: Option<Influences>,
     triangles: Vec<[u32; 3]>,
     material: u32,
 }
@@ -476,8 +560,13 @@ struct Loader<'a> {
     /// a normal map).
     tangents: Vec<Option<[Vec4; 3]>>,
     material_ids: Vec<u32>,
-    /// Primitives read once, by (mesh, primitive), for every node that places them.
-    primitives: HashMap<(usize, usize), Option<Arc<Primitive>>>,
+    /// Primitives read once, by (mesh, primitive, morph weights as bits), for every node that
+    /// places them.
+    primitives: HashMap<(usize, usize, Vec<u32>), Option<Arc<Primitive>>>,
+    /// Each node's parent (the first that lists it), for the world transforms of joints.
+    parents: Vec<Option<usize>>,
+    /// Each skin's joint matrices (joint's world transform times its inverse bind matrix).
+    skins: HashMap<usize, Arc<Vec<DMat4>>>,
     materials: Vec<Material>,
     /// glTF material index (`None`: the default material) to index in `materials`.
     material_index: HashMap<Option<usize>, u32>,
@@ -529,8 +618,22 @@ impl Loader<'_> {
             bail!("{}: nodes[{index}]: its transform is not finite", self.name);
         }
         if let Some(mesh) = node.mesh() {
+            // Morph targets at the node's weights, else the mesh's (no animation is played).
+            let weights = node.weights().or(mesh.weights()).unwrap_or(&[]);
+            // A skinned mesh is placed by its joints; the node's own transform is ignored,
+            // as the specification asks.
+            let skin = match node.skin() {
+                Some(skin) => Some(self.joint_matrices(&skin)?),
+                None => None,
+            };
             for prim in mesh.primitives() {
-                self.place(mesh.index(), prim, &world)?;
+                self.place(
+                    mesh.index(),
+                    prim,
+                    weights,
+                    &world,
+                    skin.as_deref().map(Vec::as_slice),
+                )?;
             }
         }
         if self.camera.is_none()
@@ -603,13 +706,25 @@ impl Loader<'_> {
         Ok(())
     }
 
-    /// Places one primitive with the node's world transform.
-    fn place(&mut self, mesh: usize, prim: ::gltf::Primitive, world: &DMat4) -> Result<()> {
-        let key = (mesh, prim.index());
+    /// Places one primitive with the node's world transform, its morph targets at `weights`,
+    /// or by the joint matrices of the node's skin.
+    fn place(
+        &mut self,
+        mesh: usize,
+        prim: ::gltf::Primitive,
+        weights: &[f32],
+        world: &DMat4,
+        skin: Option<&[DMat4]>,
+    ) -> Result<()> {
+        let key = (
+            mesh,
+            prim.index(),
+            weights.iter().map(|w| w.to_bits()).collect(),
+        );
         let data = match self.primitives.get(&key) {
             Some(d) => d.clone(),
             None => {
-                let d = self.read_primitive(mesh, &prim)?.map(Arc::new);
+                let d = self.read_primitive(mesh, &prim, weights)?.map(Arc::new);
                 self.primitives.insert(key, d.clone());
                 d
             }
@@ -623,20 +738,33 @@ impl Loader<'_> {
                 self.name
             );
         }
-        let linear = DMat3::from_mat4(*world);
-        let normal_m = linear.inverse().transpose();
-        // A mirroring transform turns the winding around: corners are swapped back so that
-        // the front face stays the front face.
-        let flip = linear.determinant() < 0.0;
-        let order: [usize; 3] = if flip { [0, 2, 1] } else { [0, 1, 2] };
+        let at = format!("{}: meshes[{mesh}].primitives[{}]", self.name, prim.index());
+        // Each vertex's transform: the node's, or the blend of its joints' for a skin.
+        let skinned = match (skin, &p.influences) {
+            (Some(joints), Some(influences)) => Some(skinning(&at, joints, influences, world)?),
+            (Some(_), None) => {
+                self.warnings.push(format!(
+                    "{at}: its node has a skin but the primitive has no JOINTS_0; placed by the node's transform"
+                ));
+                None
+            }
+            _ => None,
+        };
+        let one = Transform::of(world);
+        let xf = |i: usize| skinned.as_ref().map_or(&one, |s| &s[i]);
         for (ti, t) in p.triangles.iter().enumerate() {
+            // A mirroring transform turns the winding around: corners are swapped back so
+            // that the front face stays the front face.
+            let flip = xf(t[0] as usize).flip;
+            let order: [usize; 3] = if flip { [0, 2, 1] } else { [0, 1, 2] };
             let c = order.map(|k| t[k] as usize);
             self.positions
-                .extend(c.map(|i| world.transform_point3(p.positions[i].as_dvec3())));
-            let turn = |n: Vec3| (normal_m * n.as_dvec3()).normalize_or_zero().as_vec3();
+                .extend(c.map(|i| xf(i).full.transform_point3(p.positions[i].as_dvec3())));
+            let turn =
+                |i: usize, n: Vec3| (xf(i).normal * n.as_dvec3()).normalize_or_zero().as_vec3();
             self.normals.push(match (&p.normals, &p.corner_normals) {
-                (Some(n), _) => Some(c.map(|i| turn(n[i]))),
-                (None, Some(cn)) => Some(order.map(|k| turn(cn[ti][k]))),
+                (Some(n), _) => Some(c.map(|i| turn(i, n[i]))),
+                (None, Some(cn)) => Some(order.map(|k| turn(t[k] as usize, cn[ti][k]))),
                 (None, None) => None,
             });
             self.uvs.push(match &p.uvs {
@@ -650,7 +778,7 @@ impl Loader<'_> {
             // Tangents turn as positions do; a mirror turns the bitangent's handedness.
             self.tangents.push(p.tangents.as_ref().map(|t| {
                 c.map(|i| {
-                    let v = (linear * t[i].truncate().as_dvec3()).normalize_or_zero();
+                    let v = (xf(i).linear * t[i].truncate().as_dvec3()).normalize_or_zero();
                     v.as_vec3().extend(if flip { -t[i].w } else { t[i].w })
                 })
             }));
@@ -665,6 +793,7 @@ impl Loader<'_> {
         &mut self,
         mesh: usize,
         prim: &::gltf::Primitive,
+        weights: &[f32],
     ) -> Result<Option<Primitive>> {
         let at = format!("{}: meshes[{mesh}].primitives[{}]", self.name, prim.index());
         let mode = prim.mode();
@@ -745,6 +874,19 @@ impl Loader<'_> {
             _ => None,
         };
 
+        let mut positions = positions;
+        let (mut normals, mut tangents) = (normals, tangents);
+        self.morph(
+            &at,
+            prim,
+            &reader,
+            weights,
+            &mut positions,
+            &mut normals,
+            &mut tangents,
+        )?;
+        let influences = self.influences(&at, prim, &reader, n)?;
+
         let indices: Vec<u32> = match prim.indices() {
             Some(acc) => {
                 self.check_accessor(
@@ -811,9 +953,215 @@ impl Loader<'_> {
             uvs,
             uvs1,
             tangents,
+            influences,
             triangles,
             material,
         }))
+    }
+
+    /// Adds a primitive's morph targets at `weights` to its positions, normals and tangents
+    /// (every displacement accessor checked first, a count other than the vertex count an
+    /// error; a weight the mesh lacks is 0, with a warning).
+    #[allow(clippy::too_many_arguments)]
+    fn morph<'a, 's, F>(
+        &mut self,
+        at: &str,
+        prim: &::gltf::Primitive<'a>,
+        reader: &::gltf::mesh::Reader<'a, 's, F>,
+        weights: &[f32],
+        positions: &mut [Vec3],
+        normals: &mut Option<Vec<Vec3>>,
+        tangents: &mut Option<Vec<Vec4>>,
+    ) -> Result<()>
+    where
+        F: Clone + Fn(::gltf::Buffer<'a>) -> Option<&'s [u8]>,
+    {
+        let targets: Vec<_> = prim.morph_targets().collect();
+        if targets.is_empty() {
+            return Ok(());
+        }
+        // No weights at all means every weight 0 (the specification's default).
+        if !weights.is_empty() && weights.len() != targets.len() {
+            self.warnings.push(format!(
+                "{at}: {} morph target(s) and {} weight(s); a missing weight is 0",
+                targets.len(),
+                weights.len()
+            ));
+        }
+        for (k, t) in targets.iter().enumerate() {
+            for (attr, acc) in [
+                ("POSITION", t.positions()),
+                ("NORMAL", t.normals()),
+                ("TANGENT", t.tangents()),
+            ] {
+                if let Some(acc) = acc {
+                    let what = format!("targets[{k}].{attr}");
+                    self.check_accessor(at, &what, &acc, &[DataType::F32], Dimensions::Vec3)?;
+                }
+            }
+        }
+        let n = positions.len();
+        for (k, (dp, dn, dt)) in reader.read_morph_targets().enumerate() {
+            let w = weights.get(k).copied().unwrap_or(0.0);
+            if !w.is_finite() {
+                self.warnings.push(format!(
+                    "{at}: morph weight {k} is {w}; the target is left out"
+                ));
+                continue;
+            }
+            if w == 0.0 {
+                continue;
+            }
+            let read = |attr: &str, d: Option<Vec<[f32; 3]>>| -> Result<Option<Vec<Vec3>>> {
+                match d {
+                    Some(d) if d.len() != n => bail!(
+                        "{at}: targets[{k}].{attr} has {} elements for {n} vertices",
+                        d.len()
+                    ),
+                    d => Ok(d.map(|d| d.into_iter().map(Vec3::from).collect())),
+                }
+            };
+            if let Some(d) = read("POSITION", dp.map(Iterator::collect))? {
+                for (p, d) in positions.iter_mut().zip(d) {
+                    *p += w * d;
+                }
+            }
+            if let (Some(d), Some(ns)) =
+                (read("NORMAL", dn.map(Iterator::collect))?, normals.as_mut())
+            {
+                for (v, d) in ns.iter_mut().zip(d) {
+                    *v += w * d;
+                }
+            }
+            if let (Some(d), Some(ts)) = (
+                read("TANGENT", dt.map(Iterator::collect))?,
+                tangents.as_mut(),
+            ) {
+                for (v, d) in ts.iter_mut().zip(d) {
+                    *v += (w * d).extend(0.0);
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Each vertex's joints and weights (`JOINTS_n` with `WEIGHTS_n`, every set there is), or
+    /// `None` when the primitive has no `JOINTS_0`.
+    fn influences<'a, 's, F>(
+        &mut self,
+        at: &str,
+        prim: &::gltf::Primitive<'a>,
+        reader: &::gltf::mesh::Reader<'a, 's, F>,
+        n: usize,
+    ) -> Result<Option<Influences>>
+    where
+        F: Clone + Fn(::gltf::Buffer<'a>) -> Option<&'s [u8]>,
+    {
+        use ::gltf::Semantic;
+        let mut out: Option<Influences> = None;
+        for set in 0..MAX_INFLUENCE_SETS {
+            let (joints, weights) = (
+                prim.get(&Semantic::Joints(set)),
+                prim.get(&Semantic::Weights(set)),
+            );
+            let (Some(j), Some(w)) = (joints.clone(), weights.clone()) else {
+                if joints.is_some() != weights.is_some() {
+                    bail!("{at}: JOINTS_{set} and WEIGHTS_{set} come in pairs; one is missing");
+                }
+                break;
+            };
+            let (jw, ww) = (format!("JOINTS_{set}"), format!("WEIGHTS_{set}"));
+            let ints = [DataType::U8, DataType::U16];
+            self.check_accessor(at, &jw, &j, &ints, Dimensions::Vec4)?;
+            let floats = [DataType::F32, DataType::U8, DataType::U16];
+            self.check_accessor(at, &ww, &w, &floats, Dimensions::Vec4)?;
+            let joints: Vec<[u16; 4]> = reader
+                .read_joints(set)
+                .ok_or_else(|| anyhow!("{at}: {jw} cannot be read"))?
+                .into_u16()
+                .collect();
+            let weights: Vec<[f32; 4]> = reader
+                .read_weights(set)
+                .ok_or_else(|| anyhow!("{at}: {ww} cannot be read"))?
+                .into_f32()
+                .collect();
+            if joints.len() != n || weights.len() != n {
+                bail!(
+                    "{at}: {jw} and {ww} have {} and {} elements for {n} vertices",
+                    joints.len(),
+                    weights.len()
+                );
+            }
+            let out = out.get_or_insert_with(|| vec![Vec::new(); n]);
+            for ((o, j), w) in out.iter_mut().zip(&joints).zip(&weights) {
+                o.extend(
+                    j.iter()
+                        .zip(w)
+                        .filter(|(_, w)| **w != 0.0)
+                        .map(|(j, w)| (*j, *w)),
+                );
+            }
+        }
+        Ok(out)
+    }
+
+    /// A skin's joint matrices: each joint node's world transform times its inverse bind
+    /// matrix (the identity when the skin gives none).
+    fn joint_matrices(&mut self, skin: &::gltf::Skin) -> Result<Arc<Vec<DMat4>>> {
+        if let Some(m) = self.skins.get(&skin.index()) {
+            return Ok(m.clone());
+        }
+        let at = format!("{}: skins[{}]", self.name, skin.index());
+        let joints: Vec<usize> = skin.joints().map(|j| j.index()).collect();
+        let inverse_bind: Vec<DMat4> = match skin.inverse_bind_matrices() {
+            Some(acc) => {
+                let what = "inverseBindMatrices";
+                self.check_accessor(&at, what, &acc, &[DataType::F32], Dimensions::Mat4)?;
+                let buffers = self.buffers;
+                let m: Vec<DMat4> = skin
+                    .reader(|b| buffers.get(b.index()).and_then(|d| d.as_deref().ok()))
+                    .read_inverse_bind_matrices()
+                    .ok_or_else(|| anyhow!("{at}: {what} cannot be read"))?
+                    .map(|m| DMat4::from_cols_array_2d(&m.map(|c| c.map(f64::from))))
+                    .collect();
+                if m.len() < joints.len() {
+                    bail!("{at}: {} {what} for {} joints", m.len(), joints.len());
+                }
+                m
+            }
+            None => vec![DMat4::IDENTITY; joints.len()],
+        };
+        let mut out = Vec::with_capacity(joints.len());
+        for (&j, ib) in joints.iter().zip(inverse_bind) {
+            let m = self.world_of(j)? * ib;
+            if !m.is_finite() {
+                bail!("{at}: the matrix of joint nodes[{j}] is not finite");
+            }
+            out.push(m);
+        }
+        let out = Arc::new(out);
+        self.skins.insert(skin.index(), out.clone());
+        Ok(out)
+    }
+
+    /// A node's world transform, through its parents (the first that lists it).
+    fn world_of(&self, node: usize) -> Result<DMat4> {
+        let mut m = DMat4::IDENTITY;
+        let mut i = node;
+        for _ in 0..=MAX_NODE_DEPTH {
+            let Some(n) = self.nodes.get(i) else {
+                bail!("{}: nodes[{i}] does not exist", self.name);
+            };
+            m = DMat4::from_cols_array_2d(&n.transform().matrix().map(|c| c.map(f64::from))) * m;
+            match self.parents[i] {
+                Some(p) => i = p,
+                None => return Ok(m),
+            }
+        }
+        bail!(
+            "{}: nodes[{node}]: its ancestors are deeper than {MAX_NODE_DEPTH} levels (or a cycle)",
+            self.name
+        )
     }
 
     /// A vertex attribute's values when there is one per vertex; otherwise `None`, with a
