@@ -2092,3 +2092,22 @@ fn animations_are_said_not_played() {
         s.warnings
     );
 }
+
+/// An extension the file uses (not requires) and Tracery does not read is said, by name; one
+/// it reads is not.
+#[test]
+fn extensions_used_but_not_read_are_said() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = doc(
+        json!([{"mesh": 0}]),
+        json!({"extensionsUsed": ["KHR_materials_clearcoat", "KHR_texture_transform"]}),
+    );
+    let s = Scene::load(&write(dir.path(), "clearcoat.gltf", &d)).unwrap();
+    assert_eq!(s.warnings.len(), 1, "{:?}", s.warnings);
+    assert!(
+        s.warnings[0].contains("KHR_materials_clearcoat")
+            && s.warnings[0].contains("clearcoat.gltf"),
+        "{:?}",
+        s.warnings
+    );
+}

@@ -204,6 +204,15 @@ pub fn load_from(
     }
     validate(&doc).map_err(|e| parse_error(&name, e))?;
     let mut warnings = Vec::new();
+    // An extension used but not required has a fallback in the core specification, which is
+    // what is drawn: said, since the picture differs from what the file's author saw.
+    for ext in doc.extensions_used() {
+        if !READ_EXTENSIONS.contains(&ext) {
+            warnings.push(format!(
+                "{name}: uses the extension {ext}, which Tracery does not read; drawn without it"
+            ));
+        }
+    }
     let buffers = doc
         .buffers()
         .map(|b| load_buffer(&name, &b, doc.blob.as_deref(), read))
@@ -354,6 +363,15 @@ fn relaxed(bytes: &[u8]) -> Option<::gltf::Gltf> {
     }
     ::gltf::Gltf::from_slice_without_validation(&serde_json::to_vec(&json).ok()?).ok()
 }
+
+/// Extensions the loader reads.
+const READ_EXTENSIONS: &[&str] = &[
+    "KHR_lights_punctual",
+    "KHR_materials_transmission",
+    "KHR_materials_ior",
+    "KHR_materials_emissive_strength",
+    "KHR_texture_transform",
+];
 
 /// Extensions a file may require that the loader reads or can safely do without.
 const SUPPORTED_EXTENSIONS: &[&str] = &[
