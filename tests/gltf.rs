@@ -648,10 +648,10 @@ fn wrong_types_cycles_and_depth_are_errors() {
     let d = doc(Value::Array(chain), json!({"scenes": [{"nodes": [0]}]}));
     let e = error_of(&write(dir.path(), "deep.gltf", &d));
     assert!(e.contains("deeper than"), "{e}");
-    // Positions as unsigned bytes: not what POSITION may be.
+    // Positions as 32-bit integers: not what POSITION may be, even quantised.
     let mut d = doc(json!([{"mesh": 0}]), json!({}));
-    d["accessors"][0]["componentType"] = json!(5121);
-    let e = error_of(&write(dir.path(), "bytes.gltf", &d));
+    d["accessors"][0]["componentType"] = json!(5125);
+    let e = error_of(&write(dir.path(), "u32.gltf", &d));
     assert!(e.contains("POSITION (accessors[0])"), "{e}");
     // A required extension the loader does not read.
     let d = doc(
@@ -2109,5 +2109,73 @@ fn extensions_used_but_not_read_are_said() {
             && s.warnings[0].contains("clearcoat.gltf"),
         "{:?}",
         s.warnings
+    );
+}
+
+/// `KHR_mesh_quantization` (required, as gltfpack writes it): positions as unnormalised
+/// 16-bit integers scaled back by the node, normals as normalised bytes, texture coordinates
+/// as normalised 16-bit integers and a morph displacement as normalised 16-bit integers are
+/// read as the floats they stand for (a normal's byte -128 as -1). Fails with the accessors'
+/// `normalized` ignored, or with integer attributes refused (as before session 40).
+#[test]
+fn quantized_attributes_are_read_as_the_floats_they_stand_for() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut bin: Vec<u8> = Vec::new();
+    // POSITION, u16 (unnormalised), padded to 8 bytes a vertex: (0,0,0), (1000,0,0), (0,1000,0).
+    for p in [[0u16, 0, 0], [1000, 0, 0], [0, 1000, 0]] {
+        bin.extend(p.iter().flat_map(|c| c.to_le_bytes()));
+        bin.extend([0, 0]);
+    }
+    // NORMAL, i8 normalised, padded to 4 bytes: +z, and -128 (clamped to -1) in z.
+    for n in [[0i8, 0, 127], [0, 0, 127], [0, 0, -128]] {
+        bin.extend(n.map(|c| c as u8));
+        bin.push(0);
+    }
+    // TEXCOORD_0, u16 normalised: (0, 0), (1, 0), (0, 0.5).
+    for t in [[0u16, 0], [65535, 0], [0, 32768]] {
+        bin.extend(t.iter().flat_map(|c| c.to_le_bytes()));
+    }
+    // A morph target's POSITION, i16 normalised, padded to 8 bytes: the first vertex up by 1.
+    for d in [[0i16, 0, 32767], [0, 0, 0], [0, 0, 0]] {
+        bin.extend(d.iter().flat_map(|c| c.to_le_bytes()));
+        bin.extend([0, 0]);
+    }
+    let d = json!({
+        "asset": {"version": "2.0"},
+        "extensionsUsed": ["KHR_mesh_quantization"],
+        "extensionsRequired": ["KHR_mesh_quantization"],
+        "scene": 0,
+        "scenes": [{"nodes": [0]}],
+        "nodes": [{"mesh": 0, "scale": [0.001, 0.001, 0.001]}],
+        "meshes": [{"primitives": [{"attributes": {"POSITION": 0, "NORMAL": 1, "TEXCOORD_0": 2},
+                                    "targets": [{"POSITION": 3}]}],
+                    "weights": [0.5]}],
+        "buffers": [{"byteLength": bin.len(), "uri": data_uri(&bin)}],
+        "bufferViews": [
+            {"buffer": 0, "byteOffset": 0, "byteLength": 24, "byteStride": 8},
+            {"buffer": 0, "byteOffset": 24, "byteLength": 12, "byteStride": 4},
+            {"buffer": 0, "byteOffset": 36, "byteLength": 12},
+            {"buffer": 0, "byteOffset": 48, "byteLength": 24, "byteStride": 8}
+        ],
+        "accessors": [
+            {"bufferView": 0, "componentType": 5123, "count": 3, "type": "VEC3", "min": [0, 0, 0], "max": [1000, 1000, 0]},
+            {"bufferView": 1, "componentType": 5120, "normalized": true, "count": 3, "type": "VEC3"},
+            {"bufferView": 2, "componentType": 5123, "normalized": true, "count": 3, "type": "VEC2"},
+            {"bufferView": 3, "componentType": 5122, "normalized": true, "count": 3, "type": "VEC3", "min": [0, 0, 0], "max": [0, 0, 1]}
+        ]
+    });
+    let s = Scene::load(&write(dir.path(), "quantized.gltf", &d)).unwrap();
+    assert!(s.warnings.is_empty(), "{:?}", s.warnings);
+    let t = world(&s, 0);
+    // The target's displacement (1 at weight 0.5, in the node's frame) is scaled by the node.
+    assert!(close(t[0], Vec3::new(0.0, 0.0, 0.0005)), "{t:?}");
+    assert!(close(t[1], Vec3::X) && close(t[2], Vec3::Y), "{t:?}");
+    let n = s.mesh.normals[0];
+    assert!(close(n[0], Vec3::Z) && close(n[2], -Vec3::Z), "{n:?}");
+    let uv = s.mesh.uvs[0];
+    assert!(
+        (uv[1] - Vec2::X).length() < 1e-6
+            && (uv[2] - Vec2::new(0.0, 32768.0 / 65535.0)).length() < 1e-6,
+        "{uv:?}"
     );
 }

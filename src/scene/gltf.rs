@@ -10,7 +10,8 @@
 //!   normals where a primitive has none, as the glTF specification asks), `TEXCOORD_0`,
 //!   `TEXCOORD_1` (where a texture of the primitive's material reads it) and `TANGENT` (MikkTSpace tangents where a normal-mapped primitive has none, as the
 //!   specification asks: [`super::tangents`]). Triangles with a non-finite vertex are left
-//!   out, with a warning.
+//!   out, with a warning. Attributes may be quantised (`KHR_mesh_quantization`: 8- and 16-bit
+//!   integers, normalised or not, read as the floats they stand for: [`read_floats`]).
 //! - Materials (metallic-roughness) as [`Material`]s: see [`convert_material`]; their base
 //!   colour, metallic-roughness, emissive and normal textures (`normalTexture` with its
 //!   `scale`).
@@ -285,6 +286,60 @@ pub fn load_from(
     loader.finish()
 }
 
+/// Component types of attributes that `KHR_mesh_quantization` lets be integers, normalised or
+/// not (positions, texture coordinates).
+const QUANTIZED: &[DataType] = &[
+    DataType::F32,
+    DataType::I8,
+    DataType::U8,
+    DataType::I16,
+    DataType::U16,
+];
+
+/// Component types of attributes that `KHR_mesh_quantization` lets be signed normalised
+/// integers (normals, tangents, morph displacements).
+const SIGNED: &[DataType] = &[DataType::F32, DataType::I8, DataType::I16];
+
+/// An accessor's elements (of two to four components, the rest 0) as floats, whatever its
+/// component type: integers mapped to `[0, 1]` or `[-1, 1]` when the accessor is `normalized`
+/// (signed ones clamped at -1, as the specification asks), taken as they are otherwise
+/// (`KHR_mesh_quantization`). `None` when it cannot be read; the accessor must have been
+/// checked ([`Loader::check_accessor`]).
+fn read_floats<'a, 's, F>(acc: &::gltf::Accessor<'a>, get: F) -> Option<Vec<[f32; 4]>>
+where
+    F: Clone + Fn(::gltf::Buffer<'a>) -> Option<&'s [u8]>,
+{
+    use ::gltf::accessor::Iter;
+    macro_rules! read {
+        ($t:ty, $f:expr) => {{
+            let f = $f;
+            match acc.dimensions() {
+                Dimensions::Vec2 => Iter::<[$t; 2]>::new(acc.clone(), get)?
+                    .map(|a| [f(a[0]), f(a[1]), 0.0, 0.0])
+                    .collect(),
+                Dimensions::Vec3 => Iter::<[$t; 3]>::new(acc.clone(), get)?
+                    .map(|a| [f(a[0]), f(a[1]), f(a[2]), 0.0])
+                    .collect(),
+                Dimensions::Vec4 => Iter::<[$t; 4]>::new(acc.clone(), get)?
+                    .map(|a| a.map(f))
+                    .collect(),
+                _ => return None,
+            }
+        }};
+    }
+    // An integer `c` of largest value `max`, normalised or not.
+    let norm = acc.normalized();
+    let int = move |c: f32, max: f32| if norm { (c / max).max(-1.0) } else { c };
+    Some(match acc.data_type() {
+        DataType::F32 => read!(f32, |c: f32| c),
+        DataType::I8 => read!(i8, |c: i8| int(f32::from(c), 127.0)),
+        DataType::U8 => read!(u8, |c: u8| int(f32::from(c), 255.0)),
+        DataType::I16 => read!(i16, |c: i16| int(f32::from(c), 32767.0)),
+        DataType::U16 => read!(u16, |c: u16| int(f32::from(c), 65535.0)),
+        DataType::U32 => return None,
+    })
+}
+
 /// Each vertex's joints and their weights (zero weights left out).
 type Influences = Vec<Vec<(u16, f32)>>;
 
@@ -367,6 +422,7 @@ fn relaxed(bytes: &[u8]) -> Option<::gltf::Gltf> {
 /// Extensions the loader reads.
 const READ_EXTENSIONS: &[&str] = &[
     "KHR_lights_punctual",
+    "KHR_mesh_quantization",
     "KHR_materials_transmission",
     "KHR_materials_ior",
     "KHR_materials_emissive_strength",
@@ -376,6 +432,7 @@ const READ_EXTENSIONS: &[&str] = &[
 /// Extensions a file may require that the loader reads or can safely do without.
 const SUPPORTED_EXTENSIONS: &[&str] = &[
     "KHR_lights_punctual",
+    "KHR_mesh_quantization",
     "KHR_materials_transmission",
     "KHR_materials_ior",
     "KHR_materials_emissive_strength",
@@ -826,26 +883,22 @@ impl Loader<'_> {
             *self.left_out.entry("without POSITION".into()).or_default() += 1;
             return Ok(None);
         };
-        self.check_accessor(
-            &at,
-            "POSITION",
-            &pos_acc,
-            &[DataType::F32],
-            Dimensions::Vec3,
-        )?;
+        self.check_accessor(&at, "POSITION", &pos_acc, QUANTIZED, Dimensions::Vec3)?;
         let buffers = self.buffers;
-        let reader = prim.reader(|b| buffers.get(b.index()).and_then(|d| d.as_deref().ok()));
-        let positions: Vec<Vec3> = reader
-            .read_positions()
+        let get = |b: ::gltf::Buffer| buffers.get(b.index()).and_then(|d| d.as_deref().ok());
+        let reader = prim.reader(get);
+        let positions: Vec<Vec3> = read_floats(&pos_acc, get)
             .ok_or_else(|| anyhow!("{at}: POSITION cannot be read"))?
-            .map(Vec3::from)
+            .into_iter()
+            .map(|v| Vec4::from(v).truncate())
             .collect();
         let n = positions.len();
 
         let normals = match prim.get(&::gltf::Semantic::Normals) {
             Some(acc) => {
-                self.check_accessor(&at, "NORMAL", &acc, &[DataType::F32], Dimensions::Vec3)?;
-                let normals = reader.read_normals().map(|r| r.map(Vec3::from).collect());
+                self.check_accessor(&at, "NORMAL", &acc, SIGNED, Dimensions::Vec3)?;
+                let normals = read_floats(&acc, get)
+                    .map(|r| r.into_iter().map(|v| Vec4::from(v).truncate()).collect());
                 self.per_vertex(&at, "NORMAL", normals, n, "flat normals used")
             }
             None => None,
@@ -860,16 +913,12 @@ impl Loader<'_> {
             let what = format!("TEXCOORD_{set}");
             uvs[set as usize] = match prim.get(&::gltf::Semantic::TexCoords(set.into())) {
                 Some(acc) => {
-                    self.check_accessor(
-                        &at,
-                        &what,
-                        &acc,
-                        &[DataType::F32, DataType::U8, DataType::U16],
-                        Dimensions::Vec2,
-                    )?;
-                    let uvs = reader
-                        .read_tex_coords(set.into())
-                        .map(|r| r.into_f32().map(Vec2::from).collect());
+                    self.check_accessor(&at, &what, &acc, QUANTIZED, Dimensions::Vec2)?;
+                    let uvs = read_floats(&acc, get).map(|r| {
+                        r.into_iter()
+                            .map(|v| Vec4::from(v).truncate().truncate())
+                            .collect()
+                    });
                     self.per_vertex(&at, &what, uvs, n, "ignored")
                 }
                 None if set > 0 => {
@@ -885,8 +934,9 @@ impl Loader<'_> {
         let normal_mapped = self.materials[material as usize].normal_map.is_some();
         let tangents = match prim.get(&::gltf::Semantic::Tangents) {
             Some(acc) if normal_mapped => {
-                self.check_accessor(&at, "TANGENT", &acc, &[DataType::F32], Dimensions::Vec4)?;
-                let tangents = reader.read_tangents().map(|r| r.map(Vec4::from).collect());
+                self.check_accessor(&at, "TANGENT", &acc, SIGNED, Dimensions::Vec4)?;
+                let tangents =
+                    read_floats(&acc, get).map(|r| r.into_iter().map(Vec4::from).collect());
                 self.per_vertex(&at, "TANGENT", tangents, n, "MikkTSpace's used")
             }
             _ => None,
@@ -897,7 +947,7 @@ impl Loader<'_> {
         self.morph(
             &at,
             prim,
-            &reader,
+            get,
             weights,
             &mut positions,
             &mut normals,
@@ -985,7 +1035,7 @@ impl Loader<'_> {
         &mut self,
         at: &str,
         prim: &::gltf::Primitive<'a>,
-        reader: &::gltf::mesh::Reader<'a, 's, F>,
+        get: F,
         weights: &[f32],
         positions: &mut [Vec3],
         normals: &mut Option<Vec<Vec3>>,
@@ -1014,12 +1064,12 @@ impl Loader<'_> {
             ] {
                 if let Some(acc) = acc {
                     let what = format!("targets[{k}].{attr}");
-                    self.check_accessor(at, &what, &acc, &[DataType::F32], Dimensions::Vec3)?;
+                    self.check_accessor(at, &what, &acc, SIGNED, Dimensions::Vec3)?;
                 }
             }
         }
         let n = positions.len();
-        for (k, (dp, dn, dt)) in reader.read_morph_targets().enumerate() {
+        for (k, t) in targets.iter().enumerate() {
             let w = weights.get(k).copied().unwrap_or(0.0);
             if !w.is_finite() {
                 self.warnings.push(format!(
@@ -1030,31 +1080,34 @@ impl Loader<'_> {
             if w == 0.0 {
                 continue;
             }
-            let read = |attr: &str, d: Option<Vec<[f32; 3]>>| -> Result<Option<Vec<Vec3>>> {
-                match d {
-                    Some(d) if d.len() != n => bail!(
-                        "{at}: targets[{k}].{attr} has {} elements for {n} vertices",
-                        d.len()
-                    ),
-                    d => Ok(d.map(|d| d.into_iter().map(Vec3::from).collect())),
-                }
-            };
-            if let Some(d) = read("POSITION", dp.map(Iterator::collect))? {
+            let read =
+                |attr: &str, acc: Option<::gltf::Accessor<'a>>| -> Result<Option<Vec<Vec3>>> {
+                    let Some(acc) = acc else {
+                        return Ok(None);
+                    };
+                    let d = read_floats(&acc, get.clone())
+                        .ok_or_else(|| anyhow!("{at}: targets[{k}].{attr} cannot be read"))?;
+                    if d.len() != n {
+                        bail!(
+                            "{at}: targets[{k}].{attr} has {} elements for {n} vertices",
+                            d.len()
+                        );
+                    }
+                    Ok(Some(
+                        d.into_iter().map(|v| Vec4::from(v).truncate()).collect(),
+                    ))
+                };
+            if let Some(d) = read("POSITION", t.positions())? {
                 for (p, d) in positions.iter_mut().zip(d) {
                     *p += w * d;
                 }
             }
-            if let (Some(d), Some(ns)) =
-                (read("NORMAL", dn.map(Iterator::collect))?, normals.as_mut())
-            {
+            if let (Some(d), Some(ns)) = (read("NORMAL", t.normals())?, normals.as_mut()) {
                 for (v, d) in ns.iter_mut().zip(d) {
                     *v += w * d;
                 }
             }
-            if let (Some(d), Some(ts)) = (
-                read("TANGENT", dt.map(Iterator::collect))?,
-                tangents.as_mut(),
-            ) {
+            if let (Some(d), Some(ts)) = (read("TANGENT", t.tangents())?, tangents.as_mut()) {
                 for (v, d) in ts.iter_mut().zip(d) {
                     *v += (w * d).extend(0.0);
                 }
