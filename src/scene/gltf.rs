@@ -8,10 +8,11 @@
 //! - Triangle primitives (`TRIANGLES`, `TRIANGLE_STRIP`, `TRIANGLE_FAN`), indexed or not;
 //!   points and lines are counted and left out with a warning. Positions, `NORMAL` (flat
 //!   normals where a primitive has none, as the glTF specification asks), `TEXCOORD_0`,
-//!   `TEXCOORD_1` (where a texture of the primitive's material reads it) and `TANGENT` (MikkTSpace tangents where a normal-mapped primitive has none, as the
-//!   specification asks: [`super::tangents`]). Triangles with a non-finite vertex are left
-//!   out, with a warning. Attributes may be quantised (`KHR_mesh_quantization`: 8- and 16-bit
-//!   integers, normalised or not, read as the floats they stand for: [`read_floats`]).
+//!   `TEXCOORD_1` (where a texture of the primitive's material reads it) and `TANGENT`
+//!   (MikkTSpace tangents where a normal-mapped primitive has none, as the specification asks:
+//!   [`super::tangents`]). Triangles with a non-finite vertex are left out, with a warning.
+//!   Attributes may be quantised (`KHR_mesh_quantization`: 8- and 16-bit integers, normalised
+//!   or not, read as the floats they stand for).
 //! - Materials (metallic-roughness) as [`Material`]s: see [`convert_material`]; their base
 //!   colour, metallic-roughness, emissive and normal textures (`normalTexture` with its
 //!   `scale`).
