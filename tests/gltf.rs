@@ -197,20 +197,25 @@ fn materials_map_base_colour_metal_emission_alpha_and_transmission() {
         {"name": "lamp", "emissiveFactor": [1.0, 0.5, 0.0], "extensions": {"KHR_materials_emissive_strength": {"emissiveStrength": 4.0}}},
         {"name": "tinted", "alphaMode": "BLEND", "pbrMetallicRoughness": {"baseColorFactor": [1.0, 1.0, 1.0, 0.25]}},
         {"name": "cutout", "alphaMode": "MASK", "alphaCutoff": 0.5, "pbrMetallicRoughness": {"baseColorFactor": [1.0, 1.0, 1.0, 0.3]}},
-        {"name": "glass", "extensions": {"KHR_materials_transmission": {"transmissionFactor": 1.0}, "KHR_materials_ior": {"ior": 1.33}}}
+        {"name": "glass", "extensions": {"KHR_materials_transmission": {"transmissionFactor": 1.0}, "KHR_materials_ior": {"ior": 1.33}}},
+        {"name": "tinted glass", "extensions": {"KHR_materials_transmission": {"transmissionFactor": 1.0},
+            "KHR_materials_volume": {"thicknessFactor": 1.0, "attenuationColor": [0.5, 1.0, 0.25], "attenuationDistance": 2.0}}},
+        {"name": "thin glass", "extensions": {"KHR_materials_transmission": {"transmissionFactor": 1.0},
+            "KHR_materials_volume": {"thicknessFactor": 0.0, "attenuationColor": [0.5, 1.0, 0.25], "attenuationDistance": 2.0}}}
     ]);
-    let nodes: Vec<Value> = (0..6).map(|m| json!({"mesh": m})).collect();
+    let nodes: Vec<Value> = (0..8).map(|m| json!({"mesh": m})).collect();
     let prim = |m: usize| json!({"primitives": [{"attributes": {"POSITION": 0, "NORMAL": 1}, "indices": 3, "material": m}]});
-    let meshes: Vec<Value> = (0..6).map(prim).collect();
+    let meshes: Vec<Value> = (0..8).map(prim).collect();
     let d = doc(
         Value::Array(nodes),
         json!({
             "materials": materials,
             "meshes": meshes,
-            "extensionsUsed": ["KHR_materials_emissive_strength", "KHR_materials_transmission", "KHR_materials_ior"]
+            "extensionsUsed": ["KHR_materials_emissive_strength", "KHR_materials_transmission", "KHR_materials_ior", "KHR_materials_volume"]
         }),
     );
     let s = Scene::load(&write(dir.path(), "materials.gltf", &d)).unwrap();
+    assert!(s.warnings.is_empty(), "{:?}", s.warnings);
     let m = |name: &str| {
         s.materials
             .iter()
@@ -238,6 +243,20 @@ fn materials_map_base_colour_metal_emission_alpha_and_transmission() {
     );
     let glass = m("glass");
     assert_eq!((glass.opacity, glass.ior), (0.0, 1.33));
+    assert_eq!(glass.absorption, Vec3::ZERO, "no volume: nothing absorbed");
+    // KHR_materials_volume: white light turns the attenuation colour after the distance.
+    let tinted = m("tinted glass");
+    let want = Vec3::new(2f32.ln(), 0.0, 4f32.ln()) / 2.0;
+    assert!(close(tinted.absorption, want), "{}", tinted.absorption);
+    assert!(close(
+        (-2.0 * tinted.absorption).exp(),
+        Vec3::new(0.5, 1.0, 0.25)
+    ));
+    assert_eq!(
+        m("thin glass").absorption,
+        Vec3::ZERO,
+        "thin-walled: no volume"
+    );
 }
 
 /// The file's first perspective camera frames the scene; point and directional lights light

@@ -423,6 +423,7 @@ fn relaxed(bytes: &[u8]) -> Option<::gltf::Gltf> {
 /// Extensions the loader reads.
 const READ_EXTENSIONS: &[&str] = &[
     "KHR_lights_punctual",
+    "KHR_materials_volume",
     "KHR_mesh_quantization",
     "KHR_materials_transmission",
     "KHR_materials_ior",
@@ -1757,7 +1758,9 @@ fn triangles_of(mode: Mode, idx: &[u32]) -> Vec<[u32; 3]> {
 /// - opacity: base alpha (times the base colour texture's) for `BLEND`, 0 or 1 against the
 ///   cutoff for `MASK`, 1 for `OPAQUE`; light through `BLEND` and `MASK` is not tinted;
 ///   `KHR_materials_transmission` makes it glass: opacity `1 - transmission`, index of
-///   refraction from `KHR_materials_ior` (1.5 by default).
+///   refraction from `KHR_materials_ior` (1.5 by default), and `KHR_materials_volume` its
+///   absorption inside ([`volume_absorption`]; `thicknessFactor` only says whether there is
+///   a volume: the rays measure the real thickness).
 pub fn convert_material(m: &::gltf::Material) -> Material {
     let pbr = m.pbr_metallic_roughness();
     let [r, g, b, alpha] = pbr.base_color_factor();
@@ -1779,11 +1782,19 @@ pub fn convert_material(m: &::gltf::Material) -> Material {
         ::gltf::material::AlphaMode::Blend => (alpha, super::AlphaMode::Blend),
     };
     let mut ior = 1.0;
+    let mut absorption = Vec3::ZERO;
     if let Some(t) = m.transmission() {
         let t = t.transmission_factor().clamp(0.0, 1.0);
         if t > 0.0 {
             opacity *= 1.0 - t;
             ior = m.ior().unwrap_or(1.5);
+            absorption = m.volume().map_or(Vec3::ZERO, |v| {
+                volume_absorption(
+                    v.thickness_factor(),
+                    Vec3::from(v.attenuation_color()),
+                    v.attenuation_distance(),
+                )
+            });
         }
     }
     Material {
@@ -1795,7 +1806,7 @@ pub fn convert_material(m: &::gltf::Material) -> Material {
         opacity,
         ior,
         mirror: lobes.mirror,
-        absorption: Vec3::ZERO,
+        absorption,
         illum: 2,
         diffuse_map: None,
         emission_map: None,
@@ -1809,6 +1820,19 @@ pub fn convert_material(m: &::gltf::Material) -> Material {
             map: None,
         }),
     }
+}
+
+/// The absorption coefficient of a `KHR_materials_volume`: white light turns `color` after
+/// `distance` (world units), so `-ln(color) / distance` per channel (Beer-Lambert, the
+/// specification's own formula). Zero for a thin-walled surface (`thickness` 0) or a
+/// distance that is not positive and finite (the default, infinity: no absorption).
+pub fn volume_absorption(thickness: f32, color: Vec3, distance: f32) -> Vec3 {
+    if !(thickness > 0.0 && distance > 0.0 && distance.is_finite()) {
+        return Vec3::ZERO;
+    }
+    // A channel of 0 absorbs everything: taken as e^-20 of it per `distance`.
+    let c = color.clamp(Vec3::splat((-20.0f32).exp()), Vec3::ONE);
+    Vec3::new(-c.x.ln(), -c.y.ln(), -c.z.ln()) / distance
 }
 
 #[cfg(test)]
