@@ -15,6 +15,11 @@
 //!   specification's `fresnel_mix` does. Sampled by its visible normals (Heitz 2018), whose
 //!   density is `G1(wo) D(h) / (4 cos_o)`.
 //!
+//! A **clear coat** (glTF `KHR_materials_clearcoat`) may lie over either: a dielectric GGX
+//! layer of its own width, weight `k` and `f0 = 0.04`, mixed as the extension specifies,
+//! `f = (1 - k F(v.h)) f_base + k F(v.h) D G / (4 cos_i cos_o)`, about a normal of its own
+//! (the surface's without the base's normal map, or the coat's own map's).
+//!
 //! A bounce picks one lobe with a probability from the lobes' reflectances seen from `wo` and
 //! samples it; its density is that of the mixture ([`Bsdf::pdf`]), which is also what
 //! multiple importance sampling weighs light samples against. When the glossy lobe's
@@ -54,6 +59,26 @@ pub use crate::scene::pbr::MIN_ALPHA;
 /// the diffuse lobe of a GGX surface lies.
 const DIELECTRIC_F0: f32 = 0.04;
 
+/// A clear coat over the other lobes: a dielectric GGX layer.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Coat {
+    /// How much of the surface it covers, in `[0, 1]` (0: no coat).
+    pub weight: f32,
+    /// Width of its GGX distribution (`roughness^2`), at least [`MIN_ALPHA`].
+    pub alpha: f32,
+    /// Its unit normal, on the side of the shading normal.
+    pub n: Vec3,
+}
+
+impl Coat {
+    /// No coat.
+    pub const NONE: Coat = Coat {
+        weight: 0.0,
+        alpha: 1.0,
+        n: Vec3::Z,
+    };
+}
+
 /// The reflectance of one surface point about its shading normal.
 #[derive(Clone, Copy, Debug)]
 pub struct Bsdf {
@@ -63,6 +88,8 @@ pub struct Bsdf {
     pub diffuse: Vec3,
     /// Glossy lobe.
     pub gloss: Gloss,
+    /// Clear coat over both ([`Coat::NONE`]: none).
+    pub coat: Coat,
 }
 
 /// A direction a bounce picked, and its density over solid angle.
@@ -79,6 +106,25 @@ impl Bsdf {
     /// Reflected radiance per unit irradiance from `wi` towards `wo` (both unit, away from the
     /// surface).
     pub fn eval(&self, wi: Vec3, wo: Vec3) -> Vec3 {
+        let base = self.eval_base(wi, wo);
+        if self.coat.weight <= 0.0 {
+            return base;
+        }
+        let n = self.coat.n;
+        let (ci, co) = (n.dot(wi), n.dot(wo));
+        let h = (wi + wo).normalize_or_zero();
+        let f = self.coat.weight * schlick_scalar(DIELECTRIC_F0, wo.dot(h).clamp(0.0, 1.0));
+        let mut out = base * (1.0 - f);
+        if ci > 0.0 && co > 0.0 && h != Vec3::ZERO {
+            let a = self.coat.alpha.max(MIN_ALPHA);
+            let dg = ggx_d(n.dot(h), a) * smith_g1(ci, a) * smith_g1(co, a);
+            out += Vec3::splat(f * dg / (4.0 * ci * co));
+        }
+        out
+    }
+
+    /// [`Bsdf::eval`] of the lobes under the coat.
+    fn eval_base(&self, wi: Vec3, wo: Vec3) -> Vec3 {
         let n = self.n;
         match self.gloss {
             Gloss::None => self.diffuse * FRAC_1_PI,
@@ -108,10 +154,47 @@ impl Bsdf {
         }
     }
 
-    /// Probability that a bounce seen from `wo` samples the glossy lobe: its share of the two
+    /// Probability that a bounce seen from `wo` samples a glossy lobe, the coat or the glossy
+    /// lobe under it (0 without either, or when `wo` lies under the shading normal).
+    pub fn gloss_probability(&self, wo: Vec3) -> f32 {
+        let pc = self.coat_probability(wo);
+        pc + (1.0 - pc) * self.base_gloss_probability(wo)
+    }
+
+    /// Probability that a bounce seen from `wo` samples the coat: its reflectance `k F(n.wo)`
+    /// against the others' under it (0 without a coat or below the normal).
+    fn coat_probability(&self, wo: Vec3) -> f32 {
+        let co = self.coat.n.dot(wo);
+        if self.coat.weight <= 0.0 || co <= 0.0 {
+            return 0.0;
+        }
+        let f = self.coat.weight * schlick_scalar(DIELECTRIC_F0, co.min(1.0));
+        let under = (1.0 - f) * self.base_reflectance(self.n.dot(wo));
+        if under > 0.0 && under.is_finite() {
+            f / (f + under)
+        } else {
+            1.0
+        }
+    }
+
+    /// The luminance of the lobes under the coat seen at cosine `co` (their glossy part by
+    /// Fresnel at normal-incidence-free `co`, as [`Bsdf::base_gloss_probability`] weighs it).
+    fn base_reflectance(&self, co: f32) -> f32 {
+        let c = co.clamp(0.0, 1.0);
+        match self.gloss {
+            Gloss::None => luminance(self.diffuse),
+            Gloss::Phong { color, .. } => luminance(color) + luminance(self.diffuse),
+            Gloss::Ggx { f0, .. } => {
+                luminance(schlick(f0, c))
+                    + luminance(self.diffuse) * (1.0 - schlick_scalar(DIELECTRIC_F0, c))
+            }
+        }
+    }
+
+    /// Probability that a bounce under the coat samples the glossy lobe: its share of the two
     /// lobes' reflectances (0 without a glossy lobe, or when `wo` lies under the shading
     /// normal).
-    pub fn gloss_probability(&self, wo: Vec3) -> f32 {
+    fn base_gloss_probability(&self, wo: Vec3) -> f32 {
         let co = self.n.dot(wo);
         let (gloss, diffuse) = match self.gloss {
             Gloss::None => return 0.0,
@@ -135,7 +218,24 @@ impl Bsdf {
 
     /// Density over solid angle with which [`Bsdf::sample`] picks `wi` seen from `wo`.
     pub fn pdf(&self, wi: Vec3, wo: Vec3) -> f32 {
-        self.mixture_pdf(self.gloss_probability(wo), wi, wo)
+        let pc = self.coat_probability(wo);
+        let base = self.mixture_pdf(self.base_gloss_probability(wo), wi, wo);
+        if pc == 0.0 {
+            return base;
+        }
+        (1.0 - pc) * base + pc * self.coat_pdf(wi, wo)
+    }
+
+    /// The coat's own density at `wi` seen from `wo` (its visible normals).
+    fn coat_pdf(&self, wi: Vec3, wo: Vec3) -> f32 {
+        let n = self.coat.n;
+        let h = (wi + wo).normalize_or_zero();
+        let (nh, vh, co) = (n.dot(h), wo.dot(h), n.dot(wo));
+        if h == Vec3::ZERO || nh <= 0.0 || vh <= 0.0 || co <= 0.0 {
+            return 0.0;
+        }
+        let a = self.coat.alpha.max(MIN_ALPHA);
+        smith_g1(co, a) * ggx_d(nh, a) / (4.0 * co)
     }
 
     /// [`Bsdf::pdf`] with the glossy lobe's probability `ps` already found.
@@ -151,7 +251,29 @@ impl Bsdf {
     /// A direction seen from `wo`, from the uniform random numbers `u` (`None` when the glossy
     /// lobe's half vector turns away from `wo`).
     pub fn sample(&self, wo: Vec3, u: Vec2) -> Option<Sample> {
-        let ps = self.gloss_probability(wo);
+        let pc = self.coat_probability(wo);
+        if pc > 0.0 {
+            // The first number picks the coat or the lobes under it and, stretched back to
+            // [0, 1), samples what it picked.
+            let wi = if u.x < pc {
+                let v = Vec2::new((u.x / pc).min(ONE_MINUS_EPSILON), u.y);
+                let a = self.coat.alpha.max(MIN_ALPHA);
+                reflect_about_visible_normal(self.coat.n, wo, a, v)?
+            } else {
+                let v = Vec2::new(((u.x - pc) / (1.0 - pc)).min(ONE_MINUS_EPSILON), u.y);
+                self.sample_base(wo, v)?.wi
+            };
+            return Some(Sample {
+                wi,
+                pdf: self.pdf(wi, wo),
+            });
+        }
+        self.sample_base(wo, u)
+    }
+
+    /// [`Bsdf::sample`] of the lobes under the coat.
+    fn sample_base(&self, wo: Vec3, u: Vec2) -> Option<Sample> {
+        let ps = self.base_gloss_probability(wo);
         if ps == 0.0 {
             let wi = cosine_direction(self.n, u);
             return Some(Sample {
@@ -208,10 +330,7 @@ impl Bsdf {
                 t * (sin * phi.cos()) + b * (sin * phi.sin()) + n * cos
             }
             Gloss::Ggx { alpha, .. } => {
-                let a = alpha.max(MIN_ALPHA);
-                let local = Vec3::new(wo.dot(t), wo.dot(b), wo.dot(n));
-                let m = visible_normal(local, a, u);
-                t * m.x + b * m.y + n * m.z
+                return reflect_about_visible_normal(n, wo, alpha.max(MIN_ALPHA), u);
             }
         };
         let vh = wo.dot(h);
@@ -220,6 +339,20 @@ impl Bsdf {
         }
         Some((2.0 * vh * h - wo).normalize())
     }
+}
+
+/// `wo` reflected about a GGX normal of width `a` (about `n`) visible from it ([`visible_normal`]),
+/// `None` when the normal turns away from `wo`.
+fn reflect_about_visible_normal(n: Vec3, wo: Vec3, a: f32, u: Vec2) -> Option<Vec3> {
+    let (t, b) = n.any_orthonormal_pair();
+    let local = Vec3::new(wo.dot(t), wo.dot(b), wo.dot(n));
+    let m = visible_normal(local, a, u);
+    let h = t * m.x + b * m.y + n * m.z;
+    let vh = wo.dot(h);
+    if vh <= 0.0 {
+        return None;
+    }
+    Some((2.0 * vh * h - wo).normalize())
 }
 
 /// Largest `f32` below 1 (a stretched random number stays in `[0, 1)`).
@@ -321,6 +454,7 @@ mod tests {
             n,
             diffuse: red,
             gloss: Gloss::None,
+            coat: Coat::NONE,
         }];
         for exponent in [0.0, 10.0, 200.0] {
             out.push(Bsdf {
@@ -330,6 +464,7 @@ mod tests {
                     color: Vec3::splat(0.3),
                     exponent,
                 },
+                coat: Coat::NONE,
             });
         }
         for (alpha, diffuse) in [(1.0, 0.5), (0.3, 0.0), (0.05, 0.3), (MIN_ALPHA, 0.0)] {
@@ -340,7 +475,19 @@ mod tests {
                     f0: Vec3::new(0.9, 0.6, 0.3),
                     alpha,
                 },
+                coat: Coat::NONE,
             });
+        }
+        // Clear coats over a diffuse, a Blinn-Phong and two GGX lobes.
+        let coats = [(1.0, 0.3, 0), (0.5, 0.6, 2), (0.8, 0.35, 4), (1.0, 0.5, 5)];
+        for (weight, alpha, under) in coats {
+            let mut b = out[under];
+            b.coat = Coat {
+                weight,
+                alpha,
+                n: b.n,
+            };
+            out.push(b);
         }
         out
     }
@@ -439,11 +586,14 @@ mod tests {
                     }
                 }
                 sampled /= count as f32;
+                // A coat's lobes are wide (width 0.3 and up): uniform directions see them.
                 let reference = match bsdf.gloss {
+                    _ if bsdf.coat.weight > 0.0 => uniform_estimate(&bsdf, wo, &mut rng),
                     Gloss::Ggx { alpha, .. } => half_vector_estimate(&bsdf, alpha, wo, &mut rng),
                     _ => uniform_estimate(&bsdf, wo, &mut rng),
                 };
                 let tol = match bsdf.gloss {
+                    _ if bsdf.coat.weight > 0.0 => 0.02,
                     Gloss::Phong { exponent, .. } if exponent > 100.0 => 0.1,
                     _ => 0.01,
                 };
@@ -460,6 +610,7 @@ mod tests {
                 f0: Vec3::ONE,
                 alpha: 0.5,
             },
+            coat: Coat::NONE,
         };
         let mut rng = Rng(3);
         for wo in views(Vec3::Z) {

@@ -64,7 +64,7 @@ impl RenderPlan {
             transmission: bounces && transparent,
             absorption: absorbing,
             thin_lens: scene.camera.lens_radius > 0.0,
-            normal_maps: scene.materials.iter().any(|m| m.normal_map.is_some()),
+            normal_maps: scene.materials.iter().any(|m| m.has_normal_map()),
             max_light_samples: None,
         }
     }
@@ -169,7 +169,7 @@ impl fmt::Display for Explain<'_> {
                 let n = scene
                     .materials
                     .iter()
-                    .filter(|m| m.normal_map.is_some())
+                    .filter(|m| m.has_normal_map())
                     .count();
                 format!("yes, {n} material(s) bend the shading normal")
             } else {

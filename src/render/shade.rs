@@ -5,7 +5,7 @@
 
 use glam::Vec3;
 
-use super::bsdf::{Bsdf, Gloss, Sample};
+use super::bsdf::{Bsdf, Coat, Gloss, Sample};
 use super::environment::EnvironmentMap;
 use super::path::{Arrival, LightSet, power};
 use super::{RayCounts, RenderPlan};
@@ -59,6 +59,8 @@ pub(super) struct Surface<'a> {
     pub(super) opacity: f32,
     /// The material's glossy lobe here.
     pub(super) gloss: Gloss,
+    /// The material's clear coat here ([`Coat::NONE`]: none).
+    pub(super) coat: Coat,
     /// The material's mirror reflectance here (zero: no reflection ray).
     pub(super) mirror: Vec3,
 }
@@ -70,6 +72,7 @@ impl Surface<'_> {
             n: self.n,
             diffuse: self.diffuse,
             gloss: self.gloss,
+            coat: self.coat,
         }
     }
 
@@ -202,8 +205,23 @@ impl<'a> Tracer<'a> {
             emission,
             opacity,
             gloss,
+            mut coat,
             mirror,
         } = textured(scene, material, prim, u, v);
+        if coat.weight > 0.0 {
+            // The coat's own normal: the interpolated one, or its own map's about it.
+            let plain = interpolated.try_normalize().unwrap_or(ng) * side;
+            coat.n = plain;
+            let cc = material.pbr.as_ref().and_then(|p| p.clearcoat.as_ref());
+            if let Some(c) = cc.filter(|_| self.plan.normal_maps)
+                && let Some(map) = &c.normal_map
+                && let Some(mapped) =
+                    normal_mapped_by(scene, map, c.normal_scale, prim, u, v, interpolated)
+                && (mapped * side).dot(ng) > 0.0
+            {
+                coat.n = mapped * side;
+            }
+        }
         Surface {
             p,
             p_err,
@@ -216,6 +234,7 @@ impl<'a> Tracer<'a> {
             emission,
             opacity,
             gloss,
+            coat,
             mirror,
         }
     }
@@ -685,6 +704,7 @@ pub(super) struct Look {
     pub(super) emission: Vec3,
     pub(super) opacity: f32,
     pub(super) gloss: Gloss,
+    pub(super) coat: Coat,
     pub(super) mirror: Vec3,
 }
 
@@ -692,9 +712,27 @@ pub(super) struct Look {
 /// its textures, read at the triangle's texture coordinates (the diffuse texture's alpha for
 /// the opacity, as its alpha mode says). A glTF material's base colour and
 /// metallic-roughness textures vary its base colour, metalness and roughness, from which its
-/// lobes are made here ([`crate::scene::pbr`]); other materials' textures multiply the diffuse
-/// colour.
+/// lobes are made here ([`crate::scene::pbr`]), and its clear coat's textures vary the coat;
+/// other materials' textures multiply the diffuse colour.
 pub(super) fn textured(scene: &Scene, m: &Material, prim: u32, u: f32, v: f32) -> Look {
+    // Each texture reads its own coordinate set (glTF's TEXCOORD_0 or TEXCOORD_1).
+    let sample = |t: &crate::scene::Texture| t.sample(scene.mesh.uv_at(t.uv_set, prim, u, v));
+    let coat = m
+        .pbr
+        .as_ref()
+        .and_then(|p| p.clearcoat.as_ref())
+        .map_or(Coat::NONE, |c| {
+            let (weight, alpha) = c.at(
+                c.map.as_deref().map(sample),
+                c.roughness_map.as_deref().map(sample),
+            );
+            // The normal is the surface's: set by `Tracer::surface`.
+            Coat {
+                weight,
+                alpha,
+                n: Vec3::Z,
+            }
+        });
     if !m.is_textured() {
         let (gloss, mirror) = match &m.pbr {
             Some(pbr) => {
@@ -708,11 +746,10 @@ pub(super) fn textured(scene: &Scene, m: &Material, prim: u32, u: f32, v: f32) -
             emission: m.emission,
             opacity: m.opacity_at(1.0),
             gloss,
+            coat,
             mirror,
         };
     }
-    // Each texture reads its own coordinate set (glTF's TEXCOORD_0 or TEXCOORD_1).
-    let sample = |t: &crate::scene::Texture| t.sample(scene.mesh.uv_at(t.uv_set, prim, u, v));
     let base = m.diffuse_map.as_deref().map(sample);
     let emission = m
         .emission_map
@@ -728,6 +765,7 @@ pub(super) fn textured(scene: &Scene, m: &Material, prim: u32, u: f32, v: f32) -
                 emission,
                 opacity,
                 gloss: ggx(&lobes),
+                coat,
                 mirror: lobes.mirror,
             }
         }
@@ -736,6 +774,7 @@ pub(super) fn textured(scene: &Scene, m: &Material, prim: u32, u: f32, v: f32) -
             emission,
             opacity,
             gloss: phong(m),
+            coat,
             mirror: m.mirror,
         },
     }
@@ -779,6 +818,19 @@ pub(super) fn normal_mapped(
     n: Vec3,
 ) -> Option<Vec3> {
     let map = m.normal_map.as_ref()?;
+    normal_mapped_by(scene, map, m.normal_scale, prim, u, v, n)
+}
+
+/// [`normal_mapped`] by the map `map` of scale `scale` (a material's, or its clear coat's).
+fn normal_mapped_by(
+    scene: &Scene,
+    map: &crate::scene::Texture,
+    scale: f32,
+    prim: u32,
+    u: f32,
+    v: f32,
+    n: Vec3,
+) -> Option<Vec3> {
     let t = scene.mesh.tangent_at(prim, u, v);
     if t == glam::Vec4::ZERO {
         return None;
@@ -786,7 +838,7 @@ pub(super) fn normal_mapped(
     let texel = map
         .sample(scene.mesh.uv_at(map.uv_set, prim, u, v))
         .truncate();
-    crate::scene::tangents::perturbed(n, t, texel, m.normal_scale)
+    crate::scene::tangents::perturbed(n, t, texel, scale)
 }
 
 /// Barycentric `(u, v)` (the weights of the second and third vertex) of a point `p` lying on

@@ -272,6 +272,7 @@ pub fn parse(path: &Path, text: &str, read: ReadFn, check_files: bool) -> Result
                 metallic: metallic.as_ref().map_or(0.0, |v| *v.get_ref()),
                 roughness: roughness.as_ref().map_or(1.0, |v| *v.get_ref()),
                 map: None,
+                clearcoat: None,
             };
             let lobes = pbr.lobes_at(None, None);
             mat.diffuse = lobes.diffuse;
@@ -362,7 +363,7 @@ pub fn parse(path: &Path, text: &str, read: ReadFn, check_files: bool) -> Result
             }
         };
         if let Some(id) = override_id
-            && materials[id as usize].normal_map.is_some()
+            && materials[id as usize].has_normal_map()
         {
             // The mesh's own tangents were made for its own materials: MikkTSpace's for the
             // whole mesh, in its own frame (turned with it below).

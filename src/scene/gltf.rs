@@ -45,6 +45,7 @@ use anyhow::{Result, anyhow, bail};
 use base64::Engine as _;
 use glam::{DMat3, DMat4, DVec3, Vec2, Vec3, Vec4};
 
+use super::pbr::Clearcoat;
 use super::{Camera, Environment, Light, Material, Mesh, NormalRule, Scene, Texture, Wrap};
 
 /// What a glTF load produced besides the scene (used by scene files, which give their own
@@ -223,6 +224,7 @@ pub fn load_from(
     let mut loader = Loader {
         name: &name,
         nodes: doc.nodes().collect(),
+        doc_textures: doc.textures().collect(),
         buffers: &buffers,
         read,
         rule,
@@ -423,6 +425,7 @@ fn relaxed(bytes: &[u8]) -> Option<::gltf::Gltf> {
 /// Extensions the loader reads.
 const READ_EXTENSIONS: &[&str] = &[
     "KHR_lights_punctual",
+    "KHR_materials_clearcoat",
     "KHR_materials_volume",
     "KHR_mesh_quantization",
     "KHR_materials_transmission",
@@ -620,6 +623,8 @@ struct Loader<'a> {
     name: &'a str,
     /// The nodes by index (the crate's iterator would be walked from the start per lookup).
     nodes: Vec<::gltf::Node<'a>>,
+    /// The textures by index, for extensions the crate does not read (their JSON names them).
+    doc_textures: Vec<::gltf::Texture<'a>>,
     buffers: &'a [Buffer],
     read: &'a dyn Fn(&Path) -> Result<Vec<u8>>,
     /// Normals for primitives without them (`None`: flat).
@@ -933,7 +938,7 @@ impl Loader<'_> {
             };
         }
         let [uvs, uvs1] = uvs;
-        let normal_mapped = self.materials[material as usize].normal_map.is_some();
+        let normal_mapped = self.materials[material as usize].has_normal_map();
         let tangents = match prim.get(&::gltf::Semantic::Tangents) {
             Some(acc) if normal_mapped => {
                 self.check_accessor(&at, "TANGENT", &acc, SIGNED, Dimensions::Vec4)?;
@@ -1452,10 +1457,88 @@ impl Loader<'_> {
                 ));
             }
         }
+        if let Some(json) = m.extension_value("KHR_materials_clearcoat") {
+            let coat = self.clearcoat(&label, json);
+            if let Some(p) = mat.pbr.as_mut() {
+                p.clearcoat = coat;
+            }
+        }
         let id = self.materials.len() as u32;
         self.materials.push(mat);
         self.material_index.insert(key, id);
         Ok(id)
+    }
+
+    /// A material's `KHR_materials_clearcoat` (`None` when its factor is 0: no coat); a
+    /// malformed factor is said in a warning and its default used.
+    fn clearcoat(&mut self, label: &str, json: &serde_json::Value) -> Option<Clearcoat> {
+        let what = "KHR_materials_clearcoat";
+        let mut number = |key: &str, default: f32| match json.get(key) {
+            None => default,
+            Some(v) => match v.as_f64().map(|x| x as f32).filter(|x| x.is_finite()) {
+                Some(x) => x.clamp(0.0, 1.0),
+                None => {
+                    self.warnings.push(format!(
+                        "{label}: {what}.{key} is malformed; {default} used"
+                    ));
+                    default
+                }
+            },
+        };
+        let factor = number("clearcoatFactor", 0.0);
+        let roughness = number("clearcoatRoughnessFactor", 0.0);
+        if factor == 0.0 {
+            return None;
+        }
+        let mut texture = |key: &str| {
+            let info = json.get(key)?;
+            self.texture_json(label, &format!("{what}.{key}"), info)
+        };
+        let map = texture("clearcoatTexture");
+        let roughness_map = texture("clearcoatRoughnessTexture");
+        let normal_map = texture("clearcoatNormalTexture");
+        let normal_scale = json
+            .get("clearcoatNormalTexture")
+            .and_then(|t| t.get("scale"))
+            .and_then(serde_json::Value::as_f64)
+            .map(|x| x as f32)
+            .filter(|x| x.is_finite())
+            .unwrap_or(1.0);
+        Some(Clearcoat {
+            factor,
+            roughness,
+            map,
+            roughness_map,
+            normal_map,
+            normal_scale,
+        })
+    }
+
+    /// A (linear) texture named by the JSON of a `textureInfo` in an extension the gltf crate
+    /// does not read: its `index`, `texCoord` and `KHR_texture_transform`; `None`, with a
+    /// warning, when it names no texture or its image cannot be had.
+    fn texture_json(
+        &mut self,
+        label: &str,
+        what: &str,
+        info: &serde_json::Value,
+    ) -> Option<Arc<Texture>> {
+        let index = info.get("index").and_then(serde_json::Value::as_u64);
+        let Some(tex) = index.and_then(|i| self.doc_textures.get(i as usize).cloned()) else {
+            self.warnings
+                .push(format!("{label}: {what} names no texture; not used"));
+            return None;
+        };
+        let read = info
+            .get("extensions")
+            .and_then(|e| e.get("KHR_texture_transform"))
+            .map(|t| self.transform_json(label, what, t));
+        let own = info
+            .get("texCoord")
+            .and_then(serde_json::Value::as_u64)
+            .map_or(0, |c| u32::try_from(c).unwrap_or(u32::MAX));
+        let set = read.and_then(|(_, set)| set).unwrap_or(own);
+        self.image_texture(label, what, tex, set, read.map(|(t, _)| t), false)
     }
 
     /// A texture of a material (`srgb`: a colour texture, else linear values), or `None` with
@@ -1666,18 +1749,17 @@ impl Loader<'_> {
         if materials.is_empty() {
             materials.push(Material::default());
         }
-        let mapped = |i: usize| {
-            materials[self.material_ids[i] as usize]
-                .normal_map
-                .is_some()
-        };
+        let mapped = |i: usize| materials[self.material_ids[i] as usize].has_normal_map();
         let tangents = if (self.any_uvs || self.any_uvs1) && (0..triangles.len()).any(mapped) {
             // MikkTSpace's where the file gives none, the file's where it does; made from the
             // coordinate set the normal map reads.
+            // The base's normal map's set, else the coat's.
             let set1 = |i: usize| {
-                materials[self.material_ids[i] as usize]
-                    .normal_map
+                let m = &materials[self.material_ids[i] as usize];
+                let coat = m.pbr.as_ref().and_then(|p| p.clearcoat.as_ref());
+                m.normal_map
                     .as_ref()
+                    .or(coat.and_then(|c| c.normal_map.as_ref()))
                     .is_some_and(|t| t.uv_set == 1)
             };
             let uvs: Vec<[Vec2; 3]> = (0..triangles.len())
@@ -1818,6 +1900,7 @@ pub fn convert_material(m: &::gltf::Material) -> Material {
             metallic,
             roughness,
             map: None,
+            clearcoat: None,
         }),
     }
 }

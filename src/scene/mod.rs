@@ -175,16 +175,32 @@ impl Material {
             || self.pbr.as_ref().is_some_and(|p| p.map.is_some())
     }
 
-    /// The material's textures: base colour, emission, metallic-roughness and normal map.
+    /// The material's textures: base colour, emission, metallic-roughness, normal map and the
+    /// clear coat's.
     pub fn textures(&self) -> impl Iterator<Item = &Arc<Texture>> {
+        let coat = self.pbr.as_ref().and_then(|p| p.clearcoat.as_ref());
         [
             self.diffuse_map.as_ref(),
             self.emission_map.as_ref(),
             self.pbr.as_ref().and_then(|p| p.map.as_ref()),
             self.normal_map.as_ref(),
+            coat.and_then(|c| c.map.as_ref()),
+            coat.and_then(|c| c.roughness_map.as_ref()),
+            coat.and_then(|c| c.normal_map.as_ref()),
         ]
         .into_iter()
         .flatten()
+    }
+
+    /// True when a normal map bends a normal of the surface: the material's, or its clear
+    /// coat's (either needs tangents).
+    pub fn has_normal_map(&self) -> bool {
+        self.normal_map.is_some()
+            || self
+                .pbr
+                .as_ref()
+                .and_then(|p| p.clearcoat.as_ref())
+                .is_some_and(|c| c.normal_map.is_some())
     }
 }
 

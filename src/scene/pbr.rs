@@ -28,6 +28,37 @@ pub struct MetallicRoughness {
     /// `metallic`, its green channel `roughness` (red and alpha are not read: packed
     /// occlusion, say).
     pub map: Option<Arc<Texture>>,
+    /// A clear coat over the surface (glTF `KHR_materials_clearcoat`).
+    pub clearcoat: Option<Clearcoat>,
+}
+
+/// A clear coat's parameters (glTF `KHR_materials_clearcoat`): a dielectric GGX layer over
+/// the material.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Clearcoat {
+    /// How much of the surface the coat covers, in `[0, 1]`.
+    pub factor: f32,
+    /// The coat's perceptual roughness, in `[0, 1]`.
+    pub roughness: f32,
+    /// `clearcoatTexture` (linear): its red channel multiplies `factor`.
+    pub map: Option<Arc<Texture>>,
+    /// `clearcoatRoughnessTexture` (linear): its green channel multiplies `roughness`.
+    pub roughness_map: Option<Arc<Texture>>,
+    /// `clearcoatNormalTexture`: a tangent-space normal map of the coat alone (without it,
+    /// the coat follows the surface's normal, not the base's normal map).
+    pub normal_map: Option<Arc<Texture>>,
+    /// The coat normal map's `scale`.
+    pub normal_scale: f32,
+}
+
+impl Clearcoat {
+    /// The coat's weight and GGX width where its textures read `texel` and `roughness_texel`
+    /// (`None`: no texture there).
+    pub fn at(&self, texel: Option<Vec4>, roughness_texel: Option<Vec4>) -> (f32, f32) {
+        let weight = (self.factor * texel.map_or(1.0, |t| t.x)).clamp(0.0, 1.0);
+        let r = (self.roughness * roughness_texel.map_or(1.0, |t| t.y)).clamp(0.0, 1.0);
+        (weight, (r * r).max(MIN_ALPHA))
+    }
 }
 
 impl MetallicRoughness {
@@ -139,6 +170,7 @@ mod tests {
             metallic: 1.0,
             roughness: 1.0,
             map: None,
+            clearcoat: None,
         };
         // Blue 1, green 0.5: a metal of roughness 0.5.
         let at = m.lobes_at(
@@ -159,6 +191,7 @@ mod tests {
             metallic: 1.0,
             roughness: 1.0,
             map: None,
+            clearcoat: None,
         };
         assert!(!m.may_mirror(), "rough everywhere");
         m.map = Some(Arc::new(Texture::from_rgba8(
