@@ -2119,13 +2119,12 @@ fn extensions_used_but_not_read_are_said() {
     let dir = tempfile::tempdir().unwrap();
     let d = doc(
         json!([{"mesh": 0}]),
-        json!({"extensionsUsed": ["KHR_materials_clearcoat", "KHR_texture_transform"]}),
+        json!({"extensionsUsed": ["KHR_materials_sheen", "KHR_texture_transform"]}),
     );
-    let s = Scene::load(&write(dir.path(), "clearcoat.gltf", &d)).unwrap();
+    let s = Scene::load(&write(dir.path(), "sheen.gltf", &d)).unwrap();
     assert_eq!(s.warnings.len(), 1, "{:?}", s.warnings);
     assert!(
-        s.warnings[0].contains("KHR_materials_clearcoat")
-            && s.warnings[0].contains("clearcoat.gltf"),
+        s.warnings[0].contains("KHR_materials_sheen") && s.warnings[0].contains("sheen.gltf"),
         "{:?}",
         s.warnings
     );
