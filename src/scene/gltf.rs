@@ -642,9 +642,9 @@ struct Loader<'a> {
     /// a normal map).
     tangents: Vec<Option<[Vec4; 3]>>,
     material_ids: Vec<u32>,
-    /// Primitives read once, by (mesh, primitive, morph weights as bits), for every node that
-    /// places them.
-    primitives: HashMap<(usize, usize, Vec<u32>), Option<Arc<Primitive>>>,
+    /// Primitives read once, by (mesh, primitive, morph weights as bits, whether a skin
+    /// places it), for every node that places them.
+    primitives: HashMap<(usize, usize, Vec<u32>, bool), Option<Arc<Primitive>>>,
     /// Each node's parent (the first that lists it), for the world transforms of joints.
     parents: Vec<Option<usize>>,
     /// Each skin's joint matrices (joint's world transform times its inverse bind matrix).
@@ -802,11 +802,15 @@ impl Loader<'_> {
             mesh,
             prim.index(),
             weights.iter().map(|w| w.to_bits()).collect(),
+            skin.is_some(),
         );
         let data = match self.primitives.get(&key) {
             Some(d) => d.clone(),
             None => {
-                let d = self.read_primitive(mesh, &prim, weights)?.map(Arc::new);
+                let skinned = skin.is_some();
+                let d = self
+                    .read_primitive(mesh, &prim, weights, skinned)?
+                    .map(Arc::new);
                 self.primitives.insert(key, d.clone());
                 d
             }
@@ -869,13 +873,15 @@ impl Loader<'_> {
         Ok(())
     }
 
-    /// Reads a primitive's vertices and triangles, or `None` when it is left out (with the
-    /// reason counted for the warnings).
+    /// Reads a primitive's vertices and triangles (its morph targets at `weights`, its joints
+    /// and weights when `skinned`), or `None` when it is left out (with the reason counted for
+    /// the warnings).
     fn read_primitive(
         &mut self,
         mesh: usize,
         prim: &::gltf::Primitive,
         weights: &[f32],
+        skinned: bool,
     ) -> Result<Option<Primitive>> {
         let at = format!("{}: meshes[{mesh}].primitives[{}]", self.name, prim.index());
         let mode = prim.mode();
@@ -960,7 +966,13 @@ impl Loader<'_> {
             &mut normals,
             &mut tangents,
         )?;
-        let influences = self.influences(&at, prim, &reader, n)?;
+        // Joints and weights only where a skin places the primitive (elsewhere they are unused
+        // and not checked).
+        let influences = if skinned {
+            self.influences(&at, prim, &reader, n)?
+        } else {
+            None
+        };
 
         let indices: Vec<u32> = match prim.indices() {
             Some(acc) => {
