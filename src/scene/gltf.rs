@@ -343,6 +343,10 @@ where
     })
 }
 
+/// A primitive as read for a placement: mesh, primitive, morph weights (as bits), whether a
+/// skin places it.
+type PrimitiveKey = (usize, usize, Vec<u32>, bool);
+
 /// Each vertex's joints and their weights (zero weights left out).
 type Influences = Vec<Vec<(u16, f32)>>;
 
@@ -644,7 +648,7 @@ struct Loader<'a> {
     material_ids: Vec<u32>,
     /// Primitives read once, by (mesh, primitive, morph weights as bits, whether a skin
     /// places it), for every node that places them.
-    primitives: HashMap<(usize, usize, Vec<u32>, bool), Option<Arc<Primitive>>>,
+    primitives: HashMap<PrimitiveKey, Option<Arc<Primitive>>>,
     /// Each node's parent (the first that lists it), for the world transforms of joints.
     parents: Vec<Option<usize>>,
     /// Each skin's joint matrices (joint's world transform times its inverse bind matrix).
