@@ -189,6 +189,8 @@ impl<'a> Tracer<'a> {
         // normal map bends the normal of the side the ray sees as it does the other's.
         let side = if n.dot(ng) < 0.0 { -1.0 } else { 1.0 };
         n *= side;
+        // The normal before any map bends it (a clear coat's own normal starts from it).
+        let plain = n;
         if let Some(mapped) = self
             .plan
             .normal_maps
@@ -210,7 +212,6 @@ impl<'a> Tracer<'a> {
         } = textured(scene, material, prim, u, v);
         if coat.weight > 0.0 {
             // The coat's own normal: the interpolated one, or its own map's about it.
-            let plain = interpolated.try_normalize().unwrap_or(ng) * side;
             coat.n = plain;
             let cc = material.pbr.as_ref().and_then(|p| p.clearcoat.as_ref());
             if let Some(c) = cc.filter(|_| self.plan.normal_maps)

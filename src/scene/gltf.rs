@@ -201,7 +201,7 @@ pub fn load_from(
         Err(e) => return Err(parse_error(&name, e)),
     };
     for ext in doc.extensions_required() {
-        if !SUPPORTED_EXTENSIONS.contains(&ext) {
+        if !READ_EXTENSIONS.contains(&ext) && !DONE_WITHOUT_EXTENSIONS.contains(&ext) {
             bail!("{name}: needs the extension {ext}, which Tracery does not read");
         }
     }
@@ -438,16 +438,8 @@ const READ_EXTENSIONS: &[&str] = &[
     "KHR_texture_transform",
 ];
 
-/// Extensions a file may require that the loader reads or can safely do without.
-const SUPPORTED_EXTENSIONS: &[&str] = &[
-    "KHR_lights_punctual",
-    "KHR_mesh_quantization",
-    "KHR_materials_transmission",
-    "KHR_materials_ior",
-    "KHR_materials_emissive_strength",
-    "KHR_materials_unlit",
-    "KHR_texture_transform",
-];
+/// Extensions the loader does not read but a file may require: it can safely do without them.
+const DONE_WITHOUT_EXTENSIONS: &[&str] = &["KHR_materials_unlit"];
 
 /// Most node placements (a node under several parents is placed once per path to it: a file
 /// can make that grow exponentially with depth, so it is bounded, not followed into a hang).
