@@ -2198,6 +2198,53 @@ fn quantized_attributes_are_read_as_the_floats_they_stand_for() {
     );
 }
 
+/// A mirror under a clear coat shows what it reflects dimmed by the light the coat reflects
+/// away, `1 - k F(wo.n)`: seen along its normal, a coated white mirror (factor 1) shows 0.96
+/// of the sky, an uncoated one all of it, and a half coat (factor 0.5) 0.98. No light: the
+/// coat's own lobe adds nothing. Fails with the mirror traced apart from the coat (1x).
+#[test]
+fn a_clear_coat_dims_the_mirror_under_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let mirror = json!({"pbrMetallicRoughness": {"baseColorFactor": [1.0, 1.0, 1.0, 1.0], "metallicFactor": 1.0, "roughnessFactor": 0.0}});
+    let coated = |k: f32| {
+        let mut m = mirror.clone();
+        m["extensions"] = json!({"KHR_materials_clearcoat": {"clearcoatFactor": k, "clearcoatRoughnessFactor": 0.5}});
+        m
+    };
+    let centre = |s: &Scene| {
+        quad_picture(
+            s,
+            Vec3::new(0.0, 0.0, 5.0),
+            0.0,
+            tracery::scene::Environment::Color(PBR_SKY),
+        )[4 * 9 + 4]
+    };
+    let plain = centre(&pbr_quad(
+        dir.path(),
+        "plain.gltf",
+        mirror.clone(),
+        None,
+        None,
+    ));
+    assert!(
+        (plain - PBR_SKY).abs().max_element() < 1e-4,
+        "uncoated {plain}, want the sky {PBR_SKY}"
+    );
+    for (k, want) in [(1.0, 0.96), (0.5, 0.98)] {
+        let c = centre(&pbr_quad(
+            dir.path(),
+            &format!("coated{k}.gltf"),
+            coated(k),
+            None,
+            None,
+        ));
+        assert!(
+            (c - want * PBR_SKY).abs().max_element() < 1e-4,
+            "coat {k}: {c}, want {want} of the sky {PBR_SKY}"
+        );
+    }
+}
+
 /// `KHR_materials_clearcoat` is read: its factors (clamped), its three textures (the normal
 /// texture with its scale, which also makes the primitive's tangents), a malformed factor and
 /// a texture index past the list as warnings naming them, a factor of 0 as no coat, and no

@@ -77,6 +77,16 @@ impl Coat {
         alpha: 1.0,
         n: Vec3::Z,
     };
+
+    /// The share of light the coat reflects, seen at cosine `cos = wo.h` to a microfacet
+    /// normal `h`: `k F(cos)` (0 without a coat). The lobes under it get `1 - k F(cos)` of
+    /// the light; a mirror under the coat reflects about the shading normal, its `h`.
+    pub fn reflects(&self, cos: f32) -> f32 {
+        if self.weight <= 0.0 {
+            return 0.0;
+        }
+        self.weight * schlick_scalar(DIELECTRIC_F0, cos.clamp(0.0, 1.0))
+    }
 }
 
 /// The reflectance of one surface point about its shading normal.
@@ -113,7 +123,7 @@ impl Bsdf {
         let n = self.coat.n;
         let (ci, co) = (n.dot(wi), n.dot(wo));
         let h = (wi + wo).normalize_or_zero();
-        let f = self.coat.weight * schlick_scalar(DIELECTRIC_F0, wo.dot(h).clamp(0.0, 1.0));
+        let f = self.coat.reflects(wo.dot(h));
         let mut out = base * (1.0 - f);
         if ci > 0.0 && co > 0.0 && h != Vec3::ZERO {
             let a = self.coat.alpha.max(MIN_ALPHA);
@@ -168,7 +178,7 @@ impl Bsdf {
         if self.coat.weight <= 0.0 || co <= 0.0 {
             return 0.0;
         }
-        let f = self.coat.weight * schlick_scalar(DIELECTRIC_F0, co.min(1.0));
+        let f = self.coat.reflects(co);
         let under = (1.0 - f) * self.base_reflectance(self.n.dot(wo));
         if under > 0.0 && under.is_finite() {
             f / (f + under)

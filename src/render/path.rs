@@ -252,7 +252,7 @@ impl Tracer<'_> {
                 if r.dot(s.ng) > 0.0 {
                     counts.reflection += 1;
                     let bounce = Ray::new(s.origin, r);
-                    let tint = alpha * s.mirror.min(Vec3::ONE);
+                    let tint = alpha * s.mirror_tint(wo);
                     let h = self.bvh.intersect(&bounce, f32::INFINITY);
                     l += tint
                         * self.path(

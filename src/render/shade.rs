@@ -80,6 +80,13 @@ impl Surface<'_> {
     pub(super) fn is_mirror(&self) -> bool {
         self.mirror.max_element() > 0.0
     }
+
+    /// What the mirror reflects of light arriving from `wo`'s mirror direction: its
+    /// reflectance (at most 1), less what a clear coat over it reflects away, `1 - k F(wo.n)`
+    /// (the coat's own highlight is its lobe in [`Surface::bsdf`]).
+    pub(super) fn mirror_tint(&self, wo: Vec3) -> Vec3 {
+        self.mirror.min(Vec3::ONE) * (1.0 - self.coat.reflects(wo.dot(self.n)))
+    }
 }
 
 impl<'a> Tracer<'a> {
@@ -272,7 +279,7 @@ impl<'a> Tracer<'a> {
             if r.dot(s.ng) > 0.0 {
                 counts.reflection += 1;
                 let bounce = Ray::new(s.origin, r);
-                l += alpha * s.mirror.min(Vec3::ONE) * self.trace(&bounce, depth + 1, rng, counts);
+                l += alpha * s.mirror_tint(wo) * self.trace(&bounce, depth + 1, rng, counts);
             }
         }
         if alpha < 1.0 && depth < self.max_depth {
