@@ -1587,9 +1587,19 @@ fn pbr_quad(
     base: Option<[u8; 3]>,
     mr: Option<[u8; 3]>,
 ) -> Scene {
+    let pngs = [
+        png_1x1(base.unwrap_or([255; 3])),
+        png_1x1(mr.unwrap_or([255; 3])),
+    ];
+    textured_quad(dir, name, material, &pngs)
+}
+
+/// The quad of [`quad_buffer`] with one material and texture `k` showing PNG image `k`.
+fn textured_quad(dir: &Path, name: &str, material: Value, pngs: &[Vec<u8>]) -> Scene {
     let (bin, views, accessors) = quad_buffer();
-    let uri = |rgb: [u8; 3]| json!({"uri": format!("data:image/png;base64,{}", base64::engine::general_purpose::STANDARD.encode(png_1x1(rgb)))});
-    let images = vec![uri(base.unwrap_or([255; 3])), uri(mr.unwrap_or([255; 3]))];
+    let uri = |png: &Vec<u8>| json!({"uri": format!("data:image/png;base64,{}", base64::engine::general_purpose::STANDARD.encode(png))});
+    let images: Vec<Value> = pngs.iter().map(uri).collect();
+    let textures: Vec<Value> = (0..pngs.len()).map(|k| json!({"source": k})).collect();
     let d = json!({
         "asset": {"version": "2.0"},
         "scene": 0,
@@ -1597,7 +1607,7 @@ fn pbr_quad(
         "nodes": [{"mesh": 0}],
         "meshes": [{"primitives": [{"attributes": {"POSITION": 0, "NORMAL": 1, "TEXCOORD_0": 2}, "indices": 3, "material": 0}]}],
         "materials": [material],
-        "textures": [{"source": 0}, {"source": 1}],
+        "textures": textures,
         "images": images,
         "buffers": [{"byteLength": bin.len(), "uri": data_uri(&bin)}],
         "bufferViews": views,
@@ -2243,6 +2253,152 @@ fn a_clear_coat_dims_the_mirror_under_it() {
             "coat {k}: {c}, want {want} of the sky {PBR_SKY}"
         );
     }
+}
+
+/// `KHR_materials_ior` and `KHR_materials_specular` set a dielectric's Fresnel, as the
+/// extensions define it: a black rough dielectric lit and seen along its normal reflects
+/// `weight f0 D / 4` of the light, with `f0 = ((ior - 1) / (ior + 1))^2` times the specular
+/// colour (at most 1) and `weight` the specular factor, each times its texture (the colour
+/// texture's sRGB decoded, the factor texture's alpha). A white diffuse dielectric's diffuse
+/// lobe is dimmed by `1 - weight F`: not at all for factor 0. Fails with the index of refraction read for glass only (1x
+/// instead of 2.8x), the colour or factor ignored, the colour texture read as linear, or the
+/// diffuse lobe dimmed by the full Fresnel (checked).
+#[test]
+fn ior_and_specular_set_a_dielectrics_fresnel() {
+    let dir = tempfile::tempdir().unwrap();
+    let centre = |s: &Scene| {
+        quad_picture(
+            s,
+            Vec3::new(0.0, 0.0, 5.0),
+            100.0,
+            tracery::scene::Environment::None,
+        )[4 * 9 + 4]
+    };
+    let material = |base: f32, extensions: Value| {
+        json!({"pbrMetallicRoughness": {"baseColorFactor": [base, base, base, 1.0], "metallicFactor": 0.0, "roughnessFactor": 1.0},
+               "extensions": extensions})
+    };
+    let black = |extensions: Value| material(0.0, extensions);
+    // Irradiance 100 / 5^2 = 4; GGX D at the normal 1 / pi (width 1), G 1, Fresnel f0.
+    let per_f0 = 4.0 * std::f32::consts::FRAC_1_PI / 4.0;
+    let srgb = |c: u8| {
+        let c = c as f32 / 255.0;
+        ((c + 0.055) / 1.055).powf(2.4)
+    };
+    let mut rgba = std::io::Cursor::new(Vec::new());
+    image::RgbaImage::from_raw(1, 1, vec![255, 255, 255, 51])
+        .unwrap()
+        .write_to(&mut rgba, image::ImageFormat::Png)
+        .unwrap();
+    let pngs = [png_1x1([188, 255, 64]), rgba.into_inner()];
+    let cases = [
+        ("plain", json!({}), Vec3::splat(0.04)),
+        (
+            "ior",
+            json!({"KHR_materials_ior": {"ior": 2.0}}),
+            Vec3::splat(1.0 / 9.0),
+        ),
+        (
+            "factor",
+            json!({"KHR_materials_specular": {"specularFactor": 0.5}}),
+            Vec3::splat(0.02),
+        ),
+        (
+            "colour",
+            json!({"KHR_materials_specular": {"specularColorFactor": [0.5, 1.0, 30.0]}}),
+            Vec3::new(0.02, 0.04, 1.0),
+        ),
+        (
+            "both",
+            json!({"KHR_materials_ior": {"ior": 2.0}, "KHR_materials_specular": {"specularColorFactor": [2.0, 2.0, 2.0]}}),
+            Vec3::splat(2.0 / 9.0),
+        ),
+        (
+            "textures",
+            json!({"KHR_materials_specular": {"specularColorTexture": {"index": 0}, "specularTexture": {"index": 1}}}),
+            Vec3::new(srgb(188), 1.0, srgb(64)) * 0.04 * (51.0 / 255.0),
+        ),
+    ];
+    for (name, extensions, f) in cases {
+        let s = textured_quad(
+            dir.path(),
+            &format!("{name}.gltf"),
+            black(extensions),
+            &pngs,
+        );
+        let c = centre(&s);
+        let want = f * per_f0;
+        assert!(
+            ((c - want).abs() / want).max_element() < 0.005,
+            "{name}: {c}, want {want}"
+        );
+    }
+    // A white diffuse dielectric: dimmed by `1 - weight F` under its specular lobe. Factor 0:
+    // no lobe and no dimming, Lambertian, 4 / pi (4% off if dimmed as by default); factor
+    // 0.5: `4 (0.98 + 0.02 / 4) / pi` (2% off if dimmed as by default).
+    for (factor, want) in [(0.0, 4.0), (0.5, 4.0 * (0.98 + 0.02 / 4.0))] {
+        let s = textured_quad(
+            dir.path(),
+            &format!("white{factor}.gltf"),
+            material(
+                1.0,
+                json!({"KHR_materials_specular": {"specularFactor": factor}}),
+            ),
+            &pngs,
+        );
+        let c = centre(&s);
+        let want = want * std::f32::consts::FRAC_1_PI;
+        assert!(
+            ((c - Vec3::splat(want)).abs() / want).max_element() < 0.005,
+            "white, factor {factor}: {c}, want {want}"
+        );
+    }
+}
+
+/// Malformed `KHR_materials_specular` factors and a `KHR_materials_ior` index below 1 (but
+/// for 0) are warnings naming the material and the field, and their defaults are used.
+#[test]
+fn malformed_specular_and_ior_are_warnings_and_defaults() {
+    let dir = tempfile::tempdir().unwrap();
+    let (bin, views, accessors) = quad_buffer();
+    let m =
+        |ext: Value| json!({"pbrMetallicRoughness": {"metallicFactor": 0.0}, "extensions": ext});
+    let d = json!({
+        "asset": {"version": "2.0"},
+        "scene": 0,
+        "scenes": [{"nodes": [0, 1, 2]}],
+        "nodes": [{"mesh": 0}, {"mesh": 1}, {"mesh": 2}],
+        "meshes": (0..3).map(|k| json!({"primitives": [{"attributes": {"POSITION": 0, "NORMAL": 1}, "indices": 3, "material": k}]})).collect::<Vec<_>>(),
+        "materials": [
+            m(json!({"KHR_materials_specular": {"specularFactor": "shiny", "specularColorFactor": [1.0, -1.0, 0.0]}})),
+            m(json!({"KHR_materials_ior": {"ior": 0.5}})),
+            m(json!({"KHR_materials_ior": {"ior": 0.0}, "KHR_materials_specular": {"specularColorTexture": {"index": 4}}})),
+        ],
+        "buffers": [{"byteLength": bin.len(), "uri": data_uri(&bin)}],
+        "bufferViews": views,
+        "accessors": accessors,
+        "extensionsUsed": ["KHR_materials_specular", "KHR_materials_ior"]
+    });
+    let s = Scene::load(&write(dir.path(), "specular.gltf", &d)).unwrap();
+    let said = |what: &[&str]| {
+        assert!(
+            s.warnings
+                .iter()
+                .any(|w| what.iter().all(|x| w.contains(x))),
+            "a warning with {what:?}: {:?}",
+            s.warnings
+        )
+    };
+    said(&["materials[0]", "specularFactor is malformed"]);
+    said(&["materials[0]", "specularColorFactor is malformed"]);
+    said(&["materials[1]", "ior 0.5"]);
+    said(&["materials[2]", "specularColorTexture names no texture"]);
+    assert_eq!(s.warnings.len(), 4, "{:?}", s.warnings);
+    let spec = |i: usize| s.materials[i].pbr.as_ref().unwrap().specular.clone();
+    assert_eq!((spec(0).factor, spec(0).color), (1.0, Vec3::ONE));
+    assert_eq!(spec(1).ior, 1.5, "an index below 1 is the default");
+    assert_eq!(spec(2).ior, 0.0, "0 is allowed: f0 = 1");
+    assert!(spec(2).color_map.is_none());
 }
 
 /// `KHR_materials_clearcoat` is read: its factors (clamped), its three textures (the normal

@@ -626,7 +626,8 @@ fn scene_file_materials_can_be_metallic_roughness() {
         (p.base, p.metallic, p.roughness),
         (Vec3::new(0.9, 0.6, 0.3), 1.0, 0.5)
     );
-    let lobes = tracery::scene::pbr::lobes(p.base, 1.0, 0.5);
+    let lobes =
+        tracery::scene::pbr::lobes(p.base, 1.0, 0.5, tracery::scene::pbr::Dielectric::DEFAULT);
     assert_eq!(
         (m.diffuse, m.specular, m.mirror),
         (lobes.diffuse, lobes.f0, lobes.mirror)

@@ -44,19 +44,25 @@ pub enum Gloss {
         /// Exponent (`Ns`), at least 0.
         exponent: f32,
     },
-    /// GGX microfacets with Schlick's Fresnel from `f0` and width `alpha`.
+    /// GGX microfacets with Schlick's Fresnel from `f0` to `f90` and width `alpha`, over a
+    /// diffuse lobe dimmed by `1 - weight F(dielectric_f0)`.
     Ggx {
         /// Reflectance at normal incidence.
         f0: Vec3,
+        /// Reflectance at grazing incidence (1 but for a weakened dielectric).
+        f90: f32,
         /// Width of the distribution (`roughness^2`), at least [`MIN_ALPHA`].
         alpha: f32,
+        /// The dielectric's largest reflectance at normal incidence (0.04 by default).
+        dielectric_f0: f32,
+        /// The dielectric's Fresnel strength (`KHR_materials_specular`; 1 by default).
+        weight: f32,
     },
 }
 
 pub use crate::scene::pbr::MIN_ALPHA;
 
-/// The dielectric's reflectance at normal incidence (index of refraction 1.5), under which
-/// the diffuse lobe of a GGX surface lies.
+/// The clear coat's reflectance at normal incidence (index of refraction 1.5).
 const DIELECTRIC_F0: f32 = 0.04;
 
 /// A clear coat over the other lobes: a dielectric GGX layer.
@@ -148,16 +154,23 @@ impl Bsdf {
                 }
                 f
             }
-            Gloss::Ggx { f0, alpha } => {
+            Gloss::Ggx {
+                f0,
+                f90,
+                alpha,
+                dielectric_f0,
+                weight,
+            } => {
                 let (ci, co) = (n.dot(wi), n.dot(wo));
                 let h = (wi + wo).normalize_or_zero();
                 let vh = wo.dot(h).clamp(0.0, 1.0);
-                let mut f = self.diffuse * FRAC_1_PI * (1.0 - schlick_scalar(DIELECTRIC_F0, vh));
+                let mut f =
+                    self.diffuse * FRAC_1_PI * (1.0 - weight * schlick_scalar(dielectric_f0, vh));
                 if ci > 0.0 && co > 0.0 && h != Vec3::ZERO {
                     let a = alpha.max(MIN_ALPHA);
                     let d = ggx_d(n.dot(h), a);
                     let g = smith_g1(ci, a) * smith_g1(co, a);
-                    f += schlick(f0, vh) * (d * g / (4.0 * ci * co));
+                    f += schlick(f0, f90, vh) * (d * g / (4.0 * ci * co));
                 }
                 f
             }
@@ -194,9 +207,15 @@ impl Bsdf {
         match self.gloss {
             Gloss::None => luminance(self.diffuse),
             Gloss::Phong { color, .. } => luminance(color) + luminance(self.diffuse),
-            Gloss::Ggx { f0, .. } => {
-                luminance(schlick(f0, c))
-                    + luminance(self.diffuse) * (1.0 - schlick_scalar(DIELECTRIC_F0, c))
+            Gloss::Ggx {
+                f0,
+                f90,
+                dielectric_f0,
+                weight,
+                ..
+            } => {
+                luminance(schlick(f0, f90, c))
+                    + luminance(self.diffuse) * (1.0 - weight * schlick_scalar(dielectric_f0, c))
             }
         }
     }
@@ -209,11 +228,17 @@ impl Bsdf {
         let (gloss, diffuse) = match self.gloss {
             Gloss::None => return 0.0,
             Gloss::Phong { color, .. } => (luminance(color), luminance(self.diffuse)),
-            Gloss::Ggx { f0, .. } => {
+            Gloss::Ggx {
+                f0,
+                f90,
+                dielectric_f0,
+                weight,
+                ..
+            } => {
                 let c = co.clamp(0.0, 1.0);
                 (
-                    luminance(schlick(f0, c)),
-                    luminance(self.diffuse) * (1.0 - schlick_scalar(DIELECTRIC_F0, c)),
+                    luminance(schlick(f0, f90, c)),
+                    luminance(self.diffuse) * (1.0 - weight * schlick_scalar(dielectric_f0, c)),
                 )
             }
         };
@@ -421,9 +446,9 @@ fn smith_g1(c: f32, a: f32) -> f32 {
 }
 
 /// Schlick's Fresnel reflectance from `f0` at cosine `c` between the view and the half vector.
-fn schlick(f0: Vec3, c: f32) -> Vec3 {
+fn schlick(f0: Vec3, f90: f32, c: f32) -> Vec3 {
     let k = (1.0 - c).clamp(0.0, 1.0).powi(5);
-    f0 + (Vec3::ONE - f0) * k
+    f0 + (Vec3::splat(f90) - f0) * k
 }
 
 /// [`schlick`] for one channel.
@@ -477,13 +502,29 @@ mod tests {
                 coat: Coat::NONE,
             });
         }
-        for (alpha, diffuse) in [(1.0, 0.5), (0.3, 0.0), (0.05, 0.3), (MIN_ALPHA, 0.0)] {
+        // The last a weakened, tinted dielectric (`KHR_materials_specular`): Fresnel from 0.06
+        // to 0.3 over a diffuse lobe dimmed by `1 - 0.3 F(0.2)`.
+        let ggx = [
+            (1.0, 0.5, 1.0, 0.04, 1.0),
+            (0.3, 0.0, 1.0, 0.04, 1.0),
+            (0.05, 0.3, 1.0, 0.04, 1.0),
+            (MIN_ALPHA, 0.0, 1.0, 0.04, 1.0),
+            (0.4, 0.6, 0.3, 0.2, 0.3),
+        ];
+        for (alpha, diffuse, f90, dielectric_f0, weight) in ggx {
             out.push(Bsdf {
                 n,
                 diffuse: red * diffuse,
                 gloss: Gloss::Ggx {
-                    f0: Vec3::new(0.9, 0.6, 0.3),
+                    f0: if weight < 1.0 {
+                        Vec3::new(0.2, 0.1, 0.05) * weight
+                    } else {
+                        Vec3::new(0.9, 0.6, 0.3)
+                    },
+                    f90,
                     alpha,
+                    dielectric_f0,
+                    weight,
                 },
                 coat: Coat::NONE,
             });
@@ -618,7 +659,10 @@ mod tests {
             diffuse: Vec3::ZERO,
             gloss: Gloss::Ggx {
                 f0: Vec3::ONE,
+                f90: 1.0,
                 alpha: 0.5,
+                dielectric_f0: 0.04,
+                weight: 1.0,
             },
             coat: Coat::NONE,
         };
@@ -733,7 +777,9 @@ mod tests {
         assert_eq!(smith_g1(0.0, 0.5), 0.0);
         // c = 0.5, a = 0.5: 2 c / (c + sqrt(a^2 + (1 - a^2) c^2)) = 1 / (0.5 + sqrt(0.4375)).
         assert!((smith_g1(0.5, 0.5) - 1.0 / (0.5 + 0.4375f32.sqrt())).abs() < 1e-6);
-        assert_eq!(schlick(Vec3::splat(0.04), 1.0), Vec3::splat(0.04));
-        assert_eq!(schlick(Vec3::splat(0.04), 0.0), Vec3::ONE);
+        assert_eq!(schlick(Vec3::splat(0.04), 1.0, 1.0), Vec3::splat(0.04));
+        assert_eq!(schlick(Vec3::splat(0.04), 1.0, 0.0), Vec3::ONE);
+        // A weakened dielectric reaches its own `f90` at grazing.
+        assert_eq!(schlick(Vec3::splat(0.02), 0.5, 0.0), Vec3::splat(0.5));
     }
 }

@@ -12,7 +12,7 @@ use super::{RayCounts, RenderPlan};
 use crate::bvh::{Bvh, Hit};
 use crate::geometry::{Ray, interpolation_error, offset_ray_origin};
 use crate::sampling::PathSampler;
-use crate::scene::pbr::Lobes;
+use crate::scene::pbr::{Lobes, Texels};
 use crate::scene::{Integrator, Light, Material, Scene, face_normal};
 
 /// What a ray that cannot be traced (zero, NaN or infinite direction or origin) returns:
@@ -744,7 +744,7 @@ pub(super) fn textured(scene: &Scene, m: &Material, prim: u32, u: f32, v: f32) -
     if !m.is_textured() {
         let (gloss, mirror) = match &m.pbr {
             Some(pbr) => {
-                let lobes = pbr.lobes_at(None, None);
+                let lobes = pbr.lobes_at(Texels::default());
                 (ggx(&lobes), lobes.mirror)
             }
             None => (phong(m), m.mirror),
@@ -766,8 +766,12 @@ pub(super) fn textured(scene: &Scene, m: &Material, prim: u32, u: f32, v: f32) -
     let opacity = m.opacity_at(base.map_or(1.0, |b| b.w));
     match &m.pbr {
         Some(pbr) => {
-            let mr = pbr.map.as_deref().map(sample);
-            let lobes = pbr.lobes_at(base.map(|b| b.truncate()), mr);
+            let lobes = pbr.lobes_at(Texels {
+                base: base.map(|b| b.truncate()),
+                mr: pbr.map.as_deref().map(sample),
+                specular: pbr.specular.map.as_deref().map(sample),
+                specular_color: pbr.specular.color_map.as_deref().map(sample),
+            });
             Look {
                 diffuse: lobes.diffuse,
                 emission,
@@ -795,7 +799,10 @@ fn ggx(lobes: &Lobes) -> Gloss {
     } else {
         Gloss::Ggx {
             f0: lobes.f0,
+            f90: lobes.f90,
             alpha: lobes.alpha,
+            dielectric_f0: lobes.dielectric.f0.max_element(),
+            weight: lobes.dielectric.weight,
         }
     }
 }

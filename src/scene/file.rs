@@ -273,8 +273,9 @@ pub fn parse(path: &Path, text: &str, read: ReadFn, check_files: bool) -> Result
                 roughness: roughness.as_ref().map_or(1.0, |v| *v.get_ref()),
                 map: None,
                 clearcoat: None,
+                specular: super::pbr::Specular::DEFAULT,
             };
-            let lobes = pbr.lobes_at(None, None);
+            let lobes = pbr.lobes_at(super::pbr::Texels::default());
             mat.diffuse = lobes.diffuse;
             mat.specular = lobes.f0;
             mat.shininess = super::pbr::phong_exponent(lobes.alpha);

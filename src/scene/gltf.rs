@@ -430,6 +430,7 @@ fn relaxed(bytes: &[u8]) -> Option<::gltf::Gltf> {
 const READ_EXTENSIONS: &[&str] = &[
     "KHR_lights_punctual",
     "KHR_materials_clearcoat",
+    "KHR_materials_specular",
     "KHR_materials_volume",
     "KHR_mesh_quantization",
     "KHR_materials_transmission",
@@ -1471,6 +1472,20 @@ impl Loader<'_> {
                 p.clearcoat = coat;
             }
         }
+        if let Some(ior) = m.ior().filter(|&i| !valid_ior(i)) {
+            self.warnings.push(format!(
+                "{label}: KHR_materials_ior.ior {ior} is neither 0 nor at least 1; 1.5 used"
+            ));
+        }
+        if let Some(json) = m.extension_value("KHR_materials_specular") {
+            let specular = self.specular(&label, json);
+            if let Some(p) = mat.pbr.as_mut() {
+                p.specular = super::pbr::Specular {
+                    ior: p.specular.ior,
+                    ..specular
+                };
+            }
+        }
         let id = self.materials.len() as u32;
         self.materials.push(mat);
         self.material_index.insert(key, id);
@@ -1500,7 +1515,7 @@ impl Loader<'_> {
         }
         let mut texture = |key: &str| {
             let info = json.get(key)?;
-            self.texture_json(label, &format!("{what}.{key}"), info)
+            self.texture_json(label, &format!("{what}.{key}"), info, false)
         };
         let map = texture("clearcoatTexture");
         let roughness_map = texture("clearcoatRoughnessTexture");
@@ -1522,14 +1537,64 @@ impl Loader<'_> {
         })
     }
 
-    /// A (linear) texture named by the JSON of a `textureInfo` in an extension the gltf crate
-    /// does not read: its `index`, `texCoord` and `KHR_texture_transform`; `None`, with a
-    /// warning, when it names no texture or its image cannot be had.
+    /// A material's `KHR_materials_specular` (index of refraction left at its default: the
+    /// caller keeps `KHR_materials_ior`'s); a malformed factor is said in a warning and its
+    /// default used.
+    fn specular(&mut self, label: &str, json: &serde_json::Value) -> super::pbr::Specular {
+        let what = "KHR_materials_specular";
+        let factor = match json.get("specularFactor") {
+            None => 1.0,
+            Some(v) => match v.as_f64().map(|x| x as f32).filter(|x| x.is_finite()) {
+                Some(x) => x.clamp(0.0, 1.0),
+                None => {
+                    self.warnings.push(format!(
+                        "{label}: {what}.specularFactor is malformed; 1 used"
+                    ));
+                    1.0
+                }
+            },
+        };
+        let color = match json.get("specularColorFactor") {
+            None => Vec3::ONE,
+            Some(v) => match serde_json::from_value::<[f32; 3]>(v.clone())
+                .ok()
+                .filter(|c| c.iter().all(|x| x.is_finite() && *x >= 0.0))
+            {
+                Some(c) => Vec3::from(c),
+                None => {
+                    self.warnings.push(format!(
+                        "{label}: {what}.specularColorFactor is malformed (three numbers, at \
+                         least 0); [1, 1, 1] used"
+                    ));
+                    Vec3::ONE
+                }
+            },
+        };
+        let map = json.get("specularTexture").and_then(|info| {
+            self.texture_json(label, &format!("{what}.specularTexture"), info, false)
+        });
+        let color_map = json.get("specularColorTexture").and_then(|info| {
+            self.texture_json(label, &format!("{what}.specularColorTexture"), info, true)
+        });
+        super::pbr::Specular {
+            factor,
+            color,
+            map,
+            color_map,
+            ..super::pbr::Specular::DEFAULT
+        }
+    }
+
+    /// A texture named by the JSON of a `textureInfo` in an extension the gltf crate does not
+    /// read (`srgb`: a colour texture, else linear values): its `index`, `texCoord` and
+    /// `KHR_texture_transform`; `None`, with a warning, when it names no texture or its image
+    /// cannot be had.
     fn texture_json(
         &mut self,
         label: &str,
         what: &str,
         info: &serde_json::Value,
+        srgb: bool,
     ) -> Option<Arc<Texture>> {
         let index = info.get("index").and_then(serde_json::Value::as_u64);
         let Some(tex) = index.and_then(|i| self.doc_textures.get(i as usize).cloned()) else {
@@ -1546,7 +1611,7 @@ impl Loader<'_> {
             .and_then(serde_json::Value::as_u64)
             .map_or(0, |c| u32::try_from(c).unwrap_or(u32::MAX));
         let set = read.and_then(|(_, set)| set).unwrap_or(own);
-        self.image_texture(label, what, tex, set, read.map(|(t, _)| t), false)
+        self.image_texture(label, what, tex, set, read.map(|(t, _)| t), srgb)
     }
 
     /// A texture of a material (`srgb`: a colour texture, else linear values), or `None` with
@@ -1857,7 +1922,13 @@ pub fn convert_material(m: &::gltf::Material) -> Material {
     let base = Vec3::new(r, g, b).clamp(Vec3::ZERO, Vec3::ONE);
     let metallic = pbr.metallic_factor().clamp(0.0, 1.0);
     let roughness = pbr.roughness_factor().clamp(0.0, 1.0);
-    let lobes = super::pbr::lobes(base, metallic, roughness);
+    // `KHR_materials_ior`: the dielectric's Fresnel, and a glass's refraction.
+    let dielectric_ior = m.ior().filter(|&i| valid_ior(i)).unwrap_or(1.5);
+    let specular = super::pbr::Specular {
+        ior: dielectric_ior,
+        ..super::pbr::Specular::DEFAULT
+    };
+    let lobes = super::pbr::lobes(base, metallic, roughness, specular.at(None, None));
     let strength = m.emissive_strength().unwrap_or(1.0).max(0.0);
     let emission = Vec3::from(m.emissive_factor()).max(Vec3::ZERO) * strength;
     // BLEND and MASK: the base alpha here, times the base colour texture's where shaded
@@ -1877,7 +1948,7 @@ pub fn convert_material(m: &::gltf::Material) -> Material {
         let t = t.transmission_factor().clamp(0.0, 1.0);
         if t > 0.0 {
             opacity *= 1.0 - t;
-            ior = m.ior().unwrap_or(1.5);
+            ior = dielectric_ior;
             absorption = m.volume().map_or(Vec3::ZERO, |v| {
                 volume_absorption(
                     v.thickness_factor(),
@@ -1909,8 +1980,15 @@ pub fn convert_material(m: &::gltf::Material) -> Material {
             roughness,
             map: None,
             clearcoat: None,
+            specular,
         }),
     }
+}
+
+/// True for an index of refraction `KHR_materials_ior` allows: 0 (a dielectric of `f0 = 1`)
+/// or at least 1.
+fn valid_ior(ior: f32) -> bool {
+    ior == 0.0 || (ior >= 1.0 && ior.is_finite())
 }
 
 /// The absorption coefficient of a `KHR_materials_volume`: white light turns `color` after

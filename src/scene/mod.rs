@@ -159,7 +159,7 @@ impl Material {
     pub fn reflects(&self) -> bool {
         self.diffuse != Vec3::ZERO
             || self.specular != Vec3::ZERO
-            || self.pbr.as_ref().is_some_and(|p| p.map.is_some())
+            || self.pbr.as_ref().is_some_and(|p| p.is_textured())
     }
 
     /// True when the surface emits light.
@@ -172,13 +172,14 @@ impl Material {
     pub fn is_textured(&self) -> bool {
         self.diffuse_map.is_some()
             || self.emission_map.is_some()
-            || self.pbr.as_ref().is_some_and(|p| p.map.is_some())
+            || self.pbr.as_ref().is_some_and(|p| p.is_textured())
     }
 
-    /// The material's textures: base colour, emission, metallic-roughness, normal map and the
-    /// clear coat's.
+    /// The material's textures: base colour, emission, metallic-roughness, normal map, the
+    /// clear coat's and the specular ones.
     pub fn textures(&self) -> impl Iterator<Item = &Arc<Texture>> {
         let coat = self.pbr.as_ref().and_then(|p| p.clearcoat.as_ref());
+        let specular = self.pbr.as_ref().map(|p| &p.specular);
         [
             self.diffuse_map.as_ref(),
             self.emission_map.as_ref(),
@@ -187,6 +188,8 @@ impl Material {
             coat.and_then(|c| c.map.as_ref()),
             coat.and_then(|c| c.roughness_map.as_ref()),
             coat.and_then(|c| c.normal_map.as_ref()),
+            specular.and_then(|s| s.map.as_ref()),
+            specular.and_then(|s| s.color_map.as_ref()),
         ]
         .into_iter()
         .flatten()
