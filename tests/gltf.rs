@@ -2255,6 +2255,88 @@ fn a_clear_coat_dims_the_mirror_under_it() {
     }
 }
 
+/// A one-texel lossless WebP image of colour `rgb`.
+fn webp_1x1(rgb: [u8; 3]) -> Vec<u8> {
+    let mut out = Vec::new();
+    image::codecs::webp::WebPEncoder::new_lossless(&mut out)
+        .encode(
+            &[rgb[0], rgb[1], rgb[2], 255],
+            1,
+            1,
+            image::ExtendedColorType::Rgba8,
+        )
+        .unwrap();
+    out
+}
+
+/// `EXT_texture_webp`: a texture's WebP source is read in place of its core one (a red PNG
+/// behind a green WebP shows green), a texture with only a WebP source loads (the extension
+/// required, as gltf-transform writes it), a WebP source naming no image is a warning and the
+/// core source is used, and a texture with no image at all is a warning and no texture. Fails
+/// with the extension ignored (red, checked).
+#[test]
+fn webp_textures_are_read_in_place_of_their_fallback() {
+    let dir = tempfile::tempdir().unwrap();
+    let (bin, views, accessors) = quad_buffer();
+    let uri = |bytes: Vec<u8>, mime: &str| json!({"uri": format!("data:{mime};base64,{}", base64::engine::general_purpose::STANDARD.encode(bytes))});
+    let textured = |k: usize| json!({"pbrMetallicRoughness": {"baseColorTexture": {"index": k}, "metallicFactor": 0.0}});
+    let d = json!({
+        "asset": {"version": "2.0"},
+        "scene": 0,
+        "scenes": [{"nodes": [0, 1, 2, 3]}],
+        "nodes": [{"mesh": 0}, {"mesh": 1}, {"mesh": 2}, {"mesh": 3}],
+        "meshes": (0..4).map(|k| json!({"primitives": [{"attributes": {"POSITION": 0, "NORMAL": 1, "TEXCOORD_0": 2}, "indices": 3, "material": k}]})).collect::<Vec<_>>(),
+        "materials": (0..4).map(textured).collect::<Vec<_>>(),
+        "textures": [
+            {"source": 0, "extensions": {"EXT_texture_webp": {"source": 1}}},
+            {"extensions": {"EXT_texture_webp": {"source": 1}}},
+            {"source": 0, "extensions": {"EXT_texture_webp": {"source": 9}}},
+            {}
+        ],
+        "images": [uri(png_1x1([255, 0, 0]), "image/png"), uri(webp_1x1([0, 255, 0]), "image/webp")],
+        "buffers": [{"byteLength": bin.len(), "uri": data_uri(&bin)}],
+        "bufferViews": views,
+        "accessors": accessors,
+        "extensionsUsed": ["EXT_texture_webp"],
+        "extensionsRequired": ["EXT_texture_webp"]
+    });
+    let s = Scene::load(&write(dir.path(), "webp.gltf", &d)).unwrap();
+    let texel = |i: usize| {
+        s.materials[i]
+            .diffuse_map
+            .as_ref()
+            .map(|t| t.sample(Vec2::splat(0.5)).truncate())
+    };
+    let (red, green) = (Vec3::X, Vec3::Y);
+    assert_eq!(
+        texel(0),
+        Some(green),
+        "the WebP source, not the PNG fallback"
+    );
+    assert_eq!(texel(1), Some(green), "a WebP source alone");
+    assert_eq!(
+        texel(2),
+        Some(red),
+        "a WebP source naming no image: the core source"
+    );
+    assert_eq!(texel(3), None, "no image at all");
+    let said = |what: &[&str]| {
+        assert!(
+            s.warnings
+                .iter()
+                .any(|w| what.iter().all(|x| w.contains(x))),
+            "a warning with {what:?}: {:?}",
+            s.warnings
+        )
+    };
+    said(&[
+        "materials[2]",
+        "textures[2]'s EXT_texture_webp names no image (9)",
+    ]);
+    said(&["materials[3]", "textures[3] has no image"]);
+    assert_eq!(s.warnings.len(), 2, "{:?}", s.warnings);
+}
+
 /// `KHR_materials_ior` and `KHR_materials_specular` set a dielectric's Fresnel, as the
 /// extensions define it: a black rough dielectric lit and seen along its normal reflects
 /// `weight f0 D / 4` of the light, with `f0 = ((ior - 1) / (ior + 1))^2` times the specular

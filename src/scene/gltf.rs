@@ -225,6 +225,7 @@ pub fn load_from(
         name: &name,
         nodes: doc.nodes().collect(),
         doc_textures: doc.textures().collect(),
+        doc_images: doc.images().collect(),
         buffers: &buffers,
         read,
         rule,
@@ -437,6 +438,7 @@ const READ_EXTENSIONS: &[&str] = &[
     "KHR_materials_ior",
     "KHR_materials_emissive_strength",
     "KHR_texture_transform",
+    "EXT_texture_webp",
 ];
 
 /// Extensions the loader does not read but a file may require: it can safely do without them.
@@ -622,6 +624,8 @@ struct Loader<'a> {
     nodes: Vec<::gltf::Node<'a>>,
     /// The textures by index, for extensions the crate does not read (their JSON names them).
     doc_textures: Vec<::gltf::Texture<'a>>,
+    /// The images by index, for `EXT_texture_webp` (which the crate does not read).
+    doc_images: Vec<::gltf::Image<'a>>,
     buffers: &'a [Buffer],
     read: &'a dyn Fn(&Path) -> Result<Vec<u8>>,
     /// Normals for primitives without them (`None`: flat).
@@ -1653,7 +1657,8 @@ impl Loader<'_> {
                 0
             }
         };
-        let image = tex.source();
+        let index = self.texture_image(label, what, &tex)?;
+        let image = self.doc_images[index].clone();
         let key = (image.index(), srgb);
         let decoded = match self.textures.get(&key) {
             Some(t) => t.clone(),
@@ -1699,6 +1704,35 @@ impl Loader<'_> {
         t.transform = transform;
         t.uv_set = uv_set;
         Some(Arc::new(t))
+    }
+
+    /// The index of the image a texture shows: its `EXT_texture_webp` source where it names
+    /// one (the extension's own rule: a client that reads WebP uses it, the core source being
+    /// the fallback for those that do not), else its core source; `None`, with a warning, when
+    /// it has neither (a malformed WebP source is said, and the core source used).
+    fn texture_image(&mut self, label: &str, what: &str, tex: &::gltf::Texture) -> Option<usize> {
+        if let Some(ext) = tex.extension_value("EXT_texture_webp") {
+            let source = ext.get("source").and_then(serde_json::Value::as_u64);
+            match source
+                .and_then(|i| usize::try_from(i).ok())
+                .filter(|&i| i < self.doc_images.len())
+            {
+                Some(i) => return Some(i),
+                None => self.warnings.push(format!(
+                    "{label}: {what}: textures[{}]'s EXT_texture_webp names no image ({}); its core source used",
+                    tex.index(),
+                    ext.get("source").map_or("no source".into(), |v| v.to_string())
+                )),
+            }
+        }
+        let image = tex.source().map(|i| i.index());
+        if image.is_none() {
+            self.warnings.push(format!(
+                "{label}: {what}: textures[{}] has no image Tracery can read; not used",
+                tex.index()
+            ));
+        }
+        image
     }
 
     /// A `KHR_texture_transform` object as [`uv_transform`] (defaults where a field is missing
