@@ -1621,6 +1621,12 @@ fn textured_quad(dir: &Path, name: &str, material: Value, pngs: &[Vec<u8>]) -> S
 /// The sky colour of [`pbr_picture`]: what a mirror shows.
 const PBR_SKY: Vec3 = Vec3::new(0.2, 0.5, 1.0);
 
+/// The middle pixel of [`quad_picture`] with the light at the camera, `(0, 0, 5)`: the quad's
+/// centre lit and seen along its normal.
+fn centre_pixel(scene: &Scene, intensity: f32, environment: tracery::scene::Environment) -> Vec3 {
+    quad_picture(scene, Vec3::new(0.0, 0.0, 5.0), intensity, environment)[4 * 9 + 4]
+}
+
 /// A 9x9 direct-lit picture of a [`pbr_quad`] seen from +z, a point light up and to the side
 /// (its highlight on the quad), a one-colour sky.
 fn pbr_picture(scene: &Scene) -> Vec<Vec3> {
@@ -1794,14 +1800,7 @@ fn two_set_quad(dir: &Path, name: &str, info: Value, set1: bool, extra: Value) -
 #[test]
 fn textures_read_the_texture_coordinate_set_they_name() {
     let dir = tempfile::tempdir().unwrap();
-    let centre = |s: &Scene| {
-        quad_picture(
-            s,
-            Vec3::new(0.0, 0.0, 5.0),
-            0.0,
-            tracery::scene::Environment::None,
-        )[4 * 9 + 4]
-    };
+    let centre = |s: &Scene| centre_pixel(s, 0.0, tracery::scene::Environment::None);
     let (red, green) = (Vec3::X, Vec3::Y);
 
     let s = two_set_quad(
@@ -2221,14 +2220,7 @@ fn a_clear_coat_dims_the_mirror_under_it() {
         m["extensions"] = json!({"KHR_materials_clearcoat": {"clearcoatFactor": k, "clearcoatRoughnessFactor": 0.5}});
         m
     };
-    let centre = |s: &Scene| {
-        quad_picture(
-            s,
-            Vec3::new(0.0, 0.0, 5.0),
-            0.0,
-            tracery::scene::Environment::Color(PBR_SKY),
-        )[4 * 9 + 4]
-    };
+    let centre = |s: &Scene| centre_pixel(s, 0.0, tracery::scene::Environment::Color(PBR_SKY));
     let plain = centre(&pbr_quad(
         dir.path(),
         "plain.gltf",
@@ -2342,20 +2334,13 @@ fn webp_textures_are_read_in_place_of_their_fallback() {
 /// `weight f0 D / 4` of the light, with `f0 = ((ior - 1) / (ior + 1))^2` times the specular
 /// colour (at most 1) and `weight` the specular factor, each times its texture (the colour
 /// texture's sRGB decoded, the factor texture's alpha). A white diffuse dielectric's diffuse
-/// lobe is dimmed by `1 - weight F`: not at all for factor 0. Fails with the index of refraction read for glass only (1x
-/// instead of 2.8x), the colour or factor ignored, the colour texture read as linear, or the
-/// diffuse lobe dimmed by the full Fresnel (checked).
+/// lobe is dimmed by `1 - weight F`: not at all for factor 0. Fails with the index of
+/// refraction read for glass only (1x instead of 2.8x), the colour or factor ignored, the
+/// colour texture read as linear, or the diffuse lobe dimmed by the full Fresnel (checked).
 #[test]
 fn ior_and_specular_set_a_dielectrics_fresnel() {
     let dir = tempfile::tempdir().unwrap();
-    let centre = |s: &Scene| {
-        quad_picture(
-            s,
-            Vec3::new(0.0, 0.0, 5.0),
-            100.0,
-            tracery::scene::Environment::None,
-        )[4 * 9 + 4]
-    };
+    let centre = |s: &Scene| centre_pixel(s, 100.0, tracery::scene::Environment::None);
     let material = |base: f32, extensions: Value| {
         json!({"pbrMetallicRoughness": {"baseColorFactor": [base, base, base, 1.0], "metallicFactor": 0.0, "roughnessFactor": 1.0},
                "extensions": extensions})
@@ -2556,15 +2541,7 @@ fn a_clear_coat_adds_its_highlight_over_the_base() {
     coated["extensions"] = json!({"KHR_materials_clearcoat": {"clearcoatFactor": 1.0, "clearcoatRoughnessFactor": 1.0}});
     let plain = pbr_quad(dir.path(), "plain.gltf", black, None, None);
     let coat = pbr_quad(dir.path(), "coated.gltf", coated, None, None);
-    let centre = |s: &Scene| {
-        quad_picture(
-            s,
-            Vec3::new(0.0, 0.0, 5.0),
-            100.0,
-            tracery::scene::Environment::None,
-        )[4 * 9 + 4]
-            .x
-    };
+    let centre = |s: &Scene| centre_pixel(s, 100.0, tracery::scene::Environment::None).x;
     // Irradiance 100 / 5^2; GGX D at the normal is 1 / (pi a^2), G 1, Fresnel 0.04.
     let d = |a: f32| 1.0 / (std::f32::consts::PI * a * a);
     let base = 0.04 * d(1.0) / 4.0;

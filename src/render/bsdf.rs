@@ -203,30 +203,16 @@ impl Bsdf {
     /// The luminance of the lobes under the coat seen at cosine `co` (their glossy part by
     /// Fresnel at normal-incidence-free `co`, as [`Bsdf::base_gloss_probability`] weighs it).
     fn base_reflectance(&self, co: f32) -> f32 {
-        let c = co.clamp(0.0, 1.0);
-        match self.gloss {
-            Gloss::None => luminance(self.diffuse),
-            Gloss::Phong { color, .. } => luminance(color) + luminance(self.diffuse),
-            Gloss::Ggx {
-                f0,
-                f90,
-                dielectric_f0,
-                weight,
-                ..
-            } => {
-                luminance(schlick(f0, f90, c))
-                    + luminance(self.diffuse) * (1.0 - weight * schlick_scalar(dielectric_f0, c))
-            }
-        }
+        let (gloss, diffuse) = self.lobe_reflectances(co.clamp(0.0, 1.0));
+        gloss + diffuse
     }
 
-    /// Probability that a bounce under the coat samples the glossy lobe: its share of the two
-    /// lobes' reflectances (0 without a glossy lobe, or when `wo` lies under the shading
-    /// normal).
-    fn base_gloss_probability(&self, wo: Vec3) -> f32 {
-        let co = self.n.dot(wo);
-        let (gloss, diffuse) = match self.gloss {
-            Gloss::None => return 0.0,
+    /// The luminances of the glossy and the diffuse lobe seen at cosine `c` in `[0, 1]`: a
+    /// GGX lobe's Fresnel there and the diffuse colour under the dielectric's, a Blinn-Phong
+    /// lobe's colour and the diffuse colour.
+    fn lobe_reflectances(&self, c: f32) -> (f32, f32) {
+        match self.gloss {
+            Gloss::None => (0.0, luminance(self.diffuse)),
             Gloss::Phong { color, .. } => (luminance(color), luminance(self.diffuse)),
             Gloss::Ggx {
                 f0,
@@ -234,14 +220,22 @@ impl Bsdf {
                 dielectric_f0,
                 weight,
                 ..
-            } => {
-                let c = co.clamp(0.0, 1.0);
-                (
-                    luminance(schlick(f0, f90, c)),
-                    luminance(self.diffuse) * (1.0 - weight * schlick_scalar(dielectric_f0, c)),
-                )
-            }
-        };
+            } => (
+                luminance(schlick(f0, f90, c)),
+                luminance(self.diffuse) * (1.0 - weight * schlick_scalar(dielectric_f0, c)),
+            ),
+        }
+    }
+
+    /// Probability that a bounce under the coat samples the glossy lobe: its share of the two
+    /// lobes' reflectances (0 without a glossy lobe, or when `wo` lies under the shading
+    /// normal).
+    fn base_gloss_probability(&self, wo: Vec3) -> f32 {
+        if matches!(self.gloss, Gloss::None) {
+            return 0.0;
+        }
+        let co = self.n.dot(wo);
+        let (gloss, diffuse) = self.lobe_reflectances(co.clamp(0.0, 1.0));
         if co <= 0.0 || gloss <= 0.0 || !gloss.is_finite() {
             0.0
         } else if diffuse <= 0.0 || !diffuse.is_finite() {
