@@ -2247,6 +2247,17 @@ fn a_clear_coat_dims_the_mirror_under_it() {
     }
 }
 
+/// Asserts that one of the scene's warnings holds every string of `what`.
+fn assert_warned(s: &Scene, what: &[&str]) {
+    assert!(
+        s.warnings
+            .iter()
+            .any(|w| what.iter().all(|x| w.contains(x))),
+        "a warning with {what:?}: {:?}",
+        s.warnings
+    )
+}
+
 /// A one-texel lossless WebP image of colour `rgb`.
 fn webp_1x1(rgb: [u8; 3]) -> Vec<u8> {
     let mut out = Vec::new();
@@ -2312,15 +2323,7 @@ fn webp_textures_are_read_in_place_of_their_fallback() {
         "a WebP source naming no image: the core source"
     );
     assert_eq!(texel(3), None, "no image at all");
-    let said = |what: &[&str]| {
-        assert!(
-            s.warnings
-                .iter()
-                .any(|w| what.iter().all(|x| w.contains(x))),
-            "a warning with {what:?}: {:?}",
-            s.warnings
-        )
-    };
+    let said = |what: &[&str]| assert_warned(&s, what);
     said(&[
         "materials[2]",
         "textures[2]'s EXT_texture_webp names no image (9)",
@@ -2447,15 +2450,7 @@ fn malformed_specular_and_ior_are_warnings_and_defaults() {
         "extensionsUsed": ["KHR_materials_specular", "KHR_materials_ior"]
     });
     let s = Scene::load(&write(dir.path(), "specular.gltf", &d)).unwrap();
-    let said = |what: &[&str]| {
-        assert!(
-            s.warnings
-                .iter()
-                .any(|w| what.iter().all(|x| w.contains(x))),
-            "a warning with {what:?}: {:?}",
-            s.warnings
-        )
-    };
+    let said = |what: &[&str]| assert_warned(&s, what);
     said(&["materials[0]", "specularFactor is malformed"]);
     said(&["materials[0]", "specularColorFactor is malformed"]);
     said(&["materials[1]", "ior 0.5"]);
