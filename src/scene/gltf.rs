@@ -1500,20 +1500,8 @@ impl Loader<'_> {
     /// malformed factor is said in a warning and its default used.
     fn clearcoat(&mut self, label: &str, json: &serde_json::Value) -> Option<Clearcoat> {
         let what = "KHR_materials_clearcoat";
-        let mut number = |key: &str, default: f32| match json.get(key) {
-            None => default,
-            Some(v) => match v.as_f64().map(|x| x as f32).filter(|x| x.is_finite()) {
-                Some(x) => x.clamp(0.0, 1.0),
-                None => {
-                    self.warnings.push(format!(
-                        "{label}: {what}.{key} is malformed; {default} used"
-                    ));
-                    default
-                }
-            },
-        };
-        let factor = number("clearcoatFactor", 0.0);
-        let roughness = number("clearcoatRoughnessFactor", 0.0);
+        let factor = self.unit_factor(label, what, json, "clearcoatFactor", 0.0);
+        let roughness = self.unit_factor(label, what, json, "clearcoatRoughnessFactor", 0.0);
         if factor == 0.0 {
             return None;
         }
@@ -1541,23 +1529,36 @@ impl Loader<'_> {
         })
     }
 
+    /// The number `key` of an extension's JSON clamped to `[0, 1]`: `default` where it is
+    /// missing, and where it is malformed (not a finite number), with a warning.
+    fn unit_factor(
+        &mut self,
+        label: &str,
+        what: &str,
+        json: &serde_json::Value,
+        key: &str,
+        default: f32,
+    ) -> f32 {
+        match json.get(key) {
+            None => default,
+            Some(v) => match v.as_f64().map(|x| x as f32).filter(|x| x.is_finite()) {
+                Some(x) => x.clamp(0.0, 1.0),
+                None => {
+                    self.warnings.push(format!(
+                        "{label}: {what}.{key} is malformed; {default} used"
+                    ));
+                    default
+                }
+            },
+        }
+    }
+
     /// A material's `KHR_materials_specular` (index of refraction left at its default: the
     /// caller keeps `KHR_materials_ior`'s); a malformed factor is said in a warning and its
     /// default used.
     fn specular(&mut self, label: &str, json: &serde_json::Value) -> super::pbr::Specular {
         let what = "KHR_materials_specular";
-        let factor = match json.get("specularFactor") {
-            None => 1.0,
-            Some(v) => match v.as_f64().map(|x| x as f32).filter(|x| x.is_finite()) {
-                Some(x) => x.clamp(0.0, 1.0),
-                None => {
-                    self.warnings.push(format!(
-                        "{label}: {what}.specularFactor is malformed; 1 used"
-                    ));
-                    1.0
-                }
-            },
-        };
+        let factor = self.unit_factor(label, what, json, "specularFactor", 1.0);
         let color = match json.get("specularColorFactor") {
             None => Vec3::ONE,
             Some(v) => match serde_json::from_value::<[f32; 3]>(v.clone())
