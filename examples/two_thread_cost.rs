@@ -24,13 +24,11 @@ use tracery::scene::Scene;
 /// Rays a job traces, as in `tracery bench`.
 const CHUNK: usize = 1024;
 
+/// An engine's closest hit of a ray: its distance (infinite on a miss).
+type Closest<'a> = &'a (dyn Fn(&Ray) -> f32 + Sync);
+
 /// Wall time and summed busy time (inside chunks) of one trace of `rays` on `pool`, in ms.
-fn trace(
-    pool: &rayon::ThreadPool,
-    rays: &[Ray],
-    out: &mut [f32],
-    closest: &(dyn Fn(&Ray) -> f32 + Sync),
-) -> (f64, f64) {
+fn trace(pool: &rayon::ThreadPool, rays: &[Ray], out: &mut [f32], closest: Closest) -> (f64, f64) {
     let busy = [AtomicU64::new(0), AtomicU64::new(0)];
     let start = Instant::now();
     pool.install(|| {
@@ -71,8 +69,7 @@ fn main() -> Result<()> {
             .map_or(f32::INFINITY, |h| h.t)
     };
     let theirs = |r: &Ray| embree.intersect1(r).t;
-    let engines: [(&str, &(dyn Fn(&Ray) -> f32 + Sync)); 2] =
-        [("tracery-sah", &ours), ("embree", &theirs)];
+    let engines: [(&str, Closest); 2] = [("tracery-sah", &ours), ("embree", &theirs)];
     // Per engine: busy and wall sums of [1T first, 1T second, 2T first, 2T second].
     let mut busy = [[0.0f64; 4]; 2];
     let mut wall = [[0.0f64; 4]; 2];
