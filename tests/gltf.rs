@@ -1364,6 +1364,17 @@ fn quad_picture(
     intensity: f32,
     environment: tracery::scene::Environment,
 ) -> Vec<Vec3> {
+    quad_picture_fov(scene, light, intensity, environment, 30.0)
+}
+
+/// [`quad_picture`] with a vertical field of view of `vfov_deg` degrees.
+fn quad_picture_fov(
+    scene: &Scene,
+    light: Vec3,
+    intensity: f32,
+    environment: tracery::scene::Environment,
+    vfov_deg: f32,
+) -> Vec<Vec3> {
     let mut scene = scene.clone();
     scene.lights = vec![Light::Point {
         position: light,
@@ -1374,7 +1385,7 @@ fn quad_picture(
         position: Vec3::new(0.0, 0.0, 5.0),
         look_at: Vec3::ZERO,
         up: Vec3::Y,
-        vfov_deg: 30.0,
+        vfov_deg,
         lens_radius: 0.0,
         focus_distance: 5.0,
     };
@@ -2128,12 +2139,13 @@ fn extensions_used_but_not_read_are_said() {
     let dir = tempfile::tempdir().unwrap();
     let d = doc(
         json!([{"mesh": 0}]),
-        json!({"extensionsUsed": ["KHR_materials_sheen", "KHR_texture_transform"]}),
+        json!({"extensionsUsed": ["KHR_materials_iridescence", "KHR_texture_transform"]}),
     );
-    let s = Scene::load(&write(dir.path(), "sheen.gltf", &d)).unwrap();
+    let s = Scene::load(&write(dir.path(), "iridescence.gltf", &d)).unwrap();
     assert_eq!(s.warnings.len(), 1, "{:?}", s.warnings);
     assert!(
-        s.warnings[0].contains("KHR_materials_sheen") && s.warnings[0].contains("sheen.gltf"),
+        s.warnings[0].contains("KHR_materials_iridescence")
+            && s.warnings[0].contains("iridescence.gltf"),
         "{:?}",
         s.warnings
     );
@@ -2461,6 +2473,135 @@ fn malformed_specular_and_ior_are_warnings_and_defaults() {
     assert_eq!(spec(1).ior, 1.5, "an index below 1 is the default");
     assert_eq!(spec(2).ior, 0.0, "0 is allowed: f0 = 1");
     assert!(spec(2).color_map.is_none());
+}
+
+/// `KHR_materials_sheen` (the fibres of cloth): a black base with a sheen, seen along its
+/// normal and lit from low over it, shows `sheenColor D V cos` of the light
+/// ([`tracery::render::sheen::brdf`], itself checked against the extension's formulas), for
+/// the colour and roughness factors and for their textures (the colour's sRGB decoded, the
+/// roughness's alpha); a white diffuse base under a white sheen, lit and seen along its
+/// normal (where the fibres reflect nothing), is dimmed by the sheen's albedo there, `1 -
+/// E(1)`. Fails with the extension ignored (black), either texture ignored or the colour
+/// texture read as linear, or the base left undimmed (checked).
+#[test]
+fn a_sheen_reflects_at_grazing_and_dims_the_base() {
+    use tracery::render::sheen::{albedo, brdf};
+    let dir = tempfile::tempdir().unwrap();
+    // No GGX lobe (specular factor 0): the base is its diffuse colour alone.
+    let material = |base: f32, sheen: Value| {
+        json!({"pbrMetallicRoughness": {"baseColorFactor": [base, base, base, 1.0], "metallicFactor": 0.0, "roughnessFactor": 1.0},
+               "extensions": {"KHR_materials_specular": {"specularFactor": 0.0}, "KHR_materials_sheen": sheen}})
+    };
+    let srgb = |c: u8| {
+        let c = c as f32 / 255.0;
+        ((c + 0.055) / 1.055).powf(2.4)
+    };
+    let mut rgba = std::io::Cursor::new(Vec::new());
+    image::RgbaImage::from_raw(1, 1, vec![255, 255, 255, 153])
+        .unwrap()
+        .write_to(&mut rgba, image::ImageFormat::Png)
+        .unwrap();
+    let pngs = [png_1x1([188, 255, 64]), rgba.into_inner()];
+    // The light low over the quad, at (4, 0, 1): cosine 1 / sqrt(17) there, the half vector
+    // with the view along the normal at cosine sqrt((1 + ci) / 2). A narrow sheen changes
+    // fast with the half vector: the picture's field of view is a twentieth of a degree, so
+    // that where in its pixel the centre's sample falls moves neither direction.
+    let light = Vec3::new(4.0, 0.0, 1.0);
+    let ci = 1.0 / 17f32.sqrt();
+    let nh = ((1.0 + ci) / 2.0).sqrt();
+    let irradiance = 100.0 * ci / 17.0;
+    let none = tracery::scene::Environment::None;
+    let cases = [
+        (
+            "white",
+            json!({"sheenColorFactor": [1.0, 1.0, 1.0], "sheenRoughnessFactor": 0.5}),
+            Vec3::ONE,
+            0.5,
+        ),
+        (
+            "tinted",
+            json!({"sheenColorFactor": [0.2, 0.5, 1.0], "sheenRoughnessFactor": 1.0}),
+            Vec3::new(0.2, 0.5, 1.0),
+            1.0,
+        ),
+        (
+            "textures",
+            json!({"sheenColorFactor": [1.0, 1.0, 1.0], "sheenColorTexture": {"index": 0},
+                   "sheenRoughnessFactor": 1.0, "sheenRoughnessTexture": {"index": 1}}),
+            Vec3::new(srgb(188), 1.0, srgb(64)),
+            153.0 / 255.0,
+        ),
+    ];
+    for (name, sheen, color, roughness) in cases {
+        let s = textured_quad(
+            dir.path(),
+            &format!("{name}.gltf"),
+            material(0.0, sheen),
+            &pngs,
+        );
+        let c = quad_picture_fov(&s, light, 100.0, none.clone(), 0.05)[4 * 9 + 4];
+        let want = color * brdf(roughness, nh, ci, 1.0) * irradiance;
+        assert!(
+            ((c - want).abs() / want).max_element() < 0.005,
+            "{name}: {c}, want {want}"
+        );
+    }
+    let s = textured_quad(
+        dir.path(),
+        "over_white.gltf",
+        material(
+            1.0,
+            json!({"sheenColorFactor": [1.0, 1.0, 1.0], "sheenRoughnessFactor": 0.5}),
+        ),
+        &pngs,
+    );
+    let c = centre_pixel(&s, 100.0, tracery::scene::Environment::None);
+    let want = 4.0 * std::f32::consts::FRAC_1_PI * (1.0 - albedo(1.0, 0.5));
+    assert!(
+        ((c - Vec3::splat(want)).abs() / want).max_element() < 0.005,
+        "over white: {c}, want {want}"
+    );
+}
+
+/// Malformed `KHR_materials_sheen` factors are warnings naming the material and the field,
+/// and their defaults are used (a colour factor's is black: no sheen); a black colour factor
+/// is no sheen, and the extension is read (no "not read" warning).
+#[test]
+fn malformed_sheen_factors_are_warnings_and_defaults() {
+    let dir = tempfile::tempdir().unwrap();
+    let (bin, views, accessors) = quad_buffer();
+    let m = |ext: Value| json!({"pbrMetallicRoughness": {"metallicFactor": 0.0}, "extensions": {"KHR_materials_sheen": ext}});
+    let d = json!({
+        "asset": {"version": "2.0"},
+        "scene": 0,
+        "scenes": [{"nodes": [0, 1, 2]}],
+        "nodes": [{"mesh": 0}, {"mesh": 1}, {"mesh": 2}],
+        "meshes": (0..3).map(|k| json!({"primitives": [{"attributes": {"POSITION": 0, "NORMAL": 1}, "indices": 3, "material": k}]})).collect::<Vec<_>>(),
+        "materials": [
+            m(json!({"sheenColorFactor": "velvet"})),
+            m(json!({"sheenColorFactor": [0.5, 0.4, 0.3], "sheenRoughnessFactor": [1], "sheenColorTexture": {"index": 7}})),
+            m(json!({"sheenColorFactor": [0.0, 0.0, 0.0], "sheenRoughnessFactor": 0.5})),
+        ],
+        "buffers": [{"byteLength": bin.len(), "uri": data_uri(&bin)}],
+        "bufferViews": views,
+        "accessors": accessors,
+        "extensionsUsed": ["KHR_materials_sheen"]
+    });
+    let s = Scene::load(&write(dir.path(), "sheen.gltf", &d)).unwrap();
+    let said = |what: &[&str]| assert_warned(&s, what);
+    said(&["materials[0]", "sheenColorFactor is malformed"]);
+    said(&["materials[1]", "sheenRoughnessFactor is malformed"]);
+    said(&["materials[1]", "sheenColorTexture names no texture"]);
+    assert_eq!(s.warnings.len(), 3, "{:?}", s.warnings);
+    let sheen = |i: usize| s.materials[i].pbr.as_ref().unwrap().sheen.clone();
+    assert_eq!(sheen(0), None);
+    let read = sheen(1).unwrap();
+    assert_eq!(
+        (read.color, read.roughness),
+        (Vec3::new(0.5, 0.4, 0.3), 0.0)
+    );
+    assert!(read.color_map.is_none());
+    assert_eq!(sheen(2), None, "a black sheen is none");
 }
 
 /// `KHR_materials_clearcoat` is read: its factors (clamped), its three textures (the normal

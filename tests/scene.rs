@@ -605,6 +605,72 @@ fn scene_file_materials_can_name_a_normal_map() {
     }
 }
 
+/// A scene file's material with `sheen` (a colour) is a metallic-roughness material under
+/// glTF's sheen layer (`sheen_roughness` 0.5 by default); a black sheen is none. A sheen
+/// that is not a colour, a roughness outside [0, 1] or without a sheen, and a sheen mixed
+/// with Blinn-Phong's keys are errors naming the file and line.
+#[test]
+fn scene_file_materials_can_have_a_sheen() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = |body: &str| {
+        format!(
+            "[materials.velvet]\ndiffuse = [0.3, 0.02, 0.05]\n{body}\n\n\
+             [[meshes]]\nshape = \"sphere\"\nmaterial = \"velvet\"\n"
+        )
+    };
+    let load = |body: &str| Scene::load(&write(dir.path(), "v.toml", scene(body).as_bytes()));
+    let sheen = |body: &str| {
+        let s = load(body).unwrap();
+        let p = s.materials[0]
+            .pbr
+            .clone()
+            .expect("metallic-roughness parameters");
+        (p.metallic, p.roughness, p.sheen)
+    };
+    let (metallic, roughness, layer) = sheen("sheen = [1.0, 0.5, 0.6]\nsheen_roughness = 0.8");
+    assert_eq!(
+        (metallic, roughness),
+        (0.0, 1.0),
+        "glTF's defaults under the sheen"
+    );
+    let layer = layer.expect("a sheen");
+    assert_eq!(
+        (layer.color, layer.roughness),
+        (Vec3::new(1.0, 0.5, 0.6), 0.8)
+    );
+    assert_eq!(sheen("sheen = [1.0, 1.0, 1.0]").2.unwrap().roughness, 0.5);
+    assert_eq!(sheen("sheen = [0.0, 0.0, 0.0]\nroughness = 0.3").2, None);
+    let (metallic, roughness, layer) =
+        sheen("metallic = 1.0\nroughness = 0.4\nsheen = [0.2, 0.2, 0.2]");
+    assert_eq!((metallic, roughness), (1.0, 0.4));
+    assert!(layer.is_some());
+    for (body, line, says) in [
+        (
+            "sheen_roughness = 0.5",
+            3,
+            "`sheen_roughness` without `sheen`",
+        ),
+        (
+            "sheen = [1.0, 1.0, 1.0]\nsheen_roughness = 1.5",
+            4,
+            "sheen_roughness 1.5 is not in [0, 1]",
+        ),
+        ("sheen = [1.0, -1.0, 1.0]", 3, "is not a colour"),
+        ("sheen = [1.0, nan, 1.0]", 3, "is not a colour"),
+        (
+            "shininess = 20.0\nsheen = [1.0, 1.0, 1.0]",
+            4,
+            "cannot be combined with `specular`",
+        ),
+    ] {
+        let e = err(load(body));
+        assert!(
+            e.contains(&format!("v.toml:{line}")) && e.contains(says),
+            "{body}: {e}"
+        );
+    }
+}
+
 /// A scene file's material with `metallic` or `roughness` is glTF's metallic-roughness model
 /// (`diffuse` the base colour; metallic 0 and roughness 1 by default): the same lobes as a
 /// glTF material of those factors. Out of range values, and either mixed with Blinn-Phong's

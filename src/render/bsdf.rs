@@ -30,6 +30,7 @@ use std::f32::consts::{FRAC_1_PI, PI};
 
 use glam::{Vec2, Vec3};
 
+use super::sheen::Sheen;
 use crate::sampling::concentric_disk;
 
 /// The glossy lobe of a surface point.
@@ -104,7 +105,9 @@ pub struct Bsdf {
     pub diffuse: Vec3,
     /// Glossy lobe.
     pub gloss: Gloss,
-    /// Clear coat over both ([`Coat::NONE`]: none).
+    /// Sheen over both, under the coat ([`Sheen::NONE`]: none).
+    pub sheen: Sheen,
+    /// Clear coat over the rest ([`Coat::NONE`]: none).
     pub coat: Coat,
 }
 
@@ -139,8 +142,18 @@ impl Bsdf {
         out
     }
 
-    /// [`Bsdf::eval`] of the lobes under the coat.
+    /// [`Bsdf::eval`] of the lobes under the coat: the sheen, and the lobes under it dimmed by
+    /// its albedo scaling.
     fn eval_base(&self, wi: Vec3, wo: Vec3) -> Vec3 {
+        if !self.sheen.is_some() {
+            return self.eval_lobes(wi, wo);
+        }
+        let (ci, co) = (self.n.dot(wi).max(0.0), self.n.dot(wo).max(0.0));
+        self.sheen.eval(self.n, wi, wo) + self.eval_lobes(wi, wo) * self.sheen.scaling(ci, co)
+    }
+
+    /// [`Bsdf::eval`] of the diffuse and glossy lobes.
+    fn eval_lobes(&self, wi: Vec3, wo: Vec3) -> Vec3 {
         let n = self.n;
         match self.gloss {
             Gloss::None => self.diffuse * FRAC_1_PI,
@@ -209,9 +222,11 @@ impl Bsdf {
 
     /// The luminances of the glossy and the diffuse lobe seen at cosine `c` in `[0, 1]`: a
     /// GGX lobe's Fresnel there and the diffuse colour under the dielectric's, a Blinn-Phong
-    /// lobe's colour and the diffuse colour.
+    /// lobe's colour and the diffuse colour; under a sheen both dimmed by its scaling, and the
+    /// sheen's own reflectance counted with the diffuse lobe's (the cosine-weighted bounces
+    /// sample both).
     fn lobe_reflectances(&self, c: f32) -> (f32, f32) {
-        match self.gloss {
+        let (gloss, diffuse) = match self.gloss {
             Gloss::None => (0.0, luminance(self.diffuse)),
             Gloss::Phong { color, .. } => (luminance(color), luminance(self.diffuse)),
             Gloss::Ggx {
@@ -224,7 +239,12 @@ impl Bsdf {
                 luminance(schlick(f0, f90, c)),
                 luminance(self.diffuse) * (1.0 - weight * schlick_scalar(dielectric_f0, c)),
             ),
+        };
+        if !self.sheen.is_some() {
+            return (gloss, diffuse);
         }
+        let s = self.sheen.scaling(c, c);
+        (gloss * s, diffuse * s + self.sheen.reflectance(c))
     }
 
     /// Probability that a bounce under the coat samples the glossy lobe: its share of the two
@@ -452,7 +472,7 @@ fn schlick_scalar(f0: f32, c: f32) -> f32 {
 }
 
 /// Rec. 709 luminance.
-fn luminance(c: Vec3) -> f32 {
+pub(crate) fn luminance(c: Vec3) -> f32 {
     c.dot(Vec3::new(0.2126, 0.7152, 0.0722))
 }
 
@@ -483,6 +503,7 @@ mod tests {
             n,
             diffuse: red,
             gloss: Gloss::None,
+            sheen: Sheen::NONE,
             coat: Coat::NONE,
         }];
         for exponent in [0.0, 10.0, 200.0] {
@@ -493,6 +514,7 @@ mod tests {
                     color: Vec3::splat(0.3),
                     exponent,
                 },
+                sheen: Sheen::NONE,
                 coat: Coat::NONE,
             });
         }
@@ -520,6 +542,7 @@ mod tests {
                     dielectric_f0,
                     weight,
                 },
+                sheen: Sheen::NONE,
                 coat: Coat::NONE,
             });
         }
@@ -532,6 +555,24 @@ mod tests {
                 alpha,
                 n: b.n,
             };
+            out.push(b);
+        }
+        // Sheens over a diffuse lobe, a GGX one, nothing (a black base) and a coated GGX lobe.
+        let sheens = [
+            (Vec3::ONE, 0.5, 0),
+            (Vec3::new(0.9, 0.5, 0.2), 0.3, 5),
+            (Vec3::splat(0.8), 1.0, usize::MAX),
+            (Vec3::new(0.3, 0.6, 0.9), 0.7, 12),
+        ];
+        for (color, roughness, under) in sheens {
+            let mut b = match under {
+                usize::MAX => Bsdf {
+                    diffuse: Vec3::ZERO,
+                    ..out[0]
+                },
+                i => out[i],
+            };
+            b.sheen = Sheen::new(color, roughness);
             out.push(b);
         }
         out
@@ -633,12 +674,14 @@ mod tests {
                 sampled /= count as f32;
                 // A coat's lobes are wide (width 0.3 and up): uniform directions see them.
                 let reference = match bsdf.gloss {
-                    _ if bsdf.coat.weight > 0.0 => uniform_estimate(&bsdf, wo, &mut rng),
+                    _ if bsdf.coat.weight > 0.0 || bsdf.sheen.is_some() => {
+                        uniform_estimate(&bsdf, wo, &mut rng)
+                    }
                     Gloss::Ggx { alpha, .. } => half_vector_estimate(&bsdf, alpha, wo, &mut rng),
                     _ => uniform_estimate(&bsdf, wo, &mut rng),
                 };
                 let tol = match bsdf.gloss {
-                    _ if bsdf.coat.weight > 0.0 => 0.02,
+                    _ if bsdf.coat.weight > 0.0 || bsdf.sheen.is_some() => 0.02,
                     Gloss::Phong { exponent, .. } if exponent > 100.0 => 0.1,
                     _ => 0.01,
                 };
@@ -658,6 +701,7 @@ mod tests {
                 dielectric_f0: 0.04,
                 weight: 1.0,
             },
+            sheen: Sheen::NONE,
             coat: Coat::NONE,
         };
         let mut rng = Rng(3);
@@ -677,6 +721,30 @@ mod tests {
                 albedo <= 1.0 && albedo > 0.6,
                 "white metal at {wo}: albedo {albedo}"
             );
+        }
+    }
+
+    /// A white sheen over a white diffuse lobe reflects at most the light that arrives (the
+    /// lobe under it dimmed by the sheen's albedo), and more than the sheen alone.
+    #[test]
+    fn a_sheen_over_white_keeps_to_the_light_it_gets() {
+        let mut rng = Rng(13);
+        for roughness in [0.3, 0.6, 1.0] {
+            let white = Bsdf {
+                n: Vec3::Z,
+                diffuse: Vec3::ONE,
+                gloss: Gloss::None,
+                sheen: Sheen::new(Vec3::ONE, roughness),
+                coat: Coat::NONE,
+            };
+            for wo in views(Vec3::Z) {
+                let albedo = uniform_estimate(&white, wo, &mut rng).x;
+                let sheen = super::super::sheen::albedo(wo.z, roughness);
+                assert!(
+                    albedo <= 1.01 && albedo > sheen + 0.3,
+                    "roughness {roughness}, {wo}: albedo {albedo} (the sheen's own {sheen})"
+                );
+            }
         }
     }
 

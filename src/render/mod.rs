@@ -14,6 +14,8 @@ pub mod plan;
 pub mod progressive;
 pub mod resample;
 pub mod shade;
+pub mod sheen;
+pub mod sheen_albedo;
 
 pub use crate::scene::Integrator;
 pub use environment::{CubeMap, EnvironmentMap, LinearImage, sky};

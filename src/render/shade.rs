@@ -8,6 +8,7 @@ use glam::Vec3;
 use super::bsdf::{Bsdf, Coat, Gloss, Sample};
 use super::environment::EnvironmentMap;
 use super::path::{Arrival, LightSet, power};
+use super::sheen::Sheen;
 use super::{RayCounts, RenderPlan};
 use crate::bvh::{Bvh, Hit};
 use crate::geometry::{Ray, interpolation_error, offset_ray_origin};
@@ -59,6 +60,8 @@ pub(super) struct Surface<'a> {
     pub(super) opacity: f32,
     /// The material's glossy lobe here.
     pub(super) gloss: Gloss,
+    /// The material's sheen here ([`Sheen::NONE`]: none).
+    pub(super) sheen: Sheen,
     /// The material's clear coat here ([`Coat::NONE`]: none).
     pub(super) coat: Coat,
     /// The material's mirror reflectance here (zero: no reflection ray).
@@ -72,6 +75,7 @@ impl Surface<'_> {
             n: self.n,
             diffuse: self.diffuse,
             gloss: self.gloss,
+            sheen: self.sheen,
             coat: self.coat,
         }
     }
@@ -82,10 +86,12 @@ impl Surface<'_> {
     }
 
     /// What the mirror reflects of light arriving from `wo`'s mirror direction: its
-    /// reflectance (at most 1), less what a clear coat over it reflects away, `1 - k F(wo.n)`
-    /// (the coat's own highlight is its lobe in [`Surface::bsdf`]).
+    /// reflectance (at most 1), less what a clear coat over it reflects away, `1 - k F(wo.n)`,
+    /// and dimmed by a sheen's albedo scaling (the coat's and the sheen's own reflection are
+    /// their lobes in [`Surface::bsdf`]).
     pub(super) fn mirror_tint(&self, wo: Vec3) -> Vec3 {
-        self.mirror.min(Vec3::ONE) * (1.0 - self.coat.reflects(wo.dot(self.n)))
+        let c = wo.dot(self.n);
+        self.mirror.min(Vec3::ONE) * (1.0 - self.coat.reflects(c)) * self.sheen.scaling(c, c)
     }
 }
 
@@ -214,6 +220,7 @@ impl<'a> Tracer<'a> {
             emission,
             opacity,
             gloss,
+            sheen,
             mut coat,
             mirror,
         } = textured(scene, material, prim, u, v);
@@ -242,6 +249,7 @@ impl<'a> Tracer<'a> {
             emission,
             opacity,
             gloss,
+            sheen,
             coat,
             mirror,
         }
@@ -712,6 +720,7 @@ pub(super) struct Look {
     pub(super) emission: Vec3,
     pub(super) opacity: f32,
     pub(super) gloss: Gloss,
+    pub(super) sheen: Sheen,
     pub(super) coat: Coat,
     pub(super) mirror: Vec3,
 }
@@ -741,6 +750,17 @@ pub(super) fn textured(scene: &Scene, m: &Material, prim: u32, u: f32, v: f32) -
                 n: Vec3::Z,
             }
         });
+    let sheen = m
+        .pbr
+        .as_ref()
+        .and_then(|p| p.sheen.as_ref())
+        .map_or(Sheen::NONE, |s| {
+            let (color, roughness) = s.at(
+                s.color_map.as_deref().map(sample),
+                s.roughness_map.as_deref().map(sample),
+            );
+            Sheen::new(color, roughness)
+        });
     if !m.is_textured() {
         let (gloss, mirror) = match &m.pbr {
             Some(pbr) => {
@@ -754,6 +774,7 @@ pub(super) fn textured(scene: &Scene, m: &Material, prim: u32, u: f32, v: f32) -
             emission: m.emission,
             opacity: m.opacity_at(1.0),
             gloss,
+            sheen,
             coat,
             mirror,
         };
@@ -777,6 +798,7 @@ pub(super) fn textured(scene: &Scene, m: &Material, prim: u32, u: f32, v: f32) -
                 emission,
                 opacity,
                 gloss: ggx(&lobes),
+                sheen,
                 coat,
                 mirror: lobes.mirror,
             }
@@ -786,6 +808,7 @@ pub(super) fn textured(scene: &Scene, m: &Material, prim: u32, u: f32, v: f32) -
             emission,
             opacity,
             gloss: phong(m),
+            sheen,
             coat,
             mirror: m.mirror,
         },

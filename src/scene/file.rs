@@ -16,6 +16,11 @@
 //! metallic = 1.0             # glTF's metallic-roughness model, a GGX lobe (default 0)
 //! roughness = 0.3            # (default 1); not with specular, shininess or mirror
 //!
+//! [materials.velvet]
+//! diffuse = [0.3, 0.02, 0.05]
+//! sheen = [1.0, 0.55, 0.6]   # glTF's sheen layer (cloth) over the metallic-roughness model
+//! sheen_roughness = 0.5      # (default 0.5)
+//!
 //! [materials.bumpy]
 //! diffuse = [0.8, 0.8, 0.8]
 //! normal_map = "bumps.png"   # tangent-space normal map (+Y up); needs texture coordinates
@@ -115,6 +120,8 @@ struct MaterialDef {
     normal_scale: Option<Spanned<f32>>,
     metallic: Option<Spanned<f32>>,
     roughness: Option<Spanned<f32>>,
+    sheen: Option<Spanned<[f32; 3]>>,
+    sheen_roughness: Option<Spanned<f32>>,
 }
 
 #[derive(Deserialize, Clone, Copy)]
@@ -197,6 +204,10 @@ enum EnvDef {
     },
 }
 
+/// A scene file's `sheen_roughness` when only `sheen` is given: glTF's default of 0 would
+/// show almost nothing but at the silhouettes.
+const DEFAULT_SHEEN_ROUGHNESS: f32 = 0.5;
+
 /// Reads files a scene refers to (the disk, or the files built into the binary).
 type ReadFn<'a> = &'a dyn Fn(&Path) -> Result<Vec<u8>>;
 
@@ -246,8 +257,26 @@ pub fn parse(path: &Path, text: &str, read: ReadFn, check_files: bool) -> Result
         by_name.insert(name.clone(), materials.len() as u32);
         let mut mat = material_from_def(name, m);
         let (metallic, roughness) = (&m.metallic, &m.roughness);
-        if let Some(first) = metallic.as_ref().or(roughness.as_ref()) {
-            for (key, value) in [("metallic", metallic), ("roughness", roughness)] {
+        if let Some(sr) = &m.sheen_roughness
+            && m.sheen.is_none()
+        {
+            return Err(at(
+                sr.span().start,
+                format!("material `{name}`: `sheen_roughness` without `sheen` (its colour)"),
+            ));
+        }
+        let first = [metallic, roughness]
+            .into_iter()
+            .flatten()
+            .map(|v| v.span().start)
+            .chain(m.sheen.as_ref().map(|v| v.span().start))
+            .next();
+        if let Some(first) = first {
+            for (key, value) in [
+                ("metallic", metallic),
+                ("roughness", roughness),
+                ("sheen_roughness", &m.sheen_roughness),
+            ] {
                 if let Some(value) = value
                     && !(0.0..=1.0).contains(value.get_ref())
                 {
@@ -259,11 +288,22 @@ pub fn parse(path: &Path, text: &str, read: ReadFn, check_files: bool) -> Result
             }
             if m.specular.is_some() || m.shininess.is_some() || m.mirror.is_some() {
                 return Err(at(
-                    first.span().start,
+                    first,
                     format!(
-                        "material `{name}`: `metallic` and `roughness` (a GGX lobe) cannot be \
-                         combined with `specular`, `shininess` or `mirror` (Blinn-Phong and a \
-                         mirror)"
+                        "material `{name}`: `metallic`, `roughness` and `sheen` (glTF's \
+                         metallic-roughness model) cannot be combined with `specular`, \
+                         `shininess` or `mirror` (Blinn-Phong and a mirror)"
+                    ),
+                ));
+            }
+            if let Some(sheen) = &m.sheen
+                && !sheen.get_ref().iter().all(|c| c.is_finite() && *c >= 0.0)
+            {
+                return Err(at(
+                    sheen.span().start,
+                    format!(
+                        "sheen {:?} is not a colour (three finite numbers, at least 0)",
+                        sheen.get_ref()
                     ),
                 ));
             }
@@ -273,6 +313,20 @@ pub fn parse(path: &Path, text: &str, read: ReadFn, check_files: bool) -> Result
                 roughness: roughness.as_ref().map_or(1.0, |v| *v.get_ref()),
                 map: None,
                 clearcoat: None,
+                sheen: m
+                    .sheen
+                    .as_ref()
+                    .map(|c| Vec3::from(*c.get_ref()))
+                    .filter(|&c| c != Vec3::ZERO)
+                    .map(|color| super::pbr::SheenLayer {
+                        color,
+                        roughness: m
+                            .sheen_roughness
+                            .as_ref()
+                            .map_or(DEFAULT_SHEEN_ROUGHNESS, |r| *r.get_ref()),
+                        color_map: None,
+                        roughness_map: None,
+                    }),
                 specular: super::pbr::Specular::DEFAULT,
             };
             let lobes = pbr.lobes_at(super::pbr::Texels::default());

@@ -45,7 +45,7 @@ use anyhow::{Result, anyhow, bail};
 use base64::Engine as _;
 use glam::{DMat3, DMat4, DVec3, Vec2, Vec3, Vec4};
 
-use super::pbr::Clearcoat;
+use super::pbr::{Clearcoat, SheenLayer};
 use super::{Camera, Environment, Light, Material, Mesh, NormalRule, Scene, Texture, Wrap};
 
 /// What a glTF load produced besides the scene (used by scene files, which give their own
@@ -431,6 +431,7 @@ fn relaxed(bytes: &[u8]) -> Option<::gltf::Gltf> {
 const READ_EXTENSIONS: &[&str] = &[
     "KHR_lights_punctual",
     "KHR_materials_clearcoat",
+    "KHR_materials_sheen",
     "KHR_materials_specular",
     "KHR_materials_volume",
     "KHR_mesh_quantization",
@@ -1490,6 +1491,12 @@ impl Loader<'_> {
                 };
             }
         }
+        if let Some(json) = m.extension_value("KHR_materials_sheen") {
+            let sheen = self.sheen(&label, json);
+            if let Some(p) = mat.pbr.as_mut() {
+                p.sheen = sheen;
+            }
+        }
         let id = self.materials.len() as u32;
         self.materials.push(mat);
         self.material_index.insert(key, id);
@@ -1529,6 +1536,29 @@ impl Loader<'_> {
         })
     }
 
+    /// A material's `KHR_materials_sheen` (`None` when its colour factor is black: no sheen);
+    /// a malformed factor is said in a warning and its default used.
+    fn sheen(&mut self, label: &str, json: &serde_json::Value) -> Option<SheenLayer> {
+        let what = "KHR_materials_sheen";
+        let color = self.color_factor(label, what, json, "sheenColorFactor", Vec3::ZERO);
+        let roughness = self.unit_factor(label, what, json, "sheenRoughnessFactor", 0.0);
+        if color == Vec3::ZERO {
+            return None;
+        }
+        let mut texture = |key: &str, srgb: bool| {
+            let info = json.get(key)?;
+            self.texture_json(label, &format!("{what}.{key}"), info, srgb)
+        };
+        let color_map = texture("sheenColorTexture", true);
+        let roughness_map = texture("sheenRoughnessTexture", false);
+        Some(SheenLayer {
+            color,
+            roughness,
+            color_map,
+            roughness_map,
+        })
+    }
+
     /// The number `key` of an extension's JSON clamped to `[0, 1]`: `default` where it is
     /// missing, and where it is malformed (not a finite number), with a warning.
     fn unit_factor(
@@ -1553,28 +1583,42 @@ impl Loader<'_> {
         }
     }
 
+    /// The colour `key` of an extension's JSON (three numbers, at least 0): `default` where
+    /// it is missing, and where it is malformed, with a warning.
+    fn color_factor(
+        &mut self,
+        label: &str,
+        what: &str,
+        json: &serde_json::Value,
+        key: &str,
+        default: Vec3,
+    ) -> Vec3 {
+        let Some(v) = json.get(key) else {
+            return default;
+        };
+        match serde_json::from_value::<[f32; 3]>(v.clone())
+            .ok()
+            .filter(|c| c.iter().all(|x| x.is_finite() && *x >= 0.0))
+        {
+            Some(c) => Vec3::from(c),
+            None => {
+                let [r, g, b] = default.to_array();
+                self.warnings.push(format!(
+                    "{label}: {what}.{key} is malformed (three numbers, at least 0); [{r}, {g}, \
+                     {b}] used"
+                ));
+                default
+            }
+        }
+    }
+
     /// A material's `KHR_materials_specular` (index of refraction left at its default: the
     /// caller keeps `KHR_materials_ior`'s); a malformed factor is said in a warning and its
     /// default used.
     fn specular(&mut self, label: &str, json: &serde_json::Value) -> super::pbr::Specular {
         let what = "KHR_materials_specular";
         let factor = self.unit_factor(label, what, json, "specularFactor", 1.0);
-        let color = match json.get("specularColorFactor") {
-            None => Vec3::ONE,
-            Some(v) => match serde_json::from_value::<[f32; 3]>(v.clone())
-                .ok()
-                .filter(|c| c.iter().all(|x| x.is_finite() && *x >= 0.0))
-            {
-                Some(c) => Vec3::from(c),
-                None => {
-                    self.warnings.push(format!(
-                        "{label}: {what}.specularColorFactor is malformed (three numbers, at \
-                         least 0); [1, 1, 1] used"
-                    ));
-                    Vec3::ONE
-                }
-            },
-        };
+        let color = self.color_factor(label, what, json, "specularColorFactor", Vec3::ONE);
         let map = json.get("specularTexture").and_then(|info| {
             self.texture_json(label, &format!("{what}.specularTexture"), info, false)
         });
@@ -2015,6 +2059,7 @@ pub fn convert_material(m: &::gltf::Material) -> Material {
             roughness,
             map: None,
             clearcoat: None,
+            sheen: None,
             specular,
         }),
     }

@@ -159,7 +159,10 @@ impl Material {
     pub fn reflects(&self) -> bool {
         self.diffuse != Vec3::ZERO
             || self.specular != Vec3::ZERO
-            || self.pbr.as_ref().is_some_and(|p| p.is_textured())
+            || self
+                .pbr
+                .as_ref()
+                .is_some_and(|p| p.is_textured() || p.sheen.is_some())
     }
 
     /// True when the surface emits light.
@@ -176,10 +179,11 @@ impl Material {
     }
 
     /// The material's textures: base colour, emission, metallic-roughness, normal map, the
-    /// clear coat's and the specular ones.
+    /// clear coat's, the specular ones and the sheen's.
     pub fn textures(&self) -> impl Iterator<Item = &Arc<Texture>> {
         let coat = self.pbr.as_ref().and_then(|p| p.clearcoat.as_ref());
         let specular = self.pbr.as_ref().map(|p| &p.specular);
+        let sheen = self.pbr.as_ref().and_then(|p| p.sheen.as_ref());
         [
             self.diffuse_map.as_ref(),
             self.emission_map.as_ref(),
@@ -190,6 +194,8 @@ impl Material {
             coat.and_then(|c| c.normal_map.as_ref()),
             specular.and_then(|s| s.map.as_ref()),
             specular.and_then(|s| s.color_map.as_ref()),
+            sheen.and_then(|s| s.color_map.as_ref()),
+            sheen.and_then(|s| s.roughness_map.as_ref()),
         ]
         .into_iter()
         .flatten()

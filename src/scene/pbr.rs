@@ -33,6 +33,32 @@ pub struct MetallicRoughness {
     /// The dielectric part's specular reflection (glTF `KHR_materials_ior` and
     /// `KHR_materials_specular`; [`Specular::DEFAULT`] without them).
     pub specular: Specular,
+    /// A sheen over the surface, under any clear coat (glTF `KHR_materials_sheen`).
+    pub sheen: Option<SheenLayer>,
+}
+
+/// A sheen's parameters (glTF `KHR_materials_sheen`): the fibres of cloth over the material
+/// ([`crate::render::sheen`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct SheenLayer {
+    /// `sheenColorFactor` (linear RGB, at least 0).
+    pub color: Vec3,
+    /// `sheenRoughnessFactor`, in `[0, 1]`.
+    pub roughness: f32,
+    /// `sheenColorTexture` (sRGB, decoded): its RGB multiplies `color`.
+    pub color_map: Option<Arc<Texture>>,
+    /// `sheenRoughnessTexture` (linear): its alpha channel multiplies `roughness`.
+    pub roughness_map: Option<Arc<Texture>>,
+}
+
+impl SheenLayer {
+    /// The sheen's colour and roughness where its textures read `color_texel` and
+    /// `roughness_texel` (`None`: no texture there).
+    pub fn at(&self, color_texel: Option<Vec4>, roughness_texel: Option<Vec4>) -> (Vec3, f32) {
+        let color = color_texel.map_or(self.color, |t| self.color * t.truncate());
+        let roughness = self.roughness * roughness_texel.map_or(1.0, |t| t.w);
+        (color.max(Vec3::ZERO), roughness.clamp(0.0, 1.0))
+    }
 }
 
 /// The specular reflection of a material's dielectric part: its index of refraction (glTF
@@ -311,6 +337,7 @@ mod tests {
             roughness: 1.0,
             map: None,
             clearcoat: None,
+            sheen: None,
             specular: Specular::DEFAULT,
         };
         // Blue 1, green 0.5: a metal of roughness 0.5.
@@ -337,6 +364,7 @@ mod tests {
             roughness: 1.0,
             map: None,
             clearcoat: None,
+            sheen: None,
             specular: Specular::DEFAULT,
         };
         assert!(!m.may_mirror(), "rough everywhere");
