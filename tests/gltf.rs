@@ -2363,16 +2363,7 @@ fn ior_and_specular_set_a_dielectrics_fresnel() {
     let black = |extensions: Value| material(0.0, extensions);
     // Irradiance 100 / 5^2 = 4; GGX D at the normal 1 / pi (width 1), G 1, Fresnel f0.
     let per_f0 = 4.0 * std::f32::consts::FRAC_1_PI / 4.0;
-    let srgb = |c: u8| {
-        let c = c as f32 / 255.0;
-        ((c + 0.055) / 1.055).powf(2.4)
-    };
-    let mut rgba = std::io::Cursor::new(Vec::new());
-    image::RgbaImage::from_raw(1, 1, vec![255, 255, 255, 51])
-        .unwrap()
-        .write_to(&mut rgba, image::ImageFormat::Png)
-        .unwrap();
-    let pngs = [png_1x1([188, 255, 64]), rgba.into_inner()];
+    let pngs = [png_1x1([188, 255, 64]), png_rgba_1x1([255, 255, 255, 51])];
     let cases = [
         ("plain", json!({}), Vec3::splat(0.04)),
         (
@@ -2410,10 +2401,7 @@ fn ior_and_specular_set_a_dielectrics_fresnel() {
         );
         let c = centre(&s);
         let want = f * per_f0;
-        assert!(
-            ((c - want).abs() / want).max_element() < 0.005,
-            "{name}: {c}, want {want}"
-        );
+        assert_near(c, want, name);
     }
     // A white diffuse dielectric: dimmed by `1 - weight F` under its specular lobe. Factor 0:
     // no lobe and no dimming, Lambertian, 4 / pi (4% off if dimmed as by default); factor
@@ -2430,11 +2418,52 @@ fn ior_and_specular_set_a_dielectrics_fresnel() {
         );
         let c = centre(&s);
         let want = want * std::f32::consts::FRAC_1_PI;
-        assert!(
-            ((c - Vec3::splat(want)).abs() / want).max_element() < 0.005,
-            "white, factor {factor}: {c}, want {want}"
-        );
+        assert_near(c, Vec3::splat(want), &format!("white, factor {factor}"));
     }
+}
+
+/// The quad of [`quad_buffer`] once per material of `materials`, each its own mesh and node,
+/// written as `name` with `extensionsUsed` `used`, loaded (its warnings kept).
+fn quads_of(dir: &Path, name: &str, materials: &[Value], used: &[&str]) -> Scene {
+    let (bin, views, accessors) = quad_buffer();
+    let n = materials.len();
+    let d = json!({
+        "asset": {"version": "2.0"},
+        "scene": 0,
+        "scenes": [{"nodes": (0..n).collect::<Vec<_>>()}],
+        "nodes": (0..n).map(|k| json!({"mesh": k})).collect::<Vec<_>>(),
+        "meshes": (0..n).map(|k| json!({"primitives": [{"attributes": {"POSITION": 0, "NORMAL": 1}, "indices": 3, "material": k}]})).collect::<Vec<_>>(),
+        "materials": materials,
+        "buffers": [{"byteLength": bin.len(), "uri": data_uri(&bin)}],
+        "bufferViews": views,
+        "accessors": accessors,
+        "extensionsUsed": used
+    });
+    Scene::load(&write(dir, name, &d)).unwrap()
+}
+
+/// `c` within 0.5% of `want` in every channel (`what` names the case).
+fn assert_near(c: Vec3, want: Vec3, what: &str) {
+    assert!(
+        ((c - want).abs() / want).max_element() < 0.005,
+        "{what}: {c}, want {want}"
+    );
+}
+
+/// The linear value of an sRGB-encoded byte.
+fn srgb(c: u8) -> f32 {
+    let c = c as f32 / 255.0;
+    ((c + 0.055) / 1.055).powf(2.4)
+}
+
+/// A one-texel RGBA PNG.
+fn png_rgba_1x1(rgba: [u8; 4]) -> Vec<u8> {
+    let mut out = std::io::Cursor::new(Vec::new());
+    image::RgbaImage::from_raw(1, 1, rgba.to_vec())
+        .unwrap()
+        .write_to(&mut out, image::ImageFormat::Png)
+        .unwrap();
+    out.into_inner()
 }
 
 /// Malformed `KHR_materials_specular` factors and a `KHR_materials_ior` index below 1 (but
@@ -2442,26 +2471,22 @@ fn ior_and_specular_set_a_dielectrics_fresnel() {
 #[test]
 fn malformed_specular_and_ior_are_warnings_and_defaults() {
     let dir = tempfile::tempdir().unwrap();
-    let (bin, views, accessors) = quad_buffer();
     let m =
         |ext: Value| json!({"pbrMetallicRoughness": {"metallicFactor": 0.0}, "extensions": ext});
-    let d = json!({
-        "asset": {"version": "2.0"},
-        "scene": 0,
-        "scenes": [{"nodes": [0, 1, 2]}],
-        "nodes": [{"mesh": 0}, {"mesh": 1}, {"mesh": 2}],
-        "meshes": (0..3).map(|k| json!({"primitives": [{"attributes": {"POSITION": 0, "NORMAL": 1}, "indices": 3, "material": k}]})).collect::<Vec<_>>(),
-        "materials": [
-            m(json!({"KHR_materials_specular": {"specularFactor": "shiny", "specularColorFactor": [1.0, -1.0, 0.0]}})),
+    let s = quads_of(
+        dir.path(),
+        "specular.gltf",
+        &[
+            m(
+                json!({"KHR_materials_specular": {"specularFactor": "shiny", "specularColorFactor": [1.0, -1.0, 0.0]}}),
+            ),
             m(json!({"KHR_materials_ior": {"ior": 0.5}})),
-            m(json!({"KHR_materials_ior": {"ior": 0.0}, "KHR_materials_specular": {"specularColorTexture": {"index": 4}}})),
+            m(
+                json!({"KHR_materials_ior": {"ior": 0.0}, "KHR_materials_specular": {"specularColorTexture": {"index": 4}}}),
+            ),
         ],
-        "buffers": [{"byteLength": bin.len(), "uri": data_uri(&bin)}],
-        "bufferViews": views,
-        "accessors": accessors,
-        "extensionsUsed": ["KHR_materials_specular", "KHR_materials_ior"]
-    });
-    let s = Scene::load(&write(dir.path(), "specular.gltf", &d)).unwrap();
+        &["KHR_materials_specular", "KHR_materials_ior"],
+    );
     let said = |what: &[&str]| assert_warned(&s, what);
     said(&["materials[0]", "specularFactor is malformed"]);
     said(&["materials[0]", "specularColorFactor is malformed"]);
@@ -2492,16 +2517,7 @@ fn a_sheen_reflects_at_grazing_and_dims_the_base() {
         json!({"pbrMetallicRoughness": {"baseColorFactor": [base, base, base, 1.0], "metallicFactor": 0.0, "roughnessFactor": 1.0},
                "extensions": {"KHR_materials_specular": {"specularFactor": 0.0}, "KHR_materials_sheen": sheen}})
     };
-    let srgb = |c: u8| {
-        let c = c as f32 / 255.0;
-        ((c + 0.055) / 1.055).powf(2.4)
-    };
-    let mut rgba = std::io::Cursor::new(Vec::new());
-    image::RgbaImage::from_raw(1, 1, vec![255, 255, 255, 153])
-        .unwrap()
-        .write_to(&mut rgba, image::ImageFormat::Png)
-        .unwrap();
-    let pngs = [png_1x1([188, 255, 64]), rgba.into_inner()];
+    let pngs = [png_1x1([188, 255, 64]), png_rgba_1x1([255, 255, 255, 153])];
     // The light low over the quad, at (4, 0, 1): cosine 1 / sqrt(17) there, the half vector
     // with the view along the normal at cosine sqrt((1 + ci) / 2). A narrow sheen changes
     // fast with the half vector: the picture's field of view is a twentieth of a degree, so
@@ -2541,10 +2557,7 @@ fn a_sheen_reflects_at_grazing_and_dims_the_base() {
         );
         let c = quad_picture_fov(&s, light, 100.0, none.clone(), 0.05)[4 * 9 + 4];
         let want = color * brdf(roughness, nh, ci, 1.0) * irradiance;
-        assert!(
-            ((c - want).abs() / want).max_element() < 0.005,
-            "{name}: {c}, want {want}"
-        );
+        assert_near(c, want, name);
     }
     let s = textured_quad(
         dir.path(),
@@ -2557,10 +2570,7 @@ fn a_sheen_reflects_at_grazing_and_dims_the_base() {
     );
     let c = centre_pixel(&s, 100.0, tracery::scene::Environment::None);
     let want = 4.0 * std::f32::consts::FRAC_1_PI * (1.0 - albedo(1.0, 0.5));
-    assert!(
-        ((c - Vec3::splat(want)).abs() / want).max_element() < 0.005,
-        "over white: {c}, want {want}"
-    );
+    assert_near(c, Vec3::splat(want), "over white");
 }
 
 /// Malformed `KHR_materials_sheen` factors are warnings naming the material and the field,
@@ -2569,25 +2579,19 @@ fn a_sheen_reflects_at_grazing_and_dims_the_base() {
 #[test]
 fn malformed_sheen_factors_are_warnings_and_defaults() {
     let dir = tempfile::tempdir().unwrap();
-    let (bin, views, accessors) = quad_buffer();
     let m = |ext: Value| json!({"pbrMetallicRoughness": {"metallicFactor": 0.0}, "extensions": {"KHR_materials_sheen": ext}});
-    let d = json!({
-        "asset": {"version": "2.0"},
-        "scene": 0,
-        "scenes": [{"nodes": [0, 1, 2]}],
-        "nodes": [{"mesh": 0}, {"mesh": 1}, {"mesh": 2}],
-        "meshes": (0..3).map(|k| json!({"primitives": [{"attributes": {"POSITION": 0, "NORMAL": 1}, "indices": 3, "material": k}]})).collect::<Vec<_>>(),
-        "materials": [
+    let s = quads_of(
+        dir.path(),
+        "sheen.gltf",
+        &[
             m(json!({"sheenColorFactor": "velvet"})),
-            m(json!({"sheenColorFactor": [0.5, 0.4, 0.3], "sheenRoughnessFactor": [1], "sheenColorTexture": {"index": 7}})),
+            m(
+                json!({"sheenColorFactor": [0.5, 0.4, 0.3], "sheenRoughnessFactor": [1], "sheenColorTexture": {"index": 7}}),
+            ),
             m(json!({"sheenColorFactor": [0.0, 0.0, 0.0], "sheenRoughnessFactor": 0.5})),
         ],
-        "buffers": [{"byteLength": bin.len(), "uri": data_uri(&bin)}],
-        "bufferViews": views,
-        "accessors": accessors,
-        "extensionsUsed": ["KHR_materials_sheen"]
-    });
-    let s = Scene::load(&write(dir.path(), "sheen.gltf", &d)).unwrap();
+        &["KHR_materials_sheen"],
+    );
     let said = |what: &[&str]| assert_warned(&s, what);
     said(&["materials[0]", "sheenColorFactor is malformed"]);
     said(&["materials[1]", "sheenRoughnessFactor is malformed"]);

@@ -20,6 +20,10 @@
 //! `f = (1 - k F(v.h)) f_base + k F(v.h) D G / (4 cos_i cos_o)`, about a normal of its own
 //! (the surface's without the base's normal map, or the coat's own map's).
 //!
+//! A **sheen** (glTF `KHR_materials_sheen`, [`super::sheen`]) may lie between the two: the
+//! fibres' own reflection added to the lobes under them, which are dimmed by the sheen's
+//! albedo scaling; the coat covers both.
+//!
 //! A bounce picks one lobe with a probability from the lobes' reflectances seen from `wo` and
 //! samples it; its density is that of the mixture ([`Bsdf::pdf`]), which is also what
 //! multiple importance sampling weighs light samples against. When the glossy lobe's
