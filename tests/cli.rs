@@ -438,6 +438,43 @@ fn bench_on_one_thread_prints_its_spread_for_one_thread() {
     assert_eq!(line.matches("x, ").count() + 1, 3, "three engines: {line}");
 }
 
+/// `--isa` holds our kernels (and Embree's, when built with it) to one instruction set: the
+/// table's heading and every row of ours say so (scalar is never a CPU's fastest).
+#[test]
+fn bench_isa_holds_every_engine_to_one_instruction_set() {
+    let args = [
+        "bench",
+        "--isa",
+        "scalar",
+        "--repeat",
+        "1",
+        "--threads",
+        "1",
+    ];
+    let o = tracery(&args);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let out = text(&o.stdout);
+    let expected = if cfg!(feature = "embree") {
+        "tracery kernel scalar, Embree held to isa=sse2"
+    } else {
+        "tracery kernel scalar"
+    };
+    assert!(out.contains(expected), "{out}");
+    let o = tracery(&[&args[..], &["--json", "--no-peers"]].concat());
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    for r in v.as_array().unwrap() {
+        assert_eq!(r["isa"].as_str(), Some("scalar"), "{r}");
+    }
+    let o = tracery(&["bench", "--isa", "neon"]);
+    assert!(!o.status.success());
+    assert!(
+        text(&o.stderr).contains("unknown kernel `neon`"),
+        "{}",
+        text(&o.stderr)
+    );
+}
+
 /// With one round there is no spread to show.
 #[test]
 fn bench_with_one_round_prints_no_spread() {

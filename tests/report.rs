@@ -114,6 +114,7 @@ fn the_bench_chart_has_a_bar_pair_per_one_thread_row_as_long_as_its_figure() {
         occluded_mrays: occluded,
         closest_spread: 1.0,
         agreement: 1.0,
+        isa: None,
         stats: None,
         split: None,
     };

@@ -5,8 +5,9 @@
 //!
 //! Only the `embree` cargo feature compiles this module (it links `libembree3`). The struct
 //! layouts follow `embree3/rtcore_ray.h` and `rtcore_common.h` of Embree 3.13 with
-//! `RTC_MAX_INSTANCE_LEVEL_COUNT` 1 and `RTC_MIN_WIDTH` 0, Debian's configuration; a test checks
-//! the hits against brute force.
+//! `RTC_MAX_INSTANCE_LEVEL_COUNT` 1 and `RTC_MIN_WIDTH` 0, Debian's configuration;
+//! `tests/embree.rs` checks single rays against brute force and packets against ours, on every
+//! instruction set the device can be held to.
 #![allow(
     unsafe_code,
     reason = "FFI to the Embree C library, each call's contract noted"
@@ -19,6 +20,7 @@ use glam::Vec3;
 
 use super::HitRecord;
 use super::engines::Engine;
+use crate::bvh::wide::Kernel;
 use crate::geometry::Ray;
 
 type RtcDevice = *mut c_void;
@@ -164,6 +166,8 @@ pub struct Embree {
     /// `rtcCommitScene`, the copy into Embree's vertex buffers included, the device's creation
     /// (its thread pool) not.
     pub build_ms: f64,
+    /// The instruction set the device was held to (`None`: Embree's choice).
+    isa: Option<&'static str>,
 }
 
 // SAFETY: Embree documents a committed scene as safe to trace from any number of threads at
@@ -173,11 +177,25 @@ unsafe impl Send for Embree {}
 unsafe impl Sync for Embree {}
 
 impl Embree {
-    /// Builds the scene at medium quality with `threads` threads. Triangles must be finite
-    /// (the benchmark leaves out the others before any engine sees them).
+    /// Builds the scene at medium quality with `threads` threads, Embree choosing its kernels
+    /// for the CPU. Triangles must be finite (the benchmark leaves out the others before any
+    /// engine sees them).
     pub fn build(triangles: &[[Vec3; 3]], threads: usize) -> Result<Embree> {
-        let config = std::ffi::CString::new(format!("threads={}", threads.max(1)))
-            .expect("no NUL in a number");
+        Self::build_for(triangles, threads, None)
+    }
+
+    /// [`Embree::build`] with Embree held to the instruction set of one of our kernels (its
+    /// device's `isa` setting: [`Embree::isa_name`]); `None` leaves the choice to Embree. The
+    /// CPU must run it.
+    pub fn build_for(
+        triangles: &[[Vec3; 3]],
+        threads: usize,
+        isa: Option<Kernel>,
+    ) -> Result<Embree> {
+        let isa = isa.map(Self::isa_name);
+        let held = isa.map_or(String::new(), |i| format!(",isa={i}"));
+        let config = std::ffi::CString::new(format!("threads={}{held}", threads.max(1)))
+            .expect("no NUL in a number or an ISA name");
         // SAFETY: `config` is a NUL-terminated string that outlives the call.
         let device = unsafe { rtcNewDevice(config.as_ptr()) };
         if device.is_null() {
@@ -188,6 +206,7 @@ impl Embree {
             device,
             scene: std::ptr::null_mut(),
             build_ms: 0.0,
+            isa,
         };
         let start = std::time::Instant::now();
         // SAFETY: `device` is a live device handle.
@@ -294,6 +313,9 @@ impl Engine for Embree {
     fn build_ms(&self) -> Option<f64> {
         Some(self.build_ms)
     }
+    fn isa(&self) -> Option<&'static str> {
+        self.isa
+    }
     fn closest(&self, ray: &Ray) -> HitRecord {
         self.intersect1(ray)
     }
@@ -304,6 +326,16 @@ impl Engine for Embree {
 }
 
 impl Embree {
+    /// Embree's name for the instruction set of one of our kernels (its `isa` device setting).
+    /// Embree has no scalar kernels: `scalar` maps to its SSE2 ones.
+    pub fn isa_name(kernel: Kernel) -> &'static str {
+        match kernel {
+            Kernel::Scalar | Kernel::Sse2 => "sse2",
+            Kernel::Avx2 => "avx2",
+            Kernel::Avx512 => "avx512",
+        }
+    }
+
     /// `rtcIntersect1`: the closest hit of one ray.
     pub fn intersect1(&self, ray: &Ray) -> HitRecord {
         let mut rh = RtcRayHit {
@@ -395,6 +427,9 @@ impl Engine for EmbreePackets {
         self.0.occluded(ray)
     }
 
+    fn isa(&self) -> Option<&'static str> {
+        self.0.isa
+    }
     fn tile(&self) -> Option<u32> {
         Some(4)
     }

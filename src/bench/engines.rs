@@ -18,6 +18,11 @@ pub(super) trait Engine: Sync + Send {
     fn build_ms(&self) -> Option<f64> {
         None
     }
+    /// The instruction set the engine traces with, when it says (see
+    /// [`super::EngineResult::isa`]).
+    fn isa(&self) -> Option<&'static str> {
+        None
+    }
     /// Side of the square pixel tiles a packet engine traces at once; `None` for single rays.
     fn tile(&self) -> Option<u32> {
         None
@@ -74,6 +79,9 @@ impl Engine for Bvh {
     fn occluded(&self, ray: &Ray) -> bool {
         Bvh::occluded(self, ray, f32::INFINITY)
     }
+    fn isa(&self) -> Option<&'static str> {
+        Some(self.kernel().name())
+    }
 }
 
 /// Our BVH tracing camera-ray tiles of 8 x 8 as packets ([`Bvh::intersect_packet`],
@@ -91,6 +99,9 @@ impl Engine for Packets {
     }
     fn occluded(&self, ray: &Ray) -> bool {
         Bvh::occluded(&self.0, ray, f32::INFINITY)
+    }
+    fn isa(&self) -> Option<&'static str> {
+        self.0.isa()
     }
     fn tile(&self) -> Option<u32> {
         Some(Self::TILE as u32)

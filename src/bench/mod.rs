@@ -22,6 +22,7 @@ use anyhow::{Context, Result, bail};
 use glam::Vec3;
 use serde::Serialize;
 
+use crate::bvh::wide::Kernel;
 use crate::bvh::{BuildOptions, Bvh, BvhStats, SplitMethod};
 use crate::camera::CameraRays;
 use crate::geometry::{Aabb, Ray};
@@ -141,6 +142,10 @@ pub struct EngineResult {
     /// Our BVH's statistics (only for our engines).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub stats: Option<BvhStats>,
+    /// The instruction set the engine traced with: our kernel's name, the one Embree was held
+    /// to (`None` when left to choose its own), `None` for obvhs.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub isa: Option<String>,
     /// One thread, single rays: the rates on the rays that hit the mesh and on those that miss
     /// it, apart (the one-thread row of each single-ray engine; `None` for the others).
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -184,6 +189,11 @@ pub struct BenchConfig {
     /// Also measure our packets of camera-ray tiles (`tracery-packet`, built as the first of
     /// `ours`).
     pub packets: bool,
+    /// The instruction set our kernels and Embree's are held to (what a CPU without the wider
+    /// ones would see); `None`: each engine's fastest on this CPU. The caller checks that this
+    /// CPU runs it. Embree has no scalar kernels: held to `scalar`, it runs its SSE2 ones.
+    /// obvhs is compiled for the target's baseline (SSE2 on x86-64) either way.
+    pub isa: Option<Kernel>,
 }
 
 impl BenchConfig {
@@ -204,6 +214,14 @@ impl BenchConfig {
     pub fn obvhs_available() -> bool {
         cfg!(feature = "peers")
     }
+}
+
+/// `bvh` held to the kernel `isa` names (unchanged for `None`).
+fn held_to(mut bvh: Bvh, isa: Option<Kernel>) -> Result<Bvh> {
+    if let Some(k) = isa {
+        bvh.set_kernel(k).map_err(anyhow::Error::msg)?;
+    }
+    Ok(bvh)
 }
 
 fn pool(threads: usize) -> rayon::ThreadPool {
@@ -309,13 +327,14 @@ pub fn run(
     }
     let tris = &finite[..];
 
+    let isa = config.isa;
     let mut builders: Vec<(String, Builder)> = Vec::new();
     for (name, options) in &config.ours {
         let options = *options;
         builders.push((
             name.clone(),
             Box::new(move |_| {
-                let bvh = Bvh::build(tris, &options);
+                let bvh = held_to(Bvh::build(tris, &options), isa)?;
                 let stats = bvh.stats;
                 Ok((Box::new(bvh) as Box<dyn Engine>, Some(stats)))
             }),
@@ -326,7 +345,7 @@ pub fn run(
         builders.push((
             "tracery-packet".into(),
             Box::new(move |_| {
-                let bvh = Bvh::build(tris, &options);
+                let bvh = held_to(Bvh::build(tris, &options), isa)?;
                 let stats = bvh.stats;
                 Ok((
                     Box::new(engines::Packets(bvh)) as Box<dyn Engine>,
@@ -341,7 +360,7 @@ pub fn run(
             "embree".into(),
             Box::new(move |threads| {
                 Ok((
-                    Box::new(embree::Embree::build(tris, threads)?) as Box<dyn Engine>,
+                    Box::new(embree::Embree::build_for(tris, threads, isa)?) as Box<dyn Engine>,
                     None,
                 ))
             }),
@@ -349,7 +368,7 @@ pub fn run(
         builders.push((
             "embree-packet16".into(),
             Box::new(move |threads| {
-                let e = embree::EmbreePackets(embree::Embree::build(tris, threads)?);
+                let e = embree::EmbreePackets(embree::Embree::build_for(tris, threads, isa)?);
                 Ok((Box::new(e) as Box<dyn Engine>, None))
             }),
         ));
@@ -506,6 +525,7 @@ pub fn run(
                 closest_spread: median(&mut closest_rounds[k]).as_secs_f64()
                     / closest[k].as_secs_f64(),
                 agreement: agreement(&reference, &map_back(&hits[k]), &copies),
+                isa: entry.engine.isa().map(str::to_string),
                 stats,
                 split: (Some(p) == one
                     && split[e][0] != Duration::MAX

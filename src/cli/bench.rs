@@ -3,10 +3,11 @@
 
 use std::path::{Path, PathBuf};
 
-use anyhow::Result;
+use anyhow::{Result, bail};
 use clap::Args;
 use tracery::bench::{self, BenchConfig, EngineResult, SplitRates};
 use tracery::bvh::BuildOptions;
+use tracery::bvh::wide::Kernel;
 use tracery::scene::Scene;
 
 use super::ensure_parent;
@@ -27,6 +28,12 @@ pub struct BenchArgs {
     /// Largest leaf size for our builders.
     #[arg(long, default_value_t = BuildOptions::DEFAULT_LEAF_SIZE)]
     leaf_size: u32,
+    /// Hold our kernels and Embree's to one instruction set (scalar, sse2, avx2 or avx512):
+    /// what a CPU without the wider ones would see. Embree has no scalar kernels (held to
+    /// scalar, it runs SSE2); obvhs is compiled for the baseline (SSE2) either way. Default:
+    /// each engine's fastest on this CPU.
+    #[arg(long, value_name = "ISA")]
+    isa: Option<Kernel>,
     /// Leave out every peer (Embree and obvhs).
     #[arg(long)]
     no_peers: bool,
@@ -76,6 +83,16 @@ pub fn run(a: BenchArgs) -> Result<()> {
         ..BuildOptions::sah()
     };
     options.validate().map_err(anyhow::Error::msg)?;
+    if let Some(isa) = a.isa {
+        let runs = Kernel::available();
+        if !runs.contains(&isa) {
+            let runs: Vec<&str> = runs.iter().map(|k| k.name()).collect();
+            bail!(
+                "--isa {isa}: this CPU cannot run it (it runs {})",
+                runs.join(", ")
+            );
+        }
+    }
     let config = BenchConfig {
         threads,
         repeat: a.repeat,
@@ -83,6 +100,7 @@ pub fn run(a: BenchArgs) -> Result<()> {
         obvhs: !a.no_peers && !a.no_obvhs,
         embree: !a.no_peers,
         packets: true,
+        isa: a.isa,
     };
     if config.obvhs && !BenchConfig::obvhs_available() {
         eprintln!(
@@ -169,9 +187,15 @@ fn print_table(
     } else {
         String::new()
     };
+    let isa = |engine: &str| {
+        rows.iter()
+            .find(|r| r.engine == engine)
+            .and_then(|r| r.isa.clone())
+    };
+    let kernel = isa("tracery-sah").unwrap_or_else(|| Kernel::detect().name().to_string());
+    let embree = isa("embree").map_or(String::new(), |i| format!(", Embree held to isa={i}"));
     println!(
-        "\n{mesh} ({triangles} triangles{left_out}), canonical camera 1024x1024, best of runs; tracery kernel {}",
-        tracery::bvh::wide::Kernel::detect()
+        "\n{mesh} ({triangles} triangles{left_out}), canonical camera 1024x1024, best of runs; tracery kernel {kernel}{embree}"
     );
     println!(
         "{:<15} {:>7} {:>9} {:>7} {:>8} {:>9} {:>13} {:>14} {:>9}",

@@ -111,6 +111,7 @@ fn splits(meshes: Vec<PathBuf>, repeat: usize) -> Result<()> {
             obvhs: false,
             embree: false,
             packets: false,
+            isa: None,
         };
         eprintln!("{}: measuring", scene.name);
         let out = measure(&scene, &config)?;
@@ -180,6 +181,7 @@ fn bins_table(mesh: PathBuf, bins: Vec<u32>, repeat: usize) -> Result<()> {
         obvhs: false,
         embree: false,
         packets: false,
+        isa: None,
     };
     let out = measure(&scene, &config)?;
     println!(
