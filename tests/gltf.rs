@@ -1483,10 +1483,10 @@ fn a_normal_map_bends_the_shading_normal_the_way_its_texels_lean() {
 /// An OBJ quad whose MTL names a normal map: `map_Bump` with a colour image (as exporters
 /// write normal maps, `-bm` its scale) and `norm` are read as tangent-space normal maps, with
 /// MikkTSpace tangents, and bend the shading normal as the glTF one does (the same ratio); a
-/// grey `map_Bump` is a height map, left out with a warning that says so, as is a `-bm`
-/// that is not a number.
+/// grey `map_Bump` is a height map (no normal map, no tangents, `-bm` its scale); a `-bm`
+/// that is not a number leaves the map out with a warning that says so.
 #[test]
-fn an_obj_normal_map_bends_like_gltf_and_a_grey_bump_map_is_said_unread() {
+fn an_obj_normal_map_bends_like_gltf_and_a_grey_bump_map_is_a_height_map() {
     let dir = tempfile::tempdir().unwrap();
     let rgb = [128u8, 218, 218];
     std::fs::write(dir.path().join("n.png"), png_1x1(rgb)).unwrap();
@@ -1519,13 +1519,23 @@ fn an_obj_normal_map_bends_like_gltf_and_a_grey_bump_map_is_said_unread() {
         );
     }
     assert_eq!(load("bump -bm 0.25 n.png").materials[0].normal_scale, 0.25);
+    let s = load("map_Bump -bm 0.5 grey.png");
+    assert!(s.warnings.is_empty(), "{:?}", s.warnings);
+    let m = &s.materials[0];
+    assert!(m.normal_map.is_none() && s.mesh.tangents.is_empty());
+    assert!(
+        m.height_map.as_ref().is_some_and(|t| !t.srgb),
+        "a linear height map"
+    );
+    assert_eq!(m.height_scale, 0.5);
     for (mtl, why) in [
-        ("map_Bump grey.png", "height map"),
+        ("map_Bump -bm nan grey.png", "-bm"),
         ("map_Bump -bm x n.png", "-bm"),
         ("norm missing.png", "missing.png"),
     ] {
         let s = load(mtl);
         assert!(s.materials[0].normal_map.is_none(), "{mtl}");
+        assert!(s.materials[0].height_map.is_none(), "{mtl}");
         assert!(
             s.mesh.tangents.is_empty(),
             "{mtl}: no tangents without a map"
@@ -1538,6 +1548,112 @@ fn an_obj_normal_map_bends_like_gltf_and_a_grey_bump_map_is_said_unread() {
             s.warnings
         );
     }
+}
+
+/// Bump mapping: an OBJ quad (2 x 2, facing the camera along +z) whose grey 8 x 8 `bump`
+/// rises by 10 levels a texel column towards +x and 15 a row towards the image's top (+y),
+/// `-bm` its scale `s`: it is shaded as the plane of slopes `s 10 / 255 * 8 / 2` and
+/// `s 15 / 255 * 8 / 2`, whose normal leans away from the rise, so that the quad's centre,
+/// lit by a point light below it and then by one as far above it (and left and right), is
+/// brighter under one of each pair by the ratio of that normal's cosines; the scale changes
+/// the lean, a negated scale leans it the other way, a flat map and the plan's normal maps off
+/// bend nothing, and a quad without texture coordinates is said to leave the map unused.
+/// Fails with the gradient's sign, the triangle's `dp/dv` off by a multiple of `dp/du`, or
+/// the map ignored (checked).
+#[test]
+fn a_height_map_bends_the_shading_normal_away_from_its_rise() {
+    let dir = tempfile::tempdir().unwrap();
+    let texels: Vec<u8> = (0..64u8)
+        .flat_map(|i| [20 + 10 * (i % 8) + 15 * (7 - i / 8); 3])
+        .collect();
+    image::RgbImage::from_raw(8, 8, texels)
+        .unwrap()
+        .save(dir.path().join("ramp.png"))
+        .unwrap();
+    std::fs::write(dir.path().join("flat.png"), png_1x1([90, 90, 90])).unwrap();
+    let obj = "mtllib quad.mtl\nv -1 -1 0\nv 1 -1 0\nv 1 1 0\nv -1 1 0\n\
+               vt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\nvn 0 0 1\nusemtl m\n\
+               f 1/1/1 2/2/1 3/3/1\nf 1/1/1 3/3/1 4/4/1\n";
+    std::fs::write(dir.path().join("quad.obj"), obj).unwrap();
+    let load = |mtl: &str| {
+        std::fs::write(
+            dir.path().join("quad.mtl"),
+            format!("newmtl m\nKd 0.8 0.8 0.8\n{mtl}\n"),
+        )
+        .unwrap();
+        Scene::load(&dir.path().join("quad.obj")).unwrap()
+    };
+    let pairs = [
+        (Vec3::new(0.0, -200.0, 400.0), Vec3::new(0.0, 200.0, 400.0)),
+        (Vec3::new(-200.0, 0.0, 400.0), Vec3::new(200.0, 0.0, 400.0)),
+    ];
+    let l = |c: Vec3| c.x + c.y + c.z;
+    let ratio =
+        |s: &Scene, (a, b): (Vec3, Vec3)| l(centre_radiance(s, a)) / l(centre_radiance(s, b));
+    for scale in [1.0f32, 2.5, -2.5] {
+        let s = load(&format!("bump -bm {scale} ramp.png"));
+        assert!(s.warnings.is_empty(), "{:?}", s.warnings);
+        let slope = |step: f32| scale * step / 255.0 * 8.0 / 2.0;
+        let n = Vec3::new(-slope(10.0), -slope(15.0), 1.0).normalize();
+        for (a, b) in pairs {
+            let expected = n.dot(a.normalize()) / n.dot(b.normalize());
+            assert!((expected - 1.0).abs() > 0.1, "{scale}: {expected}");
+            let r = ratio(&s, (a, b));
+            assert!(
+                (r / expected - 1.0).abs() < 1e-3,
+                "-bm {scale}, lights at {a} and {b}: {r} against {expected}"
+            );
+        }
+    }
+    for pair in pairs {
+        let r = ratio(&load("bump -bm 2.5 flat.png"), pair);
+        assert!((r - 1.0).abs() < 1e-3, "a flat map bends nothing: {r}");
+    }
+    // The plan's switch (the viewer's toggle) leaves the map unread.
+    let s = load("bump -bm 2.5 ramp.png");
+    let settings = RenderSettings {
+        width: 9,
+        height: 9,
+        spp: 2,
+        ..RenderSettings::default()
+    };
+    let plan = tracery::render::RenderPlan::new(&s, &settings);
+    assert!(
+        plan.normal_maps,
+        "a height map turns the plan's normal maps on"
+    );
+    let mut plain = s.clone();
+    plain.materials[0].height_map = None;
+    let bvh = Bvh::build(&s.mesh.triangles, &BuildOptions::sah());
+    let env = tracery::render::EnvironmentMap::None;
+    let film =
+        |s: &Scene, p| tracery::render::render_with_plan(s, &bvh, &env, &settings, p, &|_| {}).film;
+    let plain_plan = tracery::render::RenderPlan::new(&plain, &settings);
+    let off = tracery::render::RenderPlan {
+        normal_maps: false,
+        ..plan
+    };
+    assert_eq!(film(&s, off), film(&plain, plain_plan));
+    assert_ne!(film(&s, plan), film(&plain, plain_plan));
+    // Without texture coordinates the map cannot be placed: said, and left out.
+    std::fs::write(
+        dir.path().join("quad.obj"),
+        obj.replace("vt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\n", "")
+            .replace("/1/1", "//1")
+            .replace("/2/1", "//1")
+            .replace("/3/1", "//1")
+            .replace("/4/1", "//1"),
+    )
+    .unwrap();
+    let s = load("bump -bm 2.5 ramp.png");
+    assert!(s.materials[0].height_map.is_none());
+    assert!(
+        s.warnings
+            .iter()
+            .any(|w| w.contains("quad.obj") && w.contains("height map not used")),
+        "{:?}",
+        s.warnings
+    );
 }
 
 /// A normal texture's own `KHR_texture_transform` (which the gltf crate does not read on a

@@ -195,6 +195,14 @@ fn normal_maps_match_mitsuba() {
     check("normal_map", 64);
 }
 
+/// Height maps (an OBJ's grey `bump`, bump mapping from each triangle's texture frame and
+/// the bilinear interpolation's own gradient) against Mitsuba's `bumpmap` BSDF: the panels of
+/// `normal_map`, bumped by a height map of leaning domes instead.
+#[test]
+fn height_maps_match_mitsuba() {
+    check("height_map", 64);
+}
+
 /// Rough metals (GGX with Smith's masking-shadowing, sampled by visible normals, weighted
 /// against light samples) against Mitsuba's `roughconductor`: two white metal spheres in the
 /// Cornell box, one showing the room blurred, one a broad highlight.
@@ -245,7 +253,8 @@ fn emissive_triangles_light_the_direct_integrator() {
 /// light 4% too dim, the direct integrator where Mitsuba traced paths, the camera turned by
 /// half a pixel, the mirror turned by a degree, the lens focused 25% too far, the environment
 /// turned by 2 degrees, the normal maps ignored, read upside down (Y negated) or at 80% of
-/// their tilt, the rough metals drawn as Blinn-Phong or 15% smoother.
+/// their tilt, the height maps ignored, inverted (dents for domes) or at 80% of their
+/// height, the rough metals drawn as Blinn-Phong or 15% smoother.
 #[test]
 fn deliberate_errors_are_caught() {
     let mut cases: Vec<(&str, Scene, u32, &str)> = Vec::new();
@@ -291,6 +300,20 @@ fn deliberate_errors_are_caught() {
         m.normal_scale = 0.8;
     }
     cases.push(("normal_map", s, 64, "normal maps at 80% of their tilt"));
+    for (scale, what) in [
+        (0.0, "height maps ignored"),
+        (-1.0, "height maps inverted"),
+        (0.8, "height maps at 80% of their height"),
+    ] {
+        let mut s = load_scene("height_map");
+        let mut bumped = 0;
+        for m in s.materials.iter_mut().filter(|m| m.height_map.is_some()) {
+            m.height_scale *= scale;
+            bumped += 1;
+        }
+        assert!(bumped > 0, "the height_map scene's panels have height maps");
+        cases.push(("height_map", s, 64, what));
+    }
     // The spheres as Blinn-Phong lobes of about the same width (the exponent glTF's
     // roughness maps to, Walter et al. 2007), white: the highlights' shape differs.
     let mut s = load_scene("rough_metal");

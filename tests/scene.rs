@@ -605,6 +605,69 @@ fn scene_file_materials_can_name_a_normal_map() {
     }
 }
 
+/// A scene file's material can name a height map (`height_map`, `height_scale`): read as
+/// linear values, no tangents made (bump mapping takes its frame from the texture
+/// coordinates); a shape without texture coordinates given it is said to leave it unused,
+/// naming the line; a missing image, a scale that is not a number, and a height map beside a
+/// normal map are errors naming the file and line.
+#[test]
+fn scene_file_materials_can_name_a_height_map() {
+    let dir = tempfile::tempdir().unwrap();
+    let img = image::RgbImage::from_raw(1, 1, vec![90, 90, 90]).unwrap();
+    img.save(dir.path().join("h.png")).unwrap();
+    write(
+        dir.path(),
+        "quad.obj",
+        b"v -1 -1 0\nv 1 -1 0\nv 1 1 0\nv -1 1 0\nvt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\n\
+          f 1/1 2/2 3/3\nf 1/1 3/3 4/4\n",
+    );
+    let scene = |extra: &str| {
+        format!(
+            "[materials.dented]\ndiffuse = [0.8, 0.8, 0.8]\nheight_map = \"h.png\"\nheight_scale = 0.02\n\n\
+             [[meshes]]\npath = \"quad.obj\"\nmaterial = \"dented\"\n{extra}"
+        )
+    };
+    let s = Scene::load(&write(dir.path(), "s.toml", scene("").as_bytes())).unwrap();
+    assert!(s.warnings.is_empty(), "{:?}", s.warnings);
+    let m = s.material_of(0);
+    assert!(
+        m.height_map.as_ref().is_some_and(|t| !t.srgb),
+        "a linear map"
+    );
+    assert!(m.normal_map.is_none() && s.mesh.tangents.is_empty());
+    assert_eq!(m.height_scale, 0.02);
+    let s = Scene::load(&write(
+        dir.path(),
+        "s.toml",
+        scene("\n[[meshes]]\nshape = \"cube\"\nmaterial = \"dented\"\n").as_bytes(),
+    ))
+    .unwrap();
+    assert!(
+        s.warnings.iter().any(|w| w.contains("s.toml:10")
+            && w.contains("height map")
+            && w.contains("no texture coordinates")),
+        "{:?}",
+        s.warnings
+    );
+    for (from, to, line) in [
+        ("\"h.png\"", "\"missing.png\"", 3),
+        ("height_scale = 0.02", "height_scale = nan", 4),
+        (
+            "height_map = \"h.png\"",
+            "normal_map = \"h.png\"\nheight_map = \"h.png\"",
+            4,
+        ),
+    ] {
+        let p = write(
+            dir.path(),
+            "bad.toml",
+            scene("").replace(from, to).as_bytes(),
+        );
+        let e = err(Scene::load(&p));
+        assert!(e.contains(&format!("bad.toml:{line}")), "{to}: {e}");
+    }
+}
+
 /// A scene file's material with `sheen` (a colour) is a metallic-roughness material under
 /// glTF's sheen layer (`sheen_roughness` 0.5 by default); a black sheen is none. A sheen
 /// that is not a colour, a roughness outside [0, 1] or without a sheen, and a sheen mixed

@@ -28,8 +28,8 @@ pub struct RenderPlan {
     pub absorption: bool,
     /// Camera rays start on a thin lens (else a pinhole).
     pub thin_lens: bool,
-    /// Materials' normal maps bend the shading normal (else the interpolated normal is
-    /// used, and no normal map is read).
+    /// Materials' normal and height maps bend the shading normal (else the interpolated
+    /// normal is used, and no such map is read).
     pub normal_maps: bool,
     /// At most this many shadow samples per area light and shading point (`None`: each
     /// light's own count). The viewer's moving preview takes 1: noisier, several times cheaper.
@@ -64,7 +64,10 @@ impl RenderPlan {
             transmission: bounces && transparent,
             absorption: absorbing,
             thin_lens: scene.camera.lens_radius > 0.0,
-            normal_maps: scene.materials.iter().any(|m| m.has_normal_map()),
+            normal_maps: scene
+                .materials
+                .iter()
+                .any(|m| m.has_normal_map() || m.has_height_map()),
             max_light_samples: None,
         }
     }
@@ -169,11 +172,11 @@ impl fmt::Display for Explain<'_> {
                 let n = scene
                     .materials
                     .iter()
-                    .filter(|m| m.has_normal_map())
+                    .filter(|m| m.has_normal_map() || m.has_height_map())
                     .count();
-                format!("yes, {n} material(s) bend the shading normal")
+                format!("yes, {n} material(s) bend the shading normal (normal or height maps)")
             } else {
-                "no normal map: interpolated normals".into()
+                "no normal or height map: interpolated normals".into()
             }
         )?;
         writeln!(

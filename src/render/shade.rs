@@ -207,7 +207,10 @@ impl<'a> Tracer<'a> {
         if let Some(mapped) = self
             .plan
             .normal_maps
-            .then(|| normal_mapped(scene, material, prim, u, v, interpolated))
+            .then(|| {
+                normal_mapped(scene, material, prim, u, v, interpolated)
+                    .or_else(|| bump_mapped(scene, material, prim, u, v, interpolated))
+            })
             .flatten()
         {
             // A map bending the normal past the surface's horizon is not followed there.
@@ -877,6 +880,46 @@ fn normal_mapped_by(
         .sample(scene.mesh.uv_at(map.uv_set, prim, u, v))
         .truncate();
     crate::scene::tangents::perturbed(n, t, texel, scale)
+}
+
+/// The shading normal a material's height map gives at barycentric `(u, v)` of triangle
+/// `prim`, about the interpolated normal `n` (`None` without a map, or where the triangle's
+/// texture coordinates or the result are degenerate: the caller keeps `n`), on `n`'s side.
+///
+/// The surface is taken as displaced along `n` by `height_scale` times the map's value
+/// (its luminance), and the normal is that of the displaced surface, the normal's own change
+/// across the triangle left out: with `dp/du`, `dp/dv` the triangle's derivatives by its
+/// texture coordinates made tangent to `n`, and `g` the displacement's gradient in texture
+/// space, `normalize((dp/du + g.x n) x (dp/dv + g.y n))`. This is Mitsuba's `bumpmap`
+/// (which flips by the geometric normal; the reference scenes' meshes have face normals, where
+/// the two agree).
+pub(super) fn bump_mapped(
+    scene: &Scene,
+    m: &Material,
+    prim: u32,
+    u: f32,
+    v: f32,
+    n: Vec3,
+) -> Option<Vec3> {
+    let map = m.height_map.as_ref()?;
+    let mesh = &scene.mesh;
+    let tri = &mesh.triangles[prim as usize];
+    let uv = |a: f32, b: f32| mesh.uv_at(map.uv_set, prim, a, b);
+    let (t0, d1, d2) = (uv(0.0, 0.0), uv(1.0, 0.0), uv(0.0, 1.0));
+    let (d1, d2) = (d1 - t0, d2 - t0);
+    let det = d1.x * d2.y - d1.y * d2.x;
+    if det == 0.0 || !det.is_finite() {
+        return None;
+    }
+    let (e1, e2) = (tri[1] - tri[0], tri[2] - tri[0]);
+    let dp_du = (e1 * d2.y - e2 * d1.y) / det;
+    let dp_dv = (e2 * d1.x - e1 * d2.x) / det;
+    let n = n.try_normalize()?;
+    let g = map.luminance_gradient(uv(u, v)) * m.height_scale;
+    let du = dp_du + n * (g.x - n.dot(dp_du));
+    let dv = dp_dv + n * (g.y - n.dot(dp_dv));
+    let bent = du.cross(dv).try_normalize()?;
+    Some(if bent.dot(n) < 0.0 { -bent } else { bent })
 }
 
 /// Barycentric `(u, v)` (the weights of the second and third vertex) of a point `p` lying on

@@ -26,6 +26,11 @@
 //! normal_map = "bumps.png"   # tangent-space normal map (+Y up); needs texture coordinates
 //! normal_scale = 1.0         # its X and Y scaled (default 1)
 //!
+//! [materials.hammered]
+//! diffuse = [0.8, 0.8, 0.8]
+//! height_map = "dents.png"   # bump mapping (not with normal_map); needs texture coordinates
+//! height_scale = 0.01        # displacement per unit of the map's value, scene units (default 1)
+//!
 //! [[meshes]]
 //! path = "../models/cornell_box.obj"
 //!
@@ -118,6 +123,8 @@ struct MaterialDef {
     absorption: Option<[f32; 3]>,
     normal_map: Option<Spanned<String>>,
     normal_scale: Option<Spanned<f32>>,
+    height_map: Option<Spanned<String>>,
+    height_scale: Option<Spanned<f32>>,
     metallic: Option<Spanned<f32>>,
     roughness: Option<Spanned<f32>>,
     sheen: Option<Spanned<[f32; 3]>>,
@@ -345,12 +352,32 @@ pub fn parse(path: &Path, text: &str, read: ReadFn, check_files: bool) -> Result
             }
             mat.normal_scale = *scale.get_ref();
         }
-        if let Some(map) = &m.normal_map {
-            let file = resolve(map.get_ref());
-            let texture = read(&file)
-                .and_then(|bytes| Texture::decode(&file.display().to_string(), &bytes, false))
-                .map_err(|e| at(map.span().start, format!("normal_map: {e:#}")))?;
-            mat.normal_map = Some(std::sync::Arc::new(texture));
+        if let (Some(_), Some(height)) = (&m.normal_map, &m.height_map) {
+            return Err(at(
+                height.span().start,
+                "a material takes a normal_map or a height_map, not both".into(),
+            ));
+        }
+        if let Some(scale) = &m.height_scale {
+            if !scale.get_ref().is_finite() {
+                return Err(at(
+                    scale.span().start,
+                    format!("height_scale {} is not a finite number", scale.get_ref()),
+                ));
+            }
+            mat.height_scale = *scale.get_ref();
+        }
+        for (key, map, slot) in [
+            ("normal_map", &m.normal_map, &mut mat.normal_map),
+            ("height_map", &m.height_map, &mut mat.height_map),
+        ] {
+            if let Some(map) = map {
+                let file = resolve(map.get_ref());
+                let texture = read(&file)
+                    .and_then(|bytes| Texture::decode(&file.display().to_string(), &bytes, false))
+                    .map_err(|e| at(map.span().start, format!("{key}: {e:#}")))?;
+                *slot = Some(std::sync::Arc::new(texture));
+            }
         }
         materials.push(mat);
     }
@@ -417,6 +444,17 @@ pub fn parse(path: &Path, text: &str, read: ReadFn, check_files: bool) -> Result
                 ));
             }
         };
+        if let Some(id) = override_id
+            && materials[id as usize].has_height_map()
+            && part.uvs.is_empty()
+        {
+            warnings.push(format!(
+                "{}:{}: material `{}` has a height map, but the mesh has no texture coordinates: not applied",
+                path.display(),
+                line_of(text, span.start),
+                materials[id as usize].name
+            ));
+        }
         if let Some(id) = override_id
             && materials[id as usize].has_normal_map()
         {
@@ -617,6 +655,8 @@ fn material_from_def(name: &str, m: &MaterialDef) -> Material {
         alpha_mode: super::AlphaMode::Opaque,
         normal_map: None,
         normal_scale: 1.0,
+        height_map: None,
+        height_scale: 1.0,
         pbr: None,
     }
 }

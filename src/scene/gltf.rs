@@ -2053,6 +2053,8 @@ pub fn convert_material(m: &::gltf::Material) -> Material {
         alpha_mode,
         normal_map: None,
         normal_scale: 1.0,
+        height_map: None,
+        height_scale: 1.0,
         pbr: Some(super::pbr::MetallicRoughness {
             base,
             metallic,

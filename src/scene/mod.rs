@@ -60,6 +60,14 @@ pub struct Material {
     pub normal_map: Option<Arc<Texture>>,
     /// Scale of the normal map's X and Y (glTF `normalTexture.scale`; 1 as the map is).
     pub normal_scale: f32,
+    /// Height map (OBJ's grey `map_Bump` / `bump`, scene files' `height_map`; linear values,
+    /// their luminance): the surface is shaded as if displaced along its normal by
+    /// `height_scale` times the map's value, in scene units, without moving (bump mapping,
+    /// Blinn 1978, as Mitsuba's `bumpmap` does it: [`Material::height_scale`]).
+    pub height_map: Option<Arc<Texture>>,
+    /// The height map's displacement per unit of its value, in scene units (OBJ's `-bm`,
+    /// Mitsuba's `scale`; 1 by default).
+    pub height_scale: f32,
     /// Metallic-roughness parameters (glTF materials, and scene-file materials that set
     /// `metallic` or `roughness`; `None` for the others). When set, the surface is shaded
     /// with a GGX lobe made from them ([`pbr::lobes`]) instead of `specular` and `shininess`;
@@ -101,6 +109,8 @@ impl Default for Material {
             alpha_mode: AlphaMode::Opaque,
             normal_map: None,
             normal_scale: 1.0,
+            height_map: None,
+            height_scale: 1.0,
             pbr: None,
         }
     }
@@ -178,8 +188,8 @@ impl Material {
             || self.pbr.as_ref().is_some_and(|p| p.is_textured())
     }
 
-    /// The material's textures: base colour, emission, metallic-roughness, normal map, the
-    /// clear coat's, the specular ones and the sheen's.
+    /// The material's textures: base colour, emission, metallic-roughness, normal map, height
+    /// map, the clear coat's, the specular ones and the sheen's.
     pub fn textures(&self) -> impl Iterator<Item = &Arc<Texture>> {
         let coat = self.pbr.as_ref().and_then(|p| p.clearcoat.as_ref());
         let specular = self.pbr.as_ref().map(|p| &p.specular);
@@ -189,6 +199,7 @@ impl Material {
             self.emission_map.as_ref(),
             self.pbr.as_ref().and_then(|p| p.map.as_ref()),
             self.normal_map.as_ref(),
+            self.height_map.as_ref(),
             coat.and_then(|c| c.map.as_ref()),
             coat.and_then(|c| c.roughness_map.as_ref()),
             coat.and_then(|c| c.normal_map.as_ref()),
@@ -199,6 +210,12 @@ impl Material {
         ]
         .into_iter()
         .flatten()
+    }
+
+    /// True when a height map bends the surface's normal (bump mapping; no tangents needed:
+    /// the frame comes from each triangle's texture coordinates).
+    pub fn has_height_map(&self) -> bool {
+        self.height_map.is_some()
     }
 
     /// True when a normal map bends a normal of the surface: the material's, or its clear

@@ -5,8 +5,10 @@
 //! smoothing groups (`s`; flat outside them, see [`super::normals`]), and the MTL fields `Kd Ks Ns Ke d Tr Ni illum` become a
 //! [`Material`], `map_Kd` its diffuse texture (an image that cannot be read is a warning), and
 //! `norm` or a `map_Bump` / `bump` holding a colour image its normal map (tangent space, `+Y`
-//! up, `-bm` its scale; a grey `map_Bump` is a height map, which is not read: a warning says
-//! so), with MikkTSpace tangents ([`super::tangents`]). `tobj` reports what went wrong but not where; the loader then finds the first
+//! up, `-bm` its scale), with MikkTSpace tangents ([`super::tangents`]); a grey `map_Bump` /
+//! `bump` is a height map (bump mapping, `-bm` the displacement per unit of its value in the
+//! file's units: [`Material::height_scale`]). A map on a mesh without texture coordinates is a
+//! warning. `tobj` reports what went wrong but not where; the loader then finds the first
 //! offending line itself so that the error reads `file:line: message`.
 
 use std::io::BufReader;
@@ -201,10 +203,10 @@ pub fn load_from(
                         match (cache.get(spec, false, read_mtl), bump_multiplier(spec)) {
                             (Err(e), _) => warnings.push(say(format!("{e:#}"))),
                             (Ok(_), None) => warnings.push(say("its -bm is not a number".into())),
-                            (Ok(t), Some(_)) if key != "norm" && t.is_grey() => warnings.push(say(
-                                "a grey image: a height map, and bump mapping is not supported"
-                                    .into(),
-                            )),
+                            (Ok(t), Some(scale)) if key != "norm" && t.is_grey() => {
+                                mat.height_map = Some(t);
+                                mat.height_scale = scale;
+                            }
                             (Ok(t), Some(scale)) => {
                                 mat.normal_map = Some(t);
                                 mat.normal_scale = scale;
@@ -353,6 +355,26 @@ pub fn load_from(
     if need_default || mats.is_empty() {
         mats.push(Material::default());
     }
+    if mesh.uvs.is_empty() {
+        let mut used = vec![false; mats.len()];
+        mesh.material_ids
+            .iter()
+            .for_each(|&i| used[i as usize] = true);
+        for (m, _) in mats.iter_mut().zip(used).filter(|(_, used)| *used) {
+            for (what, map) in [
+                ("normal map", &mut m.normal_map),
+                ("height map", &mut m.height_map),
+            ] {
+                if map.take().is_some() {
+                    warnings.push(format!(
+                        "{}: material {}: {what} not used (the mesh has no texture coordinates)",
+                        path.display(),
+                        m.name
+                    ));
+                }
+            }
+        }
+    }
     let mapped = |i: usize| mats[mesh.material_ids[i] as usize].normal_map.is_some();
     if !mesh.uvs.is_empty() && (0..mesh.triangles.len()).any(mapped) {
         mesh.tangents =
@@ -414,6 +436,8 @@ fn convert_material(m: &tobj::Material) -> Material {
         alpha_mode: super::AlphaMode::Opaque,
         normal_map: None,
         normal_scale: 1.0,
+        height_map: None,
+        height_scale: 1.0,
         pbr: None,
     }
 }

@@ -410,7 +410,7 @@ fn render_section(
             );
             ui.checkbox(&mut s.normal_maps, "normal maps")
                 .on_hover_text(
-                    "materials' normal maps bend the shading normal (off: the mesh's own normals)",
+                    "materials' normal and height (bump) maps bend the shading normal (off: the mesh's own normals)",
                 );
             egui::ComboBox::from_label("sampler")
                 .selected_text(s.sampler.to_string())

@@ -111,7 +111,7 @@ pub struct ViewSettings {
     pub shadows: bool,
     /// Shadow rays pass through transparent surfaces.
     pub transparent_shadows: bool,
-    /// Materials' normal maps bend the shading normal.
+    /// Materials' normal and height maps bend the shading normal.
     pub normal_maps: bool,
     /// How samples are drawn.
     pub sampler: SamplerKind,
