@@ -470,6 +470,14 @@ fn traced_image_with_normal_maps_equals_the_headless_render() {
     });
 }
 
+/// The same with height maps (the bump-mapped panels of the reference scene).
+#[test]
+fn traced_image_with_height_maps_equals_the_headless_render() {
+    traced_equals_headless(Some("tests/reference/scenes/height_map.toml"), |m| {
+        m.height_map.is_some()
+    });
+}
+
 /// The same with a glTF material's metallic-roughness texture (the five spheres, path
 /// traced), seen by a camera that looks down on them.
 #[test]
