@@ -1480,6 +1480,26 @@ fn a_normal_map_bends_the_shading_normal_the_way_its_texels_lean() {
     );
 }
 
+/// An OBJ quad (2 x 2 about the origin, facing +z, texture coordinates 0..1 with `v` up, a
+/// normal per vertex) of material `m`.
+const QUAD_OBJ: &str = "mtllib quad.mtl\nv -1 -1 0\nv 1 -1 0\nv 1 1 0\nv -1 1 0\n\
+                        vt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\nvn 0 0 1\nusemtl m\n\
+                        f 1/1/1 2/2/1 3/3/1\nf 1/1/1 3/3/1 4/4/1\n";
+
+/// Writes [`QUAD_OBJ`] into `dir` and returns a loader of it whose material `m` is light grey
+/// plus the MTL lines given.
+fn obj_quad(dir: &Path) -> impl Fn(&str) -> Scene + '_ {
+    std::fs::write(dir.join("quad.obj"), QUAD_OBJ).unwrap();
+    move |mtl: &str| {
+        std::fs::write(
+            dir.join("quad.mtl"),
+            format!("newmtl m\nKd 0.8 0.8 0.8\n{mtl}\n"),
+        )
+        .unwrap();
+        Scene::load(&dir.join("quad.obj")).unwrap()
+    }
+}
+
 /// An OBJ quad whose MTL names a normal map: `map_Bump` with a colour image (as exporters
 /// write normal maps, `-bm` its scale) and `norm` are read as tangent-space normal maps, with
 /// MikkTSpace tangents, and bend the shading normal as the glTF one does (the same ratio); a
@@ -1491,18 +1511,7 @@ fn an_obj_normal_map_bends_like_gltf_and_a_grey_bump_map_is_a_height_map() {
     let rgb = [128u8, 218, 218];
     std::fs::write(dir.path().join("n.png"), png_1x1(rgb)).unwrap();
     std::fs::write(dir.path().join("grey.png"), png_1x1([90, 90, 90])).unwrap();
-    let obj = "mtllib quad.mtl\nv -1 -1 0\nv 1 -1 0\nv 1 1 0\nv -1 1 0\n\
-               vt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\nvn 0 0 1\nusemtl m\n\
-               f 1/1/1 2/2/1 3/3/1\nf 1/1/1 3/3/1 4/4/1\n";
-    std::fs::write(dir.path().join("quad.obj"), obj).unwrap();
-    let load = |mtl: &str| {
-        std::fs::write(
-            dir.path().join("quad.mtl"),
-            format!("newmtl m\nKd 0.8 0.8 0.8\n{mtl}\n"),
-        )
-        .unwrap();
-        Scene::load(&dir.path().join("quad.obj")).unwrap()
-    };
+    let load = obj_quad(dir.path());
     let (up, down) = (Vec3::new(0.0, 200.0, 400.0), Vec3::new(0.0, -200.0, 400.0));
     let m = Vec3::from(rgb.map(|c| c as f32 / 255.0 * 2.0 - 1.0)).normalize();
     let expected = m.dot(up.normalize()) / m.dot(down.normalize());
@@ -1571,18 +1580,7 @@ fn a_height_map_bends_the_shading_normal_away_from_its_rise() {
         .save(dir.path().join("ramp.png"))
         .unwrap();
     std::fs::write(dir.path().join("flat.png"), png_1x1([90, 90, 90])).unwrap();
-    let obj = "mtllib quad.mtl\nv -1 -1 0\nv 1 -1 0\nv 1 1 0\nv -1 1 0\n\
-               vt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\nvn 0 0 1\nusemtl m\n\
-               f 1/1/1 2/2/1 3/3/1\nf 1/1/1 3/3/1 4/4/1\n";
-    std::fs::write(dir.path().join("quad.obj"), obj).unwrap();
-    let load = |mtl: &str| {
-        std::fs::write(
-            dir.path().join("quad.mtl"),
-            format!("newmtl m\nKd 0.8 0.8 0.8\n{mtl}\n"),
-        )
-        .unwrap();
-        Scene::load(&dir.path().join("quad.obj")).unwrap()
-    };
+    let load = obj_quad(dir.path());
     let pairs = [
         (Vec3::new(0.0, -200.0, 400.0), Vec3::new(0.0, 200.0, 400.0)),
         (Vec3::new(-200.0, 0.0, 400.0), Vec3::new(200.0, 0.0, 400.0)),
@@ -1638,7 +1636,8 @@ fn a_height_map_bends_the_shading_normal_away_from_its_rise() {
     // Without texture coordinates the map cannot be placed: said, and left out.
     std::fs::write(
         dir.path().join("quad.obj"),
-        obj.replace("vt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\n", "")
+        QUAD_OBJ
+            .replace("vt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\n", "")
             .replace("/1/1", "//1")
             .replace("/2/1", "//1")
             .replace("/3/1", "//1")

@@ -532,6 +532,12 @@ intensity = 5.0
     );
 }
 
+/// An OBJ quad (2 x 2 about the origin in the xy plane, texture coordinates 0..1, `u` along
+/// +x), no material.
+const UV_QUAD_OBJ: &[u8] =
+    b"v -1 -1 0\nv 1 -1 0\nv 1 1 0\nv -1 1 0\nvt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\n\
+                             f 1/1 2/2 3/3\nf 1/1 3/3 4/4\n";
+
 /// A scene file's material can name a normal map (`normal_map`, `normal_scale`): a mesh given
 /// that material gets MikkTSpace's tangents, turned with the mesh's transform (an OBJ quad
 /// whose `u` runs along +x, turned 90 degrees about z, has its tangents along +y); a shape
@@ -542,12 +548,7 @@ fn scene_file_materials_can_name_a_normal_map() {
     let dir = tempfile::tempdir().unwrap();
     let img = image::RgbImage::from_raw(1, 1, vec![128, 218, 218]).unwrap();
     img.save(dir.path().join("n.png")).unwrap();
-    write(
-        dir.path(),
-        "quad.obj",
-        b"v -1 -1 0\nv 1 -1 0\nv 1 1 0\nv -1 1 0\nvt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\n\
-          f 1/1 2/2 3/3\nf 1/1 3/3 4/4\n",
-    );
+    write(dir.path(), "quad.obj", UV_QUAD_OBJ);
     let scene = |extra: &str| {
         format!(
             "[materials.bumpy]\ndiffuse = [0.8, 0.8, 0.8]\nnormal_map = \"n.png\"\nnormal_scale = 0.5\n\n\
@@ -615,12 +616,7 @@ fn scene_file_materials_can_name_a_height_map() {
     let dir = tempfile::tempdir().unwrap();
     let img = image::RgbImage::from_raw(1, 1, vec![90, 90, 90]).unwrap();
     img.save(dir.path().join("h.png")).unwrap();
-    write(
-        dir.path(),
-        "quad.obj",
-        b"v -1 -1 0\nv 1 -1 0\nv 1 1 0\nv -1 1 0\nvt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\n\
-          f 1/1 2/2 3/3\nf 1/1 3/3 4/4\n",
-    );
+    write(dir.path(), "quad.obj", UV_QUAD_OBJ);
     let scene = |extra: &str| {
         format!(
             "[materials.dented]\ndiffuse = [0.8, 0.8, 0.8]\nheight_map = \"h.png\"\nheight_scale = 0.02\n\n\

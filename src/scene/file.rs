@@ -343,29 +343,25 @@ pub fn parse(path: &Path, text: &str, read: ReadFn, check_files: bool) -> Result
             mat.mirror = lobes.mirror;
             mat.pbr = Some(pbr);
         }
-        if let Some(scale) = &m.normal_scale {
-            if !scale.get_ref().is_finite() {
-                return Err(at(
-                    scale.span().start,
-                    format!("normal_scale {} is not a finite number", scale.get_ref()),
-                ));
-            }
-            mat.normal_scale = *scale.get_ref();
-        }
         if let (Some(_), Some(height)) = (&m.normal_map, &m.height_map) {
             return Err(at(
                 height.span().start,
                 "a material takes a normal_map or a height_map, not both".into(),
             ));
         }
-        if let Some(scale) = &m.height_scale {
-            if !scale.get_ref().is_finite() {
-                return Err(at(
-                    scale.span().start,
-                    format!("height_scale {} is not a finite number", scale.get_ref()),
-                ));
+        for (key, scale, slot) in [
+            ("normal_scale", &m.normal_scale, &mut mat.normal_scale),
+            ("height_scale", &m.height_scale, &mut mat.height_scale),
+        ] {
+            if let Some(scale) = scale {
+                if !scale.get_ref().is_finite() {
+                    return Err(at(
+                        scale.span().start,
+                        format!("{key} {} is not a finite number", scale.get_ref()),
+                    ));
+                }
+                *slot = *scale.get_ref();
             }
-            mat.height_scale = *scale.get_ref();
         }
         for (key, map, slot) in [
             ("normal_map", &m.normal_map, &mut mat.normal_map),
