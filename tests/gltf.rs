@@ -1655,6 +1655,40 @@ fn a_height_map_bends_the_shading_normal_away_from_its_rise() {
     );
 }
 
+/// MTL texture lines as exporters write them: options before the image (`-s 1 1 1`) or after
+/// it (`-bm 0.5`), and file names with spaces, name their images; a `-imfchan` other than `l`
+/// on a bump line is said not to be read.
+#[test]
+fn mtl_texture_lines_name_their_images_past_options_and_spaces() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("my tex.png"), png_1x1([200, 30, 30])).unwrap();
+    std::fs::write(dir.path().join("my bump.png"), png_1x1([90, 90, 90])).unwrap();
+    let load = obj_quad(dir.path());
+    let s = load("map_Kd -s 1 1 1 -o 0 0 my tex.png\nbump my bump.png -bm 0.5");
+    assert!(s.warnings.is_empty(), "{:?}", s.warnings);
+    let m = &s.materials[0];
+    assert!(
+        m.diffuse_map
+            .as_ref()
+            .is_some_and(|t| t.name.ends_with("my tex.png"))
+    );
+    assert!(
+        m.height_map
+            .as_ref()
+            .is_some_and(|t| t.name.ends_with("my bump.png"))
+    );
+    assert_eq!(m.height_scale, 0.5);
+    let s = load("bump -imfchan r my bump.png");
+    assert!(s.materials[0].height_map.is_some());
+    assert!(
+        s.warnings
+            .iter()
+            .any(|w| w.contains("quad.obj") && w.contains("-imfchan r is not read")),
+        "{:?}",
+        s.warnings
+    );
+}
+
 /// A normal texture's own `KHR_texture_transform` (which the gltf crate does not read on a
 /// normal texture) is applied; malformed fields (an offset beyond f32, a rotation that is not
 /// a number) fall back to their defaults with a warning naming them; a scale that is not a

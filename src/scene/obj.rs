@@ -29,16 +29,15 @@ use super::{Material, Mesh, Texture, face_normal, read_file};
 struct TextureCache(HashMap<(String, bool), Arc<Texture>>);
 
 impl TextureCache {
-    /// The image a texture line names (its last word: options such as `-s 1 1 1` come before
-    /// the file name), read beside the OBJ through `read`; `srgb` for a colour image, linear
-    /// values for a normal map.
+    /// The image a texture line names ([`TextureLine::file`]), read beside the OBJ through
+    /// `read`; `srgb` for a colour image, linear values for a normal or height map.
     fn get(
         &mut self,
         spec: &str,
         srgb: bool,
         read: &dyn Fn(&Path) -> Result<Vec<u8>>,
     ) -> Result<Arc<Texture>> {
-        let file = spec.split_whitespace().last().unwrap_or(spec).to_string();
+        let file = TextureLine::parse(spec).file;
         if let Some(t) = self.0.get(&(file.clone(), srgb)) {
             return Ok(t.clone());
         }
@@ -49,16 +48,66 @@ impl TextureCache {
     }
 }
 
-/// The scale a texture line's `-bm` option gives (1 without one; `None` when its value is not
-/// a finite number).
-fn bump_multiplier(spec: &str) -> Option<f32> {
-    let words: Vec<&str> = spec.split_whitespace().collect();
-    match words.iter().position(|&w| w == "-bm") {
-        None => Some(1.0),
-        Some(i) => words
-            .get(i + 1)
-            .and_then(|w| w.parse::<f32>().ok())
-            .filter(|x| x.is_finite()),
+/// What an MTL texture line (`map_Kd`, `bump`, `norm`, ...) says: the image's file name and
+/// the options read. The options of the MTL specification are skipped with their values
+/// wherever they stand (exporters write some after the name), so that the words left, joined
+/// by single spaces, name the file, spaces and all (`bump -bm 2 bump 01.png`). An unknown
+/// word starting with `-` is taken as part of the name.
+#[derive(Debug, PartialEq)]
+struct TextureLine {
+    /// The image, relative to the MTL file.
+    file: String,
+    /// The `-bm` value as written (`None` without one).
+    bump: Option<String>,
+    /// The `-imfchan` value (`None` without one).
+    channel: Option<String>,
+}
+
+impl TextureLine {
+    fn parse(spec: &str) -> Self {
+        let words: Vec<&str> = spec.split_whitespace().collect();
+        let (mut name, mut bump, mut channel) = (Vec::new(), None, None);
+        let mut i = 0;
+        while i < words.len() {
+            let w = words[i];
+            // Values each option takes; `-o`, `-s` and `-t` take one to three numbers.
+            let takes = match w {
+                "-blendu" | "-blendv" | "-boost" | "-cc" | "-clamp" | "-texres" | "-type"
+                | "-colorspace" | "-bm" | "-imfchan" => 1,
+                "-mm" => 2,
+                "-o" | "-s" | "-t" => words[i + 1..]
+                    .iter()
+                    .take(3)
+                    .take_while(|v| v.parse::<f32>().is_ok())
+                    .count()
+                    .max(1),
+                _ => {
+                    name.push(w);
+                    i += 1;
+                    continue;
+                }
+            };
+            let value = words.get(i + 1).map(|v| v.to_string());
+            match w {
+                "-bm" => bump = Some(value.unwrap_or_default()),
+                "-imfchan" => channel = value,
+                _ => {}
+            }
+            i += 1 + takes;
+        }
+        Self {
+            file: name.join(" "),
+            bump,
+            channel,
+        }
+    }
+
+    /// The scale `-bm` gives (1 without one; `None` when its value is not a finite number).
+    fn bump_multiplier(&self) -> Option<f32> {
+        match &self.bump {
+            None => Some(1.0),
+            Some(v) => v.parse::<f32>().ok().filter(|x| x.is_finite()),
+        }
     }
 }
 
@@ -200,7 +249,15 @@ pub fn load_from(
                                 tm.name
                             )
                         };
-                        match (cache.get(spec, false, read_mtl), bump_multiplier(spec)) {
+                        let line = TextureLine::parse(spec);
+                        if let Some(c) = line.channel.as_deref().filter(|&c| c != "l") {
+                            warnings.push(format!(
+                                "{}: material {}: {key}'s -imfchan {c} is not read (a height map's value is its luminance, a normal map's its RGB)",
+                                path.display(),
+                                tm.name
+                            ));
+                        }
+                        match (cache.get(spec, false, read_mtl), line.bump_multiplier()) {
                             (Err(e), _) => warnings.push(say(format!("{e:#}"))),
                             (Ok(_), None) => warnings.push(say("its -bm is not a number".into())),
                             (Ok(t), Some(scale)) if key != "norm" && t.is_grey() => {
@@ -529,4 +586,52 @@ fn locate_error(text: &str, err: tobj::LoadError) -> Option<(usize, String)> {
         }
     }
     None
+}
+
+#[cfg(test)]
+mod tests {
+    use super::TextureLine;
+
+    fn line(file: &str, bump: Option<&str>, channel: Option<&str>) -> TextureLine {
+        TextureLine {
+            file: file.into(),
+            bump: bump.map(Into::into),
+            channel: channel.map(Into::into),
+        }
+    }
+
+    /// Options are skipped with their values wherever they stand; the words left name the file,
+    /// spaces included (lines of tinyobjloader's test models among them).
+    #[test]
+    fn a_texture_line_names_its_file_past_its_options() {
+        for (spec, expected) in [
+            ("tex.png", line("tex.png", None, None)),
+            ("-s 1 1 1 -o 0.5 0.5 tex.png", line("tex.png", None, None)),
+            ("-s 2 tex.png", line("tex.png", None, None)),
+            ("-bm 2 bump 01.png", line("bump 01.png", Some("2"), None)),
+            (
+                "-imfchan r bumpmap2.jpg -bm 1.5",
+                line("bumpmap2.jpg", Some("1.5"), Some("r")),
+            ),
+            (
+                "-colorspace linear -bm 3 bumpmap.jpg",
+                line("bumpmap.jpg", Some("3"), None),
+            ),
+            (
+                "-clamp on -blendu off -mm 0 1 -texres 512 -type sphere t.png",
+                line("t.png", None, None),
+            ),
+            ("-bm x n.png", line("n.png", Some("x"), None)),
+            ("-weird t.png", line("-weird t.png", None, None)),
+        ] {
+            assert_eq!(TextureLine::parse(spec), expected, "{spec}");
+        }
+        assert_eq!(
+            TextureLine::parse("-bm 0.25 n.png").bump_multiplier(),
+            Some(0.25)
+        );
+        assert_eq!(TextureLine::parse("n.png").bump_multiplier(), Some(1.0));
+        assert_eq!(TextureLine::parse("-bm nan n.png").bump_multiplier(), None);
+        assert_eq!(TextureLine::parse("-bm x n.png").bump_multiplier(), None);
+    }
 }
