@@ -1607,6 +1607,17 @@ fn a_height_map_bends_the_shading_normal_away_from_its_rise() {
         let r = ratio(&load("bump -bm 2.5 flat.png"), pair);
         assert!((r - 1.0).abs() < 1e-3, "a flat map bends nothing: {r}");
     }
+    // Extreme scales light the quad finitely: a near-vertical bent normal (kept where it is
+    // above the horizon), or none at all.
+    for scale in ["1e30", "-1e30", "3.4e38", "1e-30", "0"] {
+        let s = load(&format!("bump -bm {scale} ramp.png"));
+        for (a, b) in pairs {
+            for light in [a, b] {
+                let c = centre_radiance(&s, light);
+                assert!(c.is_finite() && c.min_element() >= 0.0, "-bm {scale}: {c}");
+            }
+        }
+    }
     // The plan's switch (the viewer's toggle) leaves the map unread.
     let s = load("bump -bm 2.5 ramp.png");
     let settings = RenderSettings {
