@@ -18,6 +18,16 @@ fn err(r: anyhow::Result<Scene>) -> String {
     format!("{:#}", r.expect_err("an error"))
 }
 
+/// Each case's scene (`text` with `from` replaced by `to`, written as `bad.toml` into `dir`)
+/// fails to load with an error naming `bad.toml` and the case's line.
+fn assert_errors_at(dir: &Path, text: &str, cases: &[(&str, &str, usize)]) {
+    for (from, to, line) in cases {
+        let p = write(dir, "bad.toml", text.replace(from, to).as_bytes());
+        let e = err(Scene::load(&p));
+        assert!(e.contains(&format!("bad.toml:{line}")), "{to}: {e}");
+    }
+}
+
 #[test]
 fn cornell_box_has_32_triangles_its_materials_and_light() {
     let s = Scene::cornell_box();
@@ -592,18 +602,14 @@ fn scene_file_materials_can_name_a_normal_map() {
         "{:?}",
         s.warnings
     );
-    for (from, to, line) in [
-        ("\"n.png\"", "\"missing.png\"", 3),
-        ("normal_scale = 0.5", "normal_scale = nan", 4),
-    ] {
-        let p = write(
-            dir.path(),
-            "bad.toml",
-            scene("").replace(from, to).as_bytes(),
-        );
-        let e = err(Scene::load(&p));
-        assert!(e.contains(&format!("bad.toml:{line}")), "{to}: {e}");
-    }
+    assert_errors_at(
+        dir.path(),
+        &scene(""),
+        &[
+            ("\"n.png\"", "\"missing.png\"", 3),
+            ("normal_scale = 0.5", "normal_scale = nan", 4),
+        ],
+    );
 }
 
 /// A scene file's material can name a height map (`height_map`, `height_scale`): read as
@@ -645,23 +651,19 @@ fn scene_file_materials_can_name_a_height_map() {
         "{:?}",
         s.warnings
     );
-    for (from, to, line) in [
-        ("\"h.png\"", "\"missing.png\"", 3),
-        ("height_scale = 0.02", "height_scale = nan", 4),
-        (
-            "height_map = \"h.png\"",
-            "normal_map = \"h.png\"\nheight_map = \"h.png\"",
-            4,
-        ),
-    ] {
-        let p = write(
-            dir.path(),
-            "bad.toml",
-            scene("").replace(from, to).as_bytes(),
-        );
-        let e = err(Scene::load(&p));
-        assert!(e.contains(&format!("bad.toml:{line}")), "{to}: {e}");
-    }
+    assert_errors_at(
+        dir.path(),
+        &scene(""),
+        &[
+            ("\"h.png\"", "\"missing.png\"", 3),
+            ("height_scale = 0.02", "height_scale = nan", 4),
+            (
+                "height_map = \"h.png\"",
+                "normal_map = \"h.png\"\nheight_map = \"h.png\"",
+                4,
+            ),
+        ],
+    );
 }
 
 /// A scene file's material with `sheen` (a colour) is a metallic-roughness material under
