@@ -225,8 +225,22 @@ fn bench_json_and_output_files_follow_the_formats() {
             || !single
         {
             assert!(r.get("split").is_none(), "no split expected in {r}");
+            assert!(r.get("secondary").is_none(), "no secondary expected in {r}");
             continue;
         }
+        // And on the secondary rays made from the hits: one bounce and one shadow ray each,
+        // every engine finding the same hits and the same shadows.
+        let sec = &r["secondary"];
+        assert_eq!(sec["rays"], hit_count, "{r}");
+        for key in ["bounce_closest_mrays", "shadow_occluded_mrays"] {
+            assert!(sec[key].as_f64().unwrap() > 0.0, "{key} in {r}");
+        }
+        assert!(sec["bounce_agreement"].as_f64().unwrap() >= 0.9999, "{r}");
+        let blocked = sec["shadow_blocked"].as_u64().unwrap() as usize;
+        // (The Cornell box is closed above: its ceiling blocks every one.)
+        assert!(blocked > 0 && blocked <= hit_count, "{r}");
+        let first = &rows[0]["secondary"]["shadow_blocked"];
+        assert_eq!(&sec["shadow_blocked"], first, "{r}");
         let s = &r["split"];
         assert_eq!(s["hit_rays"], hit_count, "{r}");
         assert_eq!(s["miss_rays"], n - hit_count, "{r}");
@@ -404,6 +418,19 @@ fn bench_prints_every_engines_scaling() {
     }
     let ratios = line.matches("x / ").count();
     assert_eq!(ratios, 3, "one closest / occluded pair per engine: {line}");
+
+    // The secondary rays' table: a row for each single-ray engine, none for the packets.
+    let table: Vec<&str> = out
+        .lines()
+        .skip_while(|l| !l.starts_with("one thread, single rays, secondary rays from the "))
+        .skip(2)
+        .take_while(|l| !l.contains(':'))
+        .collect();
+    let names: Vec<&str> = table
+        .iter()
+        .filter_map(|l| l.split_whitespace().next())
+        .collect();
+    assert_eq!(names, ["tracery-sah", "tracery-median"], "{out}");
 
     let prefix = "closest-hit rounds, median over fastest (1 / 2 threads): ";
     let line = out

@@ -117,6 +117,7 @@ fn the_bench_chart_has_a_bar_pair_per_one_thread_row_as_long_as_its_figure() {
         isa: None,
         stats: None,
         split: None,
+        secondary: None,
     };
     let results = [
         result("fast", 1, 40.0, 20.0),

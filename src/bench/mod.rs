@@ -13,6 +13,7 @@ mod engines;
 #[cfg(feature = "peers")]
 mod obvhs;
 pub mod scaling;
+pub mod secondary;
 
 use std::io::{BufReader, BufWriter, Read, Write};
 use std::path::Path;
@@ -150,6 +151,28 @@ pub struct EngineResult {
     /// it, apart (the one-thread row of each single-ray engine; `None` for the others).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub split: Option<SplitRates>,
+    /// One thread, single rays: the rates on the secondary rays made from the canonical hits
+    /// ([`secondary`]; the one-thread row of each single-ray engine, `None` for the others).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub secondary: Option<SecondaryRates>,
+}
+
+/// An engine's one-thread rates on the secondary rays of [`secondary::secondary_rays`] (one
+/// bounce and one shadow ray from each canonical hit, as a path tracer makes them), in
+/// millions of rays per second, and its answers beside the first engine's.
+#[derive(Clone, Copy, Debug, Serialize)]
+pub struct SecondaryRates {
+    /// Bounce rays, and as many shadow rays.
+    pub rays: usize,
+    /// Closest hits of the bounce rays.
+    pub bounce_closest_mrays: f64,
+    /// Occlusion of the shadow rays.
+    pub shadow_occluded_mrays: f64,
+    /// Bounce rays whose closest hit (triangle, or miss) equals the first engine's, as a
+    /// fraction (exact duplicate triangles count as one).
+    pub bounce_agreement: f64,
+    /// Shadow rays this engine found blocked.
+    pub shadow_blocked: usize,
 }
 
 /// An engine's one-thread rates on the canonical rays split by whether they hit the mesh (as
@@ -439,16 +462,25 @@ pub fn run(
     let mut hits = vec![vec![HitRecord::MISS; rays.len()]; n];
     // The rays the first engine hits and those it misses, each in image order, for the
     // one-thread single-ray rates apart (`SplitRates`).
+    // The secondary rays are made from the same hits (`SecondaryRates`).
     let one = pools.iter().position(|(t, _)| *t == 1);
-    let (hit_rays, miss_rays): (Vec<Ray>, Vec<Ray>) = match (one, entries.first()) {
+    let (hit_rays, miss_rays, second): (Vec<Ray>, Vec<Ray>, secondary::SecondaryRays) = match (
+        one,
+        entries.first(),
+    ) {
         (Some(p), Some(first)) => {
             progress(&format!(
-                "{mesh_name}: splitting the rays into hits and misses"
+                "{mesh_name}: splitting the rays into hits and misses, and making secondary rays"
             ));
             let mut first_hits = vec![HitRecord::MISS; rays.len()];
             pools[p]
                 .1
                 .install(|| engines::trace_closest(&*first.engine, rays, width, &mut first_hits));
+            let mut bounds = Aabb::EMPTY;
+            for &v in tris.iter().flatten() {
+                bounds.grow_point(v.into());
+            }
+            let second = secondary::secondary_rays(tris, rays, &first_hits, &bounds);
             let (h, m): (Vec<_>, Vec<_>) = rays
                 .iter()
                 .zip(&first_hits)
@@ -456,6 +488,7 @@ pub fn run(
             (
                 h.into_iter().map(|(r, _)| *r).collect(),
                 m.into_iter().map(|(r, _)| *r).collect(),
+                second,
             )
         }
         _ => Default::default(),
@@ -463,6 +496,11 @@ pub fn run(
     // Per engine: best times of closest hit, closest miss, occluded hit, occluded miss.
     let mut split = vec![[Duration::MAX; 4]; entries.len()];
     let mut split_out = vec![HitRecord::MISS; hit_rays.len().max(miss_rays.len())];
+    // Per engine: best times of the bounce rays' closest hits and the shadow rays' occlusion,
+    // the bounce rays' hits and the shadow rays blocked.
+    let mut second_times = vec![[Duration::MAX; 2]; entries.len()];
+    let mut second_hits = vec![Vec::new(); entries.len()];
+    let mut second_blocked = vec![0usize; entries.len()];
     for round in 0..config.repeat.max(1) {
         progress(&format!("{mesh_name}: tracing, round {}", round + 1));
         for (e, entry) in entries.iter().enumerate() {
@@ -491,6 +529,18 @@ pub fn run(
                     pool.install(|| engines::trace_occluded(engine, set, width));
                     split[e][2 + i] = split[e][2 + i].min(start.elapsed());
                 }
+                if !second.bounce.is_empty() {
+                    let out = &mut second_hits[e];
+                    out.resize(second.bounce.len(), HitRecord::MISS);
+                    let start = Instant::now();
+                    pool.install(|| engines::trace_closest(engine, &second.bounce, width, out));
+                    second_times[e][0] = second_times[e][0].min(start.elapsed());
+                    let start = Instant::now();
+                    let blocked =
+                        pool.install(|| engines::trace_occluded(engine, &second.shadow, width));
+                    second_times[e][1] = second_times[e][1].min(start.elapsed());
+                    second_blocked[e] = blocked;
+                }
             }
         }
     }
@@ -506,6 +556,7 @@ pub fn run(
     };
     let reference = map_back(&hits[0]);
     let copies = first_copies(triangles);
+    let second_reference = second_hits.first().map(|h| map_back(h)).unwrap_or_default();
     let mut results = Vec::new();
     for (e, entry) in entries.iter().enumerate() {
         for (p, (threads, _)) in pools.iter().enumerate() {
@@ -540,6 +591,21 @@ pub fn run(
                         closest_miss_mrays: rate(miss_rays.len(), split[e][1]),
                         occluded_hit_mrays: rate(hit_rays.len(), split[e][2]),
                         occluded_miss_mrays: rate(miss_rays.len(), split[e][3]),
+                    }
+                }),
+                secondary: (Some(p) == one && second_times[e][0] != Duration::MAX).then(|| {
+                    let n = second.bounce.len();
+                    let rate = |d: Duration| n as f64 / d.as_secs_f64() / 1e6;
+                    SecondaryRates {
+                        rays: n,
+                        bounce_closest_mrays: rate(second_times[e][0]),
+                        shadow_occluded_mrays: rate(second_times[e][1]),
+                        bounce_agreement: agreement(
+                            &second_reference,
+                            &map_back(&second_hits[e]),
+                            &copies,
+                        ),
+                        shadow_blocked: second_blocked[e],
                     }
                 }),
             });

@@ -5,7 +5,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Result, bail};
 use clap::Args;
-use tracery::bench::{self, BenchConfig, EngineResult, SplitRates};
+use tracery::bench::{self, BenchConfig, EngineResult, SecondaryRates, SplitRates};
 use tracery::bvh::BuildOptions;
 use tracery::bvh::wide::Kernel;
 use tracery::scene::Scene;
@@ -258,6 +258,7 @@ fn print_table(
         }
     }
     print_split(rows);
+    print_secondary(rows);
     if let (Some(one), Some(&t)) = (find("tracery-sah", 1), threads.last())
         && t > 1
         && let Some(all) = find("tracery-sah", t)
@@ -359,6 +360,45 @@ fn print_split(rows: &[EngineResult]) {
             us.occluded_hit_mrays / them.occluded_hit_mrays,
             us.closest_miss_mrays / them.closest_miss_mrays,
             us.occluded_miss_mrays / them.occluded_miss_mrays
+        );
+    }
+}
+
+/// The one-thread single-ray rates on the secondary rays (a diffuse bounce and a shadow ray
+/// from each canonical hit), and tracery-sah's ratios to Embree on them.
+fn print_secondary(rows: &[EngineResult]) {
+    let second: Vec<(&str, SecondaryRates)> = rows
+        .iter()
+        .filter_map(|r| Some((r.engine.as_str(), r.secondary?)))
+        .collect();
+    let Some((_, first)) = second.first() else {
+        return;
+    };
+    println!(
+        "one thread, single rays, secondary rays from the {} hits: a diffuse bounce each \
+         (closest) and a shadow ray to a light above the mesh (occluded) (Mr/s):",
+        first.rays
+    );
+    println!(
+        "{:<15} {:>15} {:>16} {:>9} {:>14}",
+        "engine", "bounce closest", "shadow occluded", "agree %", "shadows blocked"
+    );
+    for (engine, s) in &second {
+        println!(
+            "{:<15} {:>15.2} {:>16.2} {:>9.3} {:>14}",
+            engine,
+            s.bounce_closest_mrays,
+            s.shadow_occluded_mrays,
+            s.bounce_agreement * 100.0,
+            s.shadow_blocked
+        );
+    }
+    let find = |e: &str| second.iter().find(|(n, _)| *n == e).map(|(_, s)| s);
+    if let (Some(us), Some(them)) = (find("tracery-sah"), find("embree")) {
+        println!(
+            "tracery-sah / embree (1 thread): secondary rays: bounce closest {:.2}x, shadow occluded {:.2}x",
+            us.bounce_closest_mrays / them.bounce_closest_mrays,
+            us.shadow_occluded_mrays / them.shadow_occluded_mrays
         );
     }
 }
