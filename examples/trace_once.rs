@@ -14,13 +14,17 @@
 //! ```
 //!
 //! `ENGINE` is `tracery` or `embree` (`rtcIntersect1` / `rtcOccluded1`), `QUERY` `closest` or
-//! `occluded`. Valgrind runs no AVX-512: our kernel is picked by `TRACERY_KERNEL`, and Embree
+//! `occluded` (the canonical rays that hit), or `bounce` or `shadow` (closest hits of the
+//! secondary rays' diffuse bounces from those hits, occlusion of their shadow rays: see
+//! `tracery::bench::secondary`; the count printed is then the rays that hit, or are blocked,
+//! to compare between the engines' runs). Valgrind runs no AVX-512: our kernel is picked by `TRACERY_KERNEL`, and Embree
 //! picks its AVX2 kernels by itself when valgrind's CPU reports no AVX-512.
 
 use std::path::PathBuf;
 
 use anyhow::{Context, Result, bail};
-use tracery::bench::canonical_rays;
+use tracery::bench::secondary::secondary_rays;
+use tracery::bench::{HitRecord, canonical_rays};
 use tracery::bench::embree::Embree;
 use tracery::bvh::{BuildOptions, Bvh};
 use tracery::scene::Scene;
@@ -35,16 +39,29 @@ fn main() -> Result<()> {
         Some("setup") => true,
         Some(other) => bail!("the last argument is `setup` or nothing, not `{other}`"),
     };
-    let closest = match query.as_str() {
-        "closest" => true,
-        "occluded" => false,
-        _ => bail!("QUERY is `closest` or `occluded`, not `{query}`"),
+    let (closest, secondary) = match query.as_str() {
+        "closest" => (true, false),
+        "occluded" => (false, false),
+        "bounce" => (true, true),
+        "shadow" => (false, true),
+        _ => bail!("QUERY is `closest`, `occluded`, `bounce` or `shadow`, not `{query}`"),
     };
     let scene = Scene::load(&path)?;
     let triangles = &scene.mesh.triangles;
     let bvh = Bvh::build(triangles, &BuildOptions::sah());
     let mut rays = canonical_rays(&bvh.bounds());
     rays.retain(|r| bvh.occluded(r, f32::INFINITY));
+    if secondary {
+        let hits: Vec<HitRecord> = rays
+            .iter()
+            .map(|r| {
+                let h = bvh.intersect(r, f32::INFINITY).expect("a ray that hits");
+                HitRecord { t: h.t, prim: h.prim }
+            })
+            .collect();
+        let second = secondary_rays(triangles, &rays, &hits, &bvh.bounds());
+        rays = if closest { second.bounce } else { second.shadow };
+    }
     let traced = if setup_only { 0 } else { rays.len() };
     let hits = match engine.as_str() {
         "tracery" => rays[..traced]
@@ -73,11 +90,11 @@ fn main() -> Result<()> {
         _ => bail!("ENGINE is `tracery` or `embree`, not `{engine}`"),
     };
     anyhow::ensure!(
-        hits == traced,
+        secondary || hits == traced,
         "{engine} found {hits} hits of {traced} rays"
     );
     println!(
-        "{} ({} triangles): {engine} {query}, {traced} of the {} canonical rays that hit traced, kernel {}",
+        "{} ({} triangles): {engine} {query}, {traced} of {} rays traced ({hits} hit or blocked), kernel {}",
         path.display(),
         triangles.len(),
         rays.len(),
