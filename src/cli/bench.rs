@@ -5,7 +5,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Result, bail};
 use clap::Args;
-use tracery::bench::{self, BenchConfig, EngineResult, SecondaryRates, SplitRates};
+use tracery::bench::{self, BenchConfig, EngineResult};
 use tracery::bvh::BuildOptions;
 use tracery::bvh::wide::Kernel;
 use tracery::scene::Scene;
@@ -323,13 +323,21 @@ fn engine_names(rows: &[EngineResult]) -> Vec<&str> {
     engines
 }
 
+/// The engines whose rows carry `part`, each with it (the one-thread rows of single-ray
+/// engines, for the split and the secondary rays), in their order.
+fn rows_with<T>(
+    rows: &[EngineResult],
+    part: impl Fn(&EngineResult) -> Option<T>,
+) -> Vec<(&str, T)> {
+    rows.iter()
+        .filter_map(|r| Some((r.engine.as_str(), part(r)?)))
+        .collect()
+}
+
 /// The one-thread single-ray rates on the rays that hit and on those that miss, apart, and
 /// tracery-sah's ratios to Embree on each.
 fn print_split(rows: &[EngineResult]) {
-    let split: Vec<(&str, SplitRates)> = rows
-        .iter()
-        .filter_map(|r| Some((r.engine.as_str(), r.split?)))
-        .collect();
+    let split = rows_with(rows, |r| r.split);
     let Some((_, first)) = split.first() else {
         return;
     };
@@ -367,10 +375,7 @@ fn print_split(rows: &[EngineResult]) {
 /// The one-thread single-ray rates on the secondary rays (a diffuse bounce and a shadow ray
 /// from each canonical hit), and tracery-sah's ratios to Embree on them.
 fn print_secondary(rows: &[EngineResult]) {
-    let second: Vec<(&str, SecondaryRates)> = rows
-        .iter()
-        .filter_map(|r| Some((r.engine.as_str(), r.secondary?)))
-        .collect();
+    let second = rows_with(rows, |r| r.secondary);
     let Some((_, first)) = second.first() else {
         return;
     };
