@@ -16,16 +16,17 @@
 //! `ENGINE` is `tracery` or `embree` (`rtcIntersect1` / `rtcOccluded1`), `QUERY` `closest` or
 //! `occluded` (the canonical rays that hit), or `bounce` or `shadow` (closest hits of the
 //! secondary rays' diffuse bounces from those hits, occlusion of their shadow rays: see
-//! `tracery::bench::secondary`; the count printed is then the rays that hit, or are blocked,
-//! to compare between the engines' runs). Valgrind runs no AVX-512: our kernel is picked by `TRACERY_KERNEL`, and Embree
+//! `tracery::bench::secondary`, ours by its walk for incoherent rays as the bench traces them;
+//! the count printed is then the rays that hit, or are blocked, to compare between the
+//! engines' runs). Valgrind runs no AVX-512: our kernel is picked by `TRACERY_KERNEL`, and Embree
 //! picks its AVX2 kernels by itself when valgrind's CPU reports no AVX-512.
 
 use std::path::PathBuf;
 
 use anyhow::{Context, Result, bail};
+use tracery::bench::embree::Embree;
 use tracery::bench::secondary::secondary_rays;
 use tracery::bench::{HitRecord, canonical_rays};
-use tracery::bench::embree::Embree;
 use tracery::bvh::{BuildOptions, Bvh};
 use tracery::scene::Scene;
 
@@ -56,18 +57,27 @@ fn main() -> Result<()> {
             .iter()
             .map(|r| {
                 let h = bvh.intersect(r, f32::INFINITY).expect("a ray that hits");
-                HitRecord { t: h.t, prim: h.prim }
+                HitRecord {
+                    t: h.t,
+                    prim: h.prim,
+                }
             })
             .collect();
         let second = secondary_rays(triangles, &rays, &hits, &bvh.bounds());
-        rays = if closest { second.bounce } else { second.shadow };
+        rays = if closest {
+            second.bounce
+        } else {
+            second.shadow
+        };
     }
     let traced = if setup_only { 0 } else { rays.len() };
     let hits = match engine.as_str() {
         "tracery" => rays[..traced]
             .iter()
             .filter(|r| {
-                if closest {
+                if closest && secondary {
+                    bvh.intersect_incoherent(r, f32::INFINITY).is_some()
+                } else if closest {
                     bvh.intersect(r, f32::INFINITY).is_some()
                 } else {
                     bvh.occluded(r, f32::INFINITY)

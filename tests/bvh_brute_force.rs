@@ -1,11 +1,13 @@
-//! Both builders, with every traversal kernel the CPU runs (scalar, SSE2, AVX2), against brute
-//! force: 100,000 random rays and the canonical camera rays on the Cornell box, the generated
-//! meshes and (fetched) the Stanford dragon.
+//! Both builders, with every traversal kernel the CPU runs (scalar, SSE2, AVX2) and both
+//! closest-hit walks (coherent and incoherent), against brute force: 100,000 random rays, the
+//! canonical camera rays and a diffuse bounce from each of their hits on the Cornell box, the
+//! generated meshes and (fetched) the Stanford dragon.
 
 mod common;
 
 use glam::Vec3;
-use tracery::bench::canonical_rays;
+use tracery::bench::secondary::secondary_rays;
+use tracery::bench::{HitRecord, canonical_rays};
 use tracery::bvh::{BuildOptions, Bvh, SplitMethod};
 use tracery::scene::{Mesh, Scene, shapes};
 
@@ -30,6 +32,32 @@ fn check_mesh(name: &str, tris: &[[Vec3; 3]], random: usize, canonical_step: usi
         tris,
         &bvhs,
         &camera,
+    );
+    // Rays that start just off the surfaces (a diffuse bounce from each canonical hit), as a
+    // path tracer's do: inside the boxes of the leaves they leave. The hits they start from are
+    // the first tree's, just checked against brute force.
+    let hits: Vec<HitRecord> = camera
+        .iter()
+        .map(|r| match bvhs[0].intersect(r, f32::INFINITY) {
+            Some(h) => HitRecord {
+                t: h.t,
+                prim: h.prim,
+            },
+            None => HitRecord::MISS,
+        })
+        .collect();
+    let bounce = secondary_rays(tris, &camera, &hits, &bounds).bounce;
+    // At most about 50,000 of them (brute force on the dragon's 202,520 triangles is slow).
+    let bounce: Vec<_> = bounce
+        .iter()
+        .step_by(bounce.len() / 50_000 + 1)
+        .copied()
+        .collect();
+    common::assert_matches_brute_force(
+        &format!("{name}, {names:?}, bounces from the canonical hits"),
+        tris,
+        &bvhs,
+        &bounce,
     );
 }
 

@@ -59,6 +59,7 @@ fn the_avx512_kernels_single_ray_walks_use_no_512_bit_registers() {
     bvh.intersect_packet(&rays, f32::INFINITY, &mut hits);
     for (ray, packet_hit) in rays.iter().zip(&hits) {
         assert_eq!(bvh.intersect(ray, f32::INFINITY), *packet_hit);
+        assert_eq!(bvh.intersect_incoherent(ray, f32::INFINITY), *packet_hit);
         assert_eq!(bvh.occluded(ray, f32::INFINITY), packet_hit.is_some());
     }
     assert!(hits.iter().any(Option::is_some), "the rays miss the sphere");
@@ -93,6 +94,12 @@ fn the_avx512_kernels_single_ray_walks_use_no_512_bit_registers() {
     assert!(
         packets.values().all(|(_, zmm)| !zmm.is_empty()),
         "no 512-bit register found in the packet walk: the check reads nothing"
+    );
+    // The closest-hit walk's four forms (the NaN rule or not, coherent or incoherent rays).
+    assert!(
+        walks.len() >= 4,
+        "closest-hit walks found: {:?}",
+        walks.keys()
     );
     for (name, (count, zmm)) in walks.iter().chain(&any_hit) {
         assert!(*count > 100, "{name}: only {count} instructions read");

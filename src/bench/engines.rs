@@ -11,6 +11,12 @@ use crate::geometry::Ray;
 pub(super) trait Engine: Sync + Send {
     /// Closest hit of one ray.
     fn closest(&self, ray: &Ray) -> HitRecord;
+    /// Closest hit of one ray of an incoherent set (a path tracer's bounces, the bench's
+    /// secondary rays): an engine with a walk for such rays uses it, the others
+    /// [`Engine::closest`].
+    fn closest_incoherent(&self, ray: &Ray) -> HitRecord {
+        self.closest(ray)
+    }
     /// Whether anything lies on the ray.
     fn occluded(&self, ray: &Ray) -> bool;
     /// The build time the engine measured itself, when its builder call does more than build
@@ -66,15 +72,23 @@ fn ray_tile(band: &[Ray], width: usize, x0: usize) -> RayTile<'_> {
     RayTile::new(&band[x0..], width, cols, band.len() / width).expect("a tile of the band")
 }
 
+/// A hit of ours as a record.
+fn record(hit: Option<crate::bvh::Hit>) -> HitRecord {
+    match hit {
+        Some(h) => HitRecord {
+            t: h.t,
+            prim: h.prim,
+        },
+        None => HitRecord::MISS,
+    }
+}
+
 impl Engine for Bvh {
     fn closest(&self, ray: &Ray) -> HitRecord {
-        match self.intersect(ray, f32::INFINITY) {
-            Some(h) => HitRecord {
-                t: h.t,
-                prim: h.prim,
-            },
-            None => HitRecord::MISS,
-        }
+        record(self.intersect(ray, f32::INFINITY))
+    }
+    fn closest_incoherent(&self, ray: &Ray) -> HitRecord {
+        record(self.intersect_incoherent(ray, f32::INFINITY))
     }
     fn occluded(&self, ray: &Ray) -> bool {
         Bvh::occluded(self, ray, f32::INFINITY)
@@ -118,13 +132,7 @@ impl Engine for Packets {
         let out = &mut out[x0..];
         self.0
             .intersect_tile(ray_tile(band, width, x0), f32::INFINITY, |at, h| {
-                out[at] = match h {
-                    Some(h) => HitRecord {
-                        t: h.t,
-                        prim: h.prim,
-                    },
-                    None => HitRecord::MISS,
-                }
+                out[at] = record(h)
             });
     }
 }
@@ -150,15 +158,7 @@ pub(super) fn trace_closest(
 ) {
     assert_eq!(rays.len(), out.len(), "one record per ray");
     match engine.tile() {
-        None => out
-            .par_chunks_mut(CHUNK)
-            .enumerate()
-            .with_max_len(1)
-            .for_each(|(c, o)| {
-                for (o, r) in o.iter_mut().zip(&rays[c * CHUNK..]) {
-                    *o = engine.closest(r);
-                }
-            }),
+        None => trace_singles(rays, out, |r| engine.closest(r)),
         Some(t) => {
             let band = width * t as usize;
             out.par_chunks_mut(band)
@@ -172,6 +172,29 @@ pub(super) fn trace_closest(
                 });
         }
     }
+}
+
+/// Closest hits of all rays into `out` (one per ray) on the current rayon pool, one ray at a
+/// time by [`Engine::closest_incoherent`] (packet engines too).
+pub(super) fn trace_closest_incoherent(engine: &dyn Engine, rays: &[Ray], out: &mut [HitRecord]) {
+    assert_eq!(rays.len(), out.len(), "one record per ray");
+    trace_singles(rays, out, |r| engine.closest_incoherent(r));
+}
+
+/// `out[i] = closest(&rays[i])` for every ray, in chunks of [`CHUNK`] on the current pool.
+fn trace_singles(
+    rays: &[Ray],
+    out: &mut [HitRecord],
+    closest: impl Fn(&Ray) -> HitRecord + Sync + Send,
+) {
+    out.par_chunks_mut(CHUNK)
+        .enumerate()
+        .with_max_len(1)
+        .for_each(|(c, o)| {
+            for (o, r) in o.iter_mut().zip(&rays[c * CHUNK..]) {
+                *o = closest(r);
+            }
+        });
 }
 
 /// Number of occluded rays, traced like [`trace_closest`].

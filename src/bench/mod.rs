@@ -533,7 +533,7 @@ pub fn run(
                     let out = &mut second_hits[e];
                     out.resize(second.bounce.len(), HitRecord::MISS);
                     let start = Instant::now();
-                    pool.install(|| engines::trace_closest(engine, &second.bounce, width, out));
+                    pool.install(|| engines::trace_closest_incoherent(engine, &second.bounce, out));
                     second_times[e][0] = second_times[e][0].min(start.elapsed());
                     let start = Instant::now();
                     let blocked =

@@ -82,7 +82,22 @@ impl Bvh {
             return None;
         }
         let safe = kernel::check_ray(ray)?;
-        Hit::of(self.wide.closest(ray, t_max, safe), t_max)
+        Hit::of(self.wide.closest::<false>(ray, t_max, safe), t_max)
+    }
+
+    /// [`Bvh::intersect`] for a ray whose neighbours take other paths through the tree: a
+    /// path tracer's bounces, drawn at random from each surface's reflection. The same hit
+    /// ([`Bvh::intersect`]'s, bit for bit) by a walk that leans less on the CPU's branch
+    /// predictor (see [`crate::bvh::wide::traverse`]): faster for such rays (the secondary
+    /// rays of `tracery bench`), slower for coherent ones such as a camera's, whose
+    /// neighbours teach the predictor their path.
+    #[inline]
+    pub fn intersect_incoherent(&self, ray: &Ray, t_max: f32) -> Option<Hit> {
+        if self.is_empty() || t_max.is_nan() || t_max <= 0.0 {
+            return None;
+        }
+        let safe = kernel::check_ray(ray)?;
+        Hit::of(self.wide.closest::<true>(ray, t_max, safe), t_max)
     }
 
     /// [`Bvh::intersect`], adding to `visits` the nodes and triangle blocks its walk tested:

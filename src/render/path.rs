@@ -536,7 +536,8 @@ impl Tracer<'_> {
         }
         counts.bounce += 1;
         let bounce = Ray::new(s.origin, wi);
-        let hit = self.bvh.intersect(&bounce, f32::INFINITY);
+        // Drawn at random: neighbouring paths' bounces take other paths through the tree.
+        let hit = self.bvh.intersect_incoherent(&bounce, f32::INFINITY);
         let arrival = Arrival::Bounce {
             pdf,
             from: depth,

@@ -102,13 +102,20 @@ pub fn random_rays(tris: &[[Vec3; 3]], count: usize, seed: u64) -> Vec<Ray> {
 /// Brute force runs once per ray for all the BVHs. Panics with the first few differences.
 pub fn assert_matches_brute_force(what: &str, tris: &[[Vec3; 3]], bvhs: &[&Bvh], rays: &[Ray]) {
     let reference = BruteForce::new(tris);
+    // Each tree's both walks: the one for coherent rays and the one for incoherent rays (the
+    // same hits, bit for bit), listed `2 k` and `2 k + 1` in a failure.
+    type Walk = fn(&Bvh, &Ray, f32) -> Option<Hit>;
+    let walks: [Walk; 2] = [Bvh::intersect, Bvh::intersect_incoherent];
     let bad: Vec<(usize, usize, Option<Hit>, Option<Hit>)> = rays
         .par_iter()
         .enumerate()
         .flat_map_iter(|(i, r)| {
             let slow = reference.closest(r, f32::INFINITY);
-            bvhs.iter().enumerate().filter_map(move |(k, bvh)| {
-                let fast = bvh.intersect(r, f32::INFINITY);
+            let each = bvhs
+                .iter()
+                .flat_map(move |bvh| walks.map(|walk| (bvh, walk)));
+            each.enumerate().filter_map(move |(k, (bvh, walk))| {
+                let fast = walk(bvh, r, f32::INFINITY);
                 let same = match (fast, slow) {
                     (None, None) => true,
                     (Some(a), Some(b)) => {
@@ -125,7 +132,7 @@ pub fn assert_matches_brute_force(what: &str, tris: &[[Vec3; 3]], bvhs: &[&Bvh],
         .collect();
     assert!(
         bad.is_empty(),
-        "{what}: {} (ray, bvh) pairs of {} rays differ from brute force, first (ray, bvh, bvh hit, brute force hit): {:?}",
+        "{what}: {} (ray, walk) pairs of {} rays differ from brute force, first (ray, walk: 2 x bvh + incoherent, bvh hit, brute force hit): {:?}",
         bad.len(),
         rays.len(),
         &bad[..bad.len().min(5)]

@@ -234,34 +234,46 @@ impl WideBvh {
     /// kernel, so its constants stay in registers (a prepared ray passed in memory was read
     /// back with wider loads than it was written with: a store-forwarding stall per ray).
     ///
-    /// `safe`: the ray needs the box test's NaN rule ([`kernel::check_ray`]).
+    /// `safe`: the ray needs the box test's NaN rule ([`kernel::check_ray`]). `INCOHERENT`:
+    /// the walk for rays whose neighbours take other paths ([`traverse`]'s module docs).
     #[inline]
-    pub(crate) fn closest(&self, ray: &Ray, t_max: f32, safe: bool) -> traverse::Best {
+    pub(crate) fn closest<const INCOHERENT: bool>(
+        &self,
+        ray: &Ray,
+        t_max: f32,
+        safe: bool,
+    ) -> traverse::Best {
         match (self.dispatch, safe) {
             (Dispatch::Scalar, false) => {
-                traverse::closest_apart::<kernel::Scalar, false>(self, ray, t_max)
+                traverse::closest_apart::<kernel::Scalar, false, INCOHERENT>(self, ray, t_max)
             }
             (Dispatch::Scalar, true) => {
-                traverse::closest_apart::<kernel::Scalar, true>(self, ray, t_max)
+                traverse::closest_apart::<kernel::Scalar, true, INCOHERENT>(self, ray, t_max)
             }
             #[cfg(target_arch = "x86_64")]
             (Dispatch::Sse2, false) => {
-                traverse::closest_apart::<kernel::Sse2, false>(self, ray, t_max)
+                traverse::closest_apart::<kernel::Sse2, false, INCOHERENT>(self, ray, t_max)
             }
             #[cfg(target_arch = "x86_64")]
             (Dispatch::Sse2, true) => {
-                traverse::closest_apart::<kernel::Sse2, true>(self, ray, t_max)
+                traverse::closest_apart::<kernel::Sse2, true, INCOHERENT>(self, ray, t_max)
             }
             #[cfg(target_arch = "x86_64")]
-            (Dispatch::Avx2(cpu), false) => kernel::avx2::closest::<false>(cpu, self, ray, t_max),
+            (Dispatch::Avx2(cpu), false) => {
+                kernel::avx2::closest::<false, INCOHERENT>(cpu, self, ray, t_max)
+            }
             #[cfg(target_arch = "x86_64")]
-            (Dispatch::Avx2(cpu), true) => kernel::avx2::closest::<true>(cpu, self, ray, t_max),
+            (Dispatch::Avx2(cpu), true) => {
+                kernel::avx2::closest::<true, INCOHERENT>(cpu, self, ray, t_max)
+            }
             #[cfg(target_arch = "x86_64")]
             (Dispatch::Avx512(cpu), false) => {
-                kernel::avx512::closest::<false>(cpu, self, ray, t_max)
+                kernel::avx512::closest::<false, INCOHERENT>(cpu, self, ray, t_max)
             }
             #[cfg(target_arch = "x86_64")]
-            (Dispatch::Avx512(cpu), true) => kernel::avx512::closest::<true>(cpu, self, ray, t_max),
+            (Dispatch::Avx512(cpu), true) => {
+                kernel::avx512::closest::<true, INCOHERENT>(cpu, self, ray, t_max)
+            }
         }
     }
 
@@ -274,9 +286,9 @@ impl WideBvh {
         visits: &mut traverse::Visits,
     ) -> traverse::Best {
         if safe {
-            traverse::closest_tallied::<kernel::Scalar, true>(self, ray, t_max, visits)
+            traverse::closest_tallied::<kernel::Scalar, true, false>(self, ray, t_max, visits)
         } else {
-            traverse::closest_tallied::<kernel::Scalar, false>(self, ray, t_max, visits)
+            traverse::closest_tallied::<kernel::Scalar, false, false>(self, ray, t_max, visits)
         }
     }
 

@@ -10,7 +10,12 @@
 //! hitting rays 15-25% slower on the canonical camera).
 //!
 //! `closest` goes to the nearest child entered; the others are pushed, farthest first (one
-//! with a scalar push, more in one vector push). A popped entry that starts beyond the best hit
+//! with a scalar push, more in one vector push). Its incoherent form (`INCOHERENT`, for rays
+//! whose neighbours take other paths: a path tracer's bounces) predicts less: a node whose ray
+//! entered one child goes to it straight from the box test's mask, and one whose ray entered
+//! two goes to the nearer by their entry distances, where the scan's exit would be guessed
+//! wrong about as often as right; three or more are scanned as above. The same hits either
+//! way (the walk's order never changes the closest hit, see [`Best::offer`]). A popped entry that starts beyond the best hit
 //! so far is skipped, a popped leaf is tested on the spot. `each_hit` walks the same way without
 //! culling (a leaf tested when reached or popped) until the caller asks to stop: for shadow
 //! rays, depth first along the nearest path finds a blocker sooner than testing each node's
@@ -126,9 +131,10 @@ fn offer_lanes<V: LaneValues>(
 /// first (one by a scalar push, more by the kernel's vector push).
 ///
 /// With `DIST` false the others are pushed without their distances (the any-hit walk, which
-/// pops with [`Stack::pop_child`]).
+/// pops with [`Stack::pop_child`]). With `INCOHERENT`, one child entered is the one, and of
+/// two the nearer by entry distance (the lower lane on a tie), without the scan.
 #[inline(always)]
-fn next_child<L: Lanes, const DIST: bool>(
+fn next_child<L: Lanes, const DIST: bool, const INCOHERENT: bool>(
     node: &WideNode,
     nr: &L::NodeRay,
     mask: u32,
@@ -140,6 +146,22 @@ fn next_child<L: Lanes, const DIST: bool>(
     }
     // Lane indices masked to the node's width: the compiler then needs no bounds check.
     let lane = |bits: u32| bits.trailing_zeros() as usize & (WIDTH - 1);
+    if INCOHERENT {
+        let rest = mask & (mask - 1);
+        if rest == 0 {
+            return Some(lane(mask));
+        }
+        if rest & (rest - 1) == 0 {
+            let (a, b) = (lane(mask), lane(rest));
+            let (k, f) = if near[b] < near[a] { (b, a) } else { (a, b) };
+            if DIST {
+                stack.push(node.child[f], near[f]);
+            } else {
+                stack.push_child(node.child[f]);
+            }
+            return Some(k);
+        }
+    }
     let q = L::octant(nr);
     // (The scan always finds a lane: every node's order lists all its lanes.)
     let mut k = lane(mask);
@@ -211,15 +233,20 @@ impl Tally for Visits {
     }
 }
 
-/// Closest hit at `0 < t < t_max` (the best is `t_max` with no triangle when nothing is hit).
+/// Closest hit at `0 < t < t_max` (the best is `t_max` with no triangle when nothing is hit),
+/// by the incoherent walk with `INCOHERENT` (see the module docs).
 #[inline(always)]
-pub(crate) fn closest<L: Lanes, const SAFE: bool>(w: &WideBvh, ray: &Ray, t_max: f32) -> Best {
-    closest_tallied::<L, SAFE>(w, ray, t_max, &mut ())
+pub(crate) fn closest<L: Lanes, const SAFE: bool, const INCOHERENT: bool>(
+    w: &WideBvh,
+    ray: &Ray,
+    t_max: f32,
+) -> Best {
+    closest_tallied::<L, SAFE, INCOHERENT>(w, ray, t_max, &mut ())
 }
 
 /// [`closest`], telling `tally` about every node and block it tests.
 #[inline(always)]
-pub(crate) fn closest_tallied<L: Lanes, const SAFE: bool>(
+pub(crate) fn closest_tallied<L: Lanes, const SAFE: bool, const INCOHERENT: bool>(
     w: &WideBvh,
     ray: &Ray,
     t_max: f32,
@@ -254,7 +281,7 @@ pub(crate) fn closest_tallied<L: Lanes, const SAFE: bool>(
     let mut slots = Slots::new();
     let mut stack = Stack::new(&mut slots);
     'node: loop {
-        let next = next_child::<L, true>(node, &nr, mask, &near, &mut stack);
+        let next = next_child::<L, true, INCOHERENT>(node, &nr, mask, &near, &mut stack);
         if let Some(k) = next {
             let child = Child(node.child[k]);
             if !child.is_leaf() {
@@ -383,7 +410,7 @@ pub(crate) fn each_hit<L: Lanes, const SAFE: bool>(
     // Depth first, nearest child first, as the closest hit walks (no culling: any hit will
     // do); a leaf is tested when reached or popped, and the walk stops when the caller asks.
     'node: loop {
-        if let Some(k) = next_child::<L, false>(node, &nr, mask, &near, &mut stack) {
+        if let Some(k) = next_child::<L, false, false>(node, &nr, mask, &near, &mut stack) {
             let child = Child(node.child[k]);
             if !child.is_leaf() {
                 node = &w.nodes[child.index() as usize];
@@ -418,12 +445,12 @@ pub(crate) fn each_hit<L: Lanes, const SAFE: bool>(
 /// probe its stack on every call, the AVX2 and AVX-512 arms included, which only jump to
 /// their kernels' own functions.
 #[inline(never)]
-pub(crate) fn closest_apart<L: Lanes, const SAFE: bool>(
+pub(crate) fn closest_apart<L: Lanes, const SAFE: bool, const INCOHERENT: bool>(
     w: &WideBvh,
     ray: &Ray,
     t_max: f32,
 ) -> Best {
-    closest::<L, SAFE>(w, ray, t_max)
+    closest::<L, SAFE, INCOHERENT>(w, ray, t_max)
 }
 
 /// [`each_hit`] as a function of its own (see [`closest_apart`]).

@@ -790,8 +790,12 @@ macro_rules! entry_points {
             use super::*;
 
             #[target_feature(enable = $features)]
-            fn closest_inner<const SAFE: bool>(w: &WideBvh, ray: &Ray, t_max: f32) -> Best {
-                traverse::closest::<$lanes, SAFE>(w, ray, t_max)
+            fn closest_inner<const SAFE: bool, const INCOHERENT: bool>(
+                w: &WideBvh,
+                ray: &Ray,
+                t_max: f32,
+            ) -> Best {
+                traverse::closest::<$lanes, SAFE, INCOHERENT>(w, ray, t_max)
             }
 
             #[target_feature(enable = $features)]
@@ -817,14 +821,14 @@ macro_rules! entry_points {
             /// Closest hit (see [`traverse::closest`]), the whole traversal compiled for this
             /// instruction set.
             #[inline]
-            pub(crate) fn closest<const SAFE: bool>(
+            pub(crate) fn closest<const SAFE: bool, const INCOHERENT: bool>(
                 _cpu: $cpu,
                 w: &WideBvh,
                 ray: &Ray,
                 t_max: f32,
             ) -> Best {
                 // SAFETY: the proof exists only when the CPU has every feature enabled here.
-                unsafe { closest_inner::<SAFE>(w, ray, t_max) }
+                unsafe { closest_inner::<SAFE, INCOHERENT>(w, ray, t_max) }
             }
 
             /// Every hit (see [`traverse::each_hit`]).
