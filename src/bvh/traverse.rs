@@ -73,15 +73,24 @@ fn enter(node: &BvhNode, ray: &PreparedRay, limit: f32) -> f32 {
 }
 
 impl Bvh {
+    /// Whether a query of `ray` up to `t_max` walks the tree, and how: `None` when it can
+    /// hit nothing (an empty tree, a `t_max` that is NaN or not positive, a ray with a NaN or
+    /// infinite origin or direction, or a zero direction), else whether the ray needs the box
+    /// test's NaN rule ([`kernel::check_ray`]).
+    #[inline(always)]
+    fn query_ray(&self, ray: &Ray, t_max: f32) -> Option<bool> {
+        if self.is_empty() || t_max.is_nan() || t_max <= 0.0 {
+            return None;
+        }
+        kernel::check_ray(ray)
+    }
+
     /// The closest triangle the ray hits at `0 < t < t_max`. Ties in `t` go to the lowest
     /// triangle index. A ray with a NaN or infinite origin or direction, or a zero direction,
     /// hits nothing and walks no tree.
     #[inline]
     pub fn intersect(&self, ray: &Ray, t_max: f32) -> Option<Hit> {
-        if self.is_empty() || t_max.is_nan() || t_max <= 0.0 {
-            return None;
-        }
-        let safe = kernel::check_ray(ray)?;
+        let safe = self.query_ray(ray, t_max)?;
         Hit::of(self.wide.closest::<false>(ray, t_max, safe), t_max)
     }
 
@@ -93,10 +102,7 @@ impl Bvh {
     /// neighbours teach the predictor their path.
     #[inline]
     pub fn intersect_incoherent(&self, ray: &Ray, t_max: f32) -> Option<Hit> {
-        if self.is_empty() || t_max.is_nan() || t_max <= 0.0 {
-            return None;
-        }
-        let safe = kernel::check_ray(ray)?;
+        let safe = self.query_ray(ray, t_max)?;
         Hit::of(self.wide.closest::<true>(ray, t_max, safe), t_max)
     }
 
@@ -104,10 +110,7 @@ impl Bvh {
     /// a measure of the tree's quality for a set of rays that, unlike a time, does not depend
     /// on the machine or its load. Every kernel walks the same way; this runs the scalar one.
     pub fn intersect_counted(&self, ray: &Ray, t_max: f32, visits: &mut Visits) -> Option<Hit> {
-        if self.is_empty() || t_max.is_nan() || t_max <= 0.0 {
-            return None;
-        }
-        let safe = kernel::check_ray(ray)?;
+        let safe = self.query_ray(ray, t_max)?;
         Hit::of(self.wide.closest_counted(ray, t_max, safe, visits), t_max)
     }
 
@@ -358,10 +361,7 @@ impl Bvh {
     /// Calls `f(prim, t)` for every triangle hit at `0 < t < t_max`, in no particular order,
     /// until `f` returns false. A NaN, infinite or zero ray hits nothing.
     pub fn for_each_hit(&self, ray: &Ray, t_max: f32, mut f: impl FnMut(u32, f32) -> bool) {
-        if self.is_empty() || t_max.is_nan() || t_max <= 0.0 {
-            return;
-        }
-        let Some(safe) = kernel::check_ray(ray) else {
+        let Some(safe) = self.query_ray(ray, t_max) else {
             return;
         };
         self.wide.each_hit(ray, t_max, safe, &mut f);
