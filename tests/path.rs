@@ -56,6 +56,7 @@ fn render_means(s: &Scene, w: u32, h: u32, spp: u32, depth: u32, b: u32) -> (Vec
         seed: 7,
         max_depth: depth,
         sampler: SamplerKind::Sobol,
+        soft_terminator: true,
     };
     let out = render(s, &bvh, &settings, &|_| {}).unwrap();
     assert_eq!(out.film.rejected, 0, "no sample may be NaN or infinite");

@@ -47,6 +47,10 @@ pub struct RenderArgs {
     /// Print the render plan (what the scene needs and what is left out), then render.
     #[arg(long)]
     explain: bool,
+    /// Shade the normals that normal and height maps bend as they are, without the shadowing
+    /// term that softens their shadow terminator (on by default, as in Mitsuba 3).
+    #[arg(long)]
+    hard_terminator: bool,
     /// Exposure multiplier applied before tone mapping.
     #[arg(long, default_value_t = 1.0)]
     exposure: f32,
@@ -66,6 +70,7 @@ pub fn run(a: RenderArgs) -> Result<()> {
         seed: a.seed,
         max_depth: a.max_depth,
         sampler: a.sampler,
+        soft_terminator: !a.hard_terminator,
     };
     settings.validate().map_err(anyhow::Error::msg)?;
     tracery::film::OutputKind::of(&a.output)?;

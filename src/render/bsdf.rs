@@ -24,6 +24,16 @@
 //! fibres' own reflection added to the lobes under them, which are dimmed by the sheen's
 //! albedo scaling; the coat covers both.
 //!
+//! A normal or height map's bent normal casts a hard shadow terminator on a smooth mesh: light
+//! that the bent normal faces but the surface around it hardly does lights it fully, up to where
+//! the light leaves the surface's hemisphere. A [`Bump`] softens it as Mitsuba 3's `normalmap`
+//! and `bumpmap` do by default: the whole reflection is scaled by a microfacet shadowing term
+//! `G = 2 / (1 + sqrt(1 + a^2 tan^2(theta_i)))`, whose roughness `a^2 = min(tan^2(theta_d) / 8,
+//! 1)` grows with the angle `theta_d` the map bends the normal by, and `theta_i` is the light's
+//! angle from the normal before the map (Chiang, Li and Burley, "Taming the Shadow
+//! Terminator", SIGGRAPH 2019 talk; Mitsuba cites Estevez et al. 2019). Light from under the
+//! unbent normal reflects nothing, as in Mitsuba.
+//!
 //! A bounce picks one lobe with a probability from the lobes' reflectances seen from `wo` and
 //! samples it; its density is that of the mixture ([`Bsdf::pdf`]), which is also what
 //! multiple importance sampling weighs light samples against. When the glossy lobe's
@@ -113,6 +123,53 @@ pub struct Bsdf {
     pub sheen: Sheen,
     /// Clear coat over the rest ([`Coat::NONE`]: none).
     pub coat: Coat,
+    /// Shadowing of a normal a map bent ([`Bump::NONE`]: none).
+    pub bump: Bump,
+}
+
+/// The shadowing a normal or height map's bent normal is given (see the module docs): the
+/// normal before the map, and the microfacet roughness the bend stands for.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Bump {
+    /// Unit normal before the map bent it.
+    pub n: Vec3,
+    /// Squared roughness `min(tan^2(theta_d) / 8, 1)` (0: no shadowing at all).
+    pub alpha2: f32,
+}
+
+impl Bump {
+    /// No shadowing: the surface's normal is its own.
+    pub const NONE: Bump = Bump {
+        n: Vec3::Z,
+        alpha2: 0.0,
+    };
+
+    /// The shadowing of `mapped`, the unit normal a map made of `plain` (unit, the same side).
+    pub fn new(plain: Vec3, mapped: Vec3) -> Bump {
+        let c2 = plain.dot(mapped).powi(2).min(1.0);
+        let alpha2 = if c2 > 0.0 {
+            (0.125 * (1.0 - c2) / c2).min(1.0)
+        } else {
+            1.0
+        };
+        Bump { n: plain, alpha2 }
+    }
+
+    /// The share of light from `wi` (unit, away from the surface) the bent normal's surface
+    /// is not shadowed from: 1 without a bend, 0 from under the unbent normal.
+    #[inline]
+    pub fn shadowing(&self, wi: Vec3) -> f32 {
+        if self.alpha2 <= 0.0 {
+            return 1.0;
+        }
+        let c = self.n.dot(wi);
+        if c <= 0.0 {
+            return 0.0;
+        }
+        let c2 = (c * c).min(1.0);
+        let tan2 = (1.0 - c2) / c2;
+        2.0 / (1.0 + (1.0 + self.alpha2 * tan2).sqrt())
+    }
 }
 
 /// A direction a bounce picked, and its density over solid angle.
@@ -129,6 +186,11 @@ impl Bsdf {
     /// Reflected radiance per unit irradiance from `wi` towards `wo` (both unit, away from the
     /// surface).
     pub fn eval(&self, wi: Vec3, wo: Vec3) -> Vec3 {
+        self.eval_unbent(wi, wo) * self.bump.shadowing(wi)
+    }
+
+    /// [`Bsdf::eval`] without the bent normal's shadowing.
+    fn eval_unbent(&self, wi: Vec3, wo: Vec3) -> Vec3 {
         let base = self.eval_base(wi, wo);
         if self.coat.weight <= 0.0 {
             return base;
@@ -509,6 +571,7 @@ mod tests {
             gloss: Gloss::None,
             sheen: Sheen::NONE,
             coat: Coat::NONE,
+            bump: Bump::NONE,
         }];
         for exponent in [0.0, 10.0, 200.0] {
             out.push(Bsdf {
@@ -520,6 +583,7 @@ mod tests {
                 },
                 sheen: Sheen::NONE,
                 coat: Coat::NONE,
+                bump: Bump::NONE,
             });
         }
         // The last a weakened, tinted dielectric (`KHR_materials_specular`): Fresnel from 0.06
@@ -548,6 +612,7 @@ mod tests {
                 },
                 sheen: Sheen::NONE,
                 coat: Coat::NONE,
+                bump: Bump::NONE,
             });
         }
         // Clear coats over a diffuse, a Blinn-Phong and two GGX lobes.
@@ -593,6 +658,52 @@ mod tests {
     /// Every sampled direction's density is what `pdf` says for it, and the glossy lobe's
     /// density integrates to at most 1 over the sphere (exactly 1 less what falls under the
     /// surface: checked by the share of samples that come back).
+    /// The bent normal's shadowing: 1 without a bend and along the unbent normal, falling
+    /// towards the horizon (faster the more the map bends), 0 under it, the formula's values
+    /// at known angles, and its roughness capped at 1 (a bend past `atan(sqrt(8))`).
+    #[test]
+    fn bump_shadowing_follows_the_formula() {
+        let n = Vec3::new(0.3, 0.5, 0.8).normalize();
+        let (t, b) = n.any_orthonormal_pair();
+        let tilt = |deg: f32| {
+            let a = deg.to_radians();
+            (n * a.cos() + t * a.sin()).normalize()
+        };
+        assert_eq!(Bump::NONE.shadowing(-n), 1.0);
+        let bent45 = Bump::new(n, tilt(45.0));
+        assert!((bent45.alpha2 - 0.125).abs() < 1e-5, "{}", bent45.alpha2);
+        assert!((bent45.shadowing(n) - 1.0).abs() < 1e-6);
+        // Light 60 degrees from the unbent normal (tan^2 = 3), on the side away from the bend.
+        let light = (n * 0.5 + b * 0.75f32.sqrt()).normalize();
+        let expected = 2.0 / (1.0 + (1.0 + 0.125f32 * 3.0).sqrt());
+        assert!((bent45.shadowing(light) - expected).abs() < 1e-5);
+        assert_eq!(bent45.shadowing(-light), 0.0);
+        let bent20 = Bump::new(n, tilt(20.0));
+        let mut last = (1.0, 1.0);
+        for deg in [10.0f32, 30.0, 50.0, 70.0, 85.0, 89.5] {
+            let a = deg.to_radians();
+            let wi = n * a.cos() + b * a.sin();
+            let g = (bent20.shadowing(wi), bent45.shadowing(wi));
+            assert!(g.0 < last.0 && g.1 < last.1 && g.1 < g.0, "{deg}: {g:?}");
+            last = g;
+        }
+        assert!(last.1 < 0.25, "{last:?}");
+        assert_eq!(Bump::new(n, tilt(75.0)).alpha2, 1.0);
+        // The whole reflection is scaled, so a bounce's weight carries it too.
+        let bsdf = Bsdf {
+            n,
+            bump: bent45,
+            ..lobes()[1]
+        };
+        let unbent = Bsdf {
+            bump: Bump::NONE,
+            ..bsdf
+        };
+        let wo = (n + t * 0.2).normalize();
+        let ratio = bsdf.eval(light, wo) / unbent.eval(light, wo);
+        assert!((ratio - Vec3::splat(expected)).abs().max_element() < 1e-5);
+    }
+
     #[test]
     fn sampled_densities_match_pdf() {
         let mut rng = Rng(7);
@@ -707,6 +818,7 @@ mod tests {
             },
             sheen: Sheen::NONE,
             coat: Coat::NONE,
+            bump: Bump::NONE,
         };
         let mut rng = Rng(3);
         for wo in views(Vec3::Z) {
@@ -740,6 +852,7 @@ mod tests {
                 gloss: Gloss::None,
                 sheen: Sheen::new(Vec3::ONE, roughness),
                 coat: Coat::NONE,
+                bump: Bump::NONE,
             };
             for wo in views(Vec3::Z) {
                 let albedo = uniform_estimate(&white, wo, &mut rng).x;

@@ -49,6 +49,9 @@ pub struct RenderSettings {
     pub max_depth: u32,
     /// How pixel, lens and light samples are drawn.
     pub sampler: SamplerKind,
+    /// Soften the shadow terminator of normals that normal and height maps bend (see
+    /// [`RenderPlan::soft_terminator`]); on by default.
+    pub soft_terminator: bool,
 }
 
 impl Default for RenderSettings {
@@ -60,6 +63,7 @@ impl Default for RenderSettings {
             seed: 0,
             max_depth: 5,
             sampler: SamplerKind::Sobol,
+            soft_terminator: true,
         }
     }
 }

@@ -31,6 +31,10 @@ pub struct RenderPlan {
     /// Materials' normal and height maps bend the shading normal (else the interpolated
     /// normal is used, and no such map is read).
     pub normal_maps: bool,
+    /// A normal a map bent is given a microfacet shadowing term that softens the hard shadow
+    /// terminator of a smooth mesh (as Mitsuba 3's `normalmap` and `bumpmap` do by default;
+    /// see [`super::bsdf::Bump`]); else the bent normal shades as it is.
+    pub soft_terminator: bool,
     /// At most this many shadow samples per area light and shading point (`None`: each
     /// light's own count). The viewer's moving preview takes 1: noisier, several times cheaper.
     pub max_light_samples: Option<u32>,
@@ -68,6 +72,7 @@ impl RenderPlan {
                 .materials
                 .iter()
                 .any(|m| m.has_normal_map() || m.has_height_map()),
+            soft_terminator: settings.soft_terminator,
             max_light_samples: None,
         }
     }
@@ -85,6 +90,7 @@ impl RenderPlan {
             absorption: true,
             thin_lens: true,
             normal_maps: true,
+            soft_terminator: true,
             max_light_samples: None,
         }
     }
@@ -174,7 +180,14 @@ impl fmt::Display for Explain<'_> {
                     .iter()
                     .filter(|m| m.has_normal_map() || m.has_height_map())
                     .count();
-                format!("yes, {n} material(s) bend the shading normal (normal or height maps)")
+                let terminator = if p.soft_terminator {
+                    "shadow terminator softened"
+                } else {
+                    "hard shadow terminator"
+                };
+                format!(
+                    "yes, {n} material(s) bend the shading normal (normal or height maps), {terminator}"
+                )
             } else {
                 "no normal or height map: interpolated normals".into()
             }

@@ -5,7 +5,7 @@
 
 use glam::Vec3;
 
-use super::bsdf::{Bsdf, Coat, Gloss, Sample};
+use super::bsdf::{Bsdf, Bump, Coat, Gloss, Sample};
 use super::environment::EnvironmentMap;
 use super::path::{Arrival, LightSet, power};
 use super::sheen::Sheen;
@@ -66,6 +66,8 @@ pub(super) struct Surface<'a> {
     pub(super) coat: Coat,
     /// The material's mirror reflectance here (zero: no reflection ray).
     pub(super) mirror: Vec3,
+    /// The shadowing of a normal a map bent here ([`Bump::NONE`]: none, or not softened).
+    pub(super) bump: Bump,
 }
 
 impl Surface<'_> {
@@ -77,6 +79,7 @@ impl Surface<'_> {
             gloss: self.gloss,
             sheen: self.sheen,
             coat: self.coat,
+            bump: self.bump,
         }
     }
 
@@ -91,7 +94,11 @@ impl Surface<'_> {
     /// their lobes in [`Surface::bsdf`]).
     pub(super) fn mirror_tint(&self, wo: Vec3) -> Vec3 {
         let c = wo.dot(self.n);
-        self.mirror.min(Vec3::ONE) * (1.0 - self.coat.reflects(c)) * self.sheen.scaling(c, c)
+        let shadowing = self.bump.shadowing(reflect(-wo, self.n));
+        self.mirror.min(Vec3::ONE)
+            * (1.0 - self.coat.reflects(c))
+            * self.sheen.scaling(c, c)
+            * shadowing
     }
 }
 
@@ -218,6 +225,11 @@ impl<'a> Tracer<'a> {
                 n = mapped * side;
             }
         }
+        let bump = if n != plain && self.plan.soft_terminator {
+            Bump::new(plain, n)
+        } else {
+            Bump::NONE
+        };
         let Look {
             diffuse,
             emission,
@@ -255,6 +267,7 @@ impl<'a> Tracer<'a> {
             sheen,
             coat,
             mirror,
+            bump,
         }
     }
 

@@ -682,6 +682,7 @@ fn report(
         seed: settings.seed,
         max_depth: settings.max_depth,
         sampler: settings.sampler,
+        soft_terminator: settings.soft_terminator,
     };
     let t0 = Instant::now();
     let headless = render_with_plan(

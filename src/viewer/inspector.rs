@@ -412,6 +412,13 @@ fn render_section(
                 .on_hover_text(
                     "materials' normal and height (bump) maps bend the shading normal (off: the mesh's own normals)",
                 );
+            ui.add_enabled(
+                s.normal_maps,
+                egui::Checkbox::new(&mut s.soft_terminator, "soft terminator"),
+            )
+            .on_hover_text(
+                "a shadowing term for the normals the maps bend, which softens their hard shadow edge (as Mitsuba 3 does)",
+            );
             egui::ComboBox::from_label("sampler")
                 .selected_text(s.sampler.to_string())
                 .show_ui(ui, |ui| {

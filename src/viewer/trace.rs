@@ -113,6 +113,8 @@ pub struct ViewSettings {
     pub transparent_shadows: bool,
     /// Materials' normal and height maps bend the shading normal.
     pub normal_maps: bool,
+    /// The normals the maps bend get the shadowing term that softens their shadow terminator.
+    pub soft_terminator: bool,
     /// How samples are drawn.
     pub sampler: SamplerKind,
     /// Seed of the random streams.
@@ -164,6 +166,7 @@ impl Default for ViewSettings {
             shadows: true,
             transparent_shadows: true,
             normal_maps: true,
+            soft_terminator: r.soft_terminator,
             sampler: r.sampler,
             seed: r.seed,
             exposure: 1.0,
@@ -227,6 +230,7 @@ impl ViewSettings {
         plan.transparent_shadows &= self.transparent_shadows && self.shadows;
         plan.thin_lens = self.depth_of_field && self.lens_radius > 0.0;
         plan.normal_maps &= self.normal_maps;
+        plan.soft_terminator &= self.soft_terminator;
         plan
     }
 }
