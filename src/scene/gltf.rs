@@ -45,6 +45,7 @@ use anyhow::{Result, anyhow, bail};
 use base64::Engine as _;
 use glam::{DMat3, DMat4, DVec3, Vec2, Vec3, Vec4};
 
+use super::meshopt::{self, Buffer};
 use super::pbr::{Clearcoat, SheenLayer};
 use super::{Camera, Environment, Light, Material, Mesh, NormalRule, Scene, Texture, Wrap};
 
@@ -216,10 +217,11 @@ pub fn load_from(
             ));
         }
     }
-    let buffers = doc
+    let mut buffers = doc
         .buffers()
         .map(|b| load_buffer(&name, &b, doc.blob.as_deref(), read))
         .collect::<Vec<_>>();
+    let doc = meshopt::decompress(&name, doc, &mut buffers)?;
 
     let mut loader = Loader {
         name: &name,
@@ -440,6 +442,8 @@ const READ_EXTENSIONS: &[&str] = &[
     "KHR_materials_emissive_strength",
     "KHR_texture_transform",
     "EXT_texture_webp",
+    meshopt::EXTENSION,
+    meshopt::KHR_EXTENSION,
 ];
 
 /// Extensions the loader does not read but a file may require: it can safely do without them.
@@ -552,8 +556,6 @@ fn parse_error(name: &str, e: ::gltf::Error) -> anyhow::Error {
 }
 
 /// A buffer's bytes, or why they cannot be had (reported when an accessor needs them).
-type Buffer = std::result::Result<Vec<u8>, String>;
-
 fn load_buffer(
     name: &str,
     b: &::gltf::Buffer,
@@ -561,6 +563,11 @@ fn load_buffer(
     read: &dyn Fn(&Path) -> Result<Vec<u8>>,
 ) -> Buffer {
     let i = b.index();
+    if meshopt::is_fallback(b) {
+        return Err(format!(
+            "{name}: buffers[{i}]: the uncompressed fallback of the meshopt compression, which the file leaves out"
+        ));
+    }
     let data = match b.source() {
         ::gltf::buffer::Source::Bin => match blob {
             Some(d) => d.to_vec(),

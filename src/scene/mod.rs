@@ -7,6 +7,7 @@
 pub mod check;
 pub mod file;
 pub mod gltf;
+mod meshopt;
 pub mod normals;
 pub mod obj;
 pub mod pbr;
