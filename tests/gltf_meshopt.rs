@@ -218,7 +218,8 @@ fn load_edited(edit: impl Fn(&mut Value, &mut Vec<u8>)) -> Option<Result<Scene, 
 
 /// Compressed data made wrong is an error naming the file, the view and what is wrong, never a
 /// panic or a silently wrong mesh: the stream overwritten, an unknown mode and filter, a view
-/// past its buffer, a field missing. The file unchanged loads.
+/// past its buffer, a count that is not the view's (a million times it: refused before
+/// anything is decoded), a field missing. The file unchanged loads.
 #[test]
 fn bad_compressed_views_are_refused_by_name() {
     let Some(ok) = load_edited(|_, _| {}) else {
@@ -249,6 +250,14 @@ fn bad_compressed_views_are_refused_by_name() {
             "past its buffer",
             Box::new(|ext, _| ext["byteOffset"] = 10_000_000.into()),
             "run past buffers[",
+        ),
+        (
+            "count not the view's",
+            Box::new(|ext, _| {
+                let n = ext["count"].as_u64().unwrap();
+                ext["count"] = (n * 1_000_000).into();
+            }),
+            "where the view's byteLength is",
         ),
         (
             "count missing",

@@ -476,10 +476,7 @@ pub fn run(
             pools[p]
                 .1
                 .install(|| engines::trace_closest(&*first.engine, rays, width, &mut first_hits));
-            let mut bounds = Aabb::EMPTY;
-            for &v in tris.iter().flatten() {
-                bounds.grow_point(v.into());
-            }
+            let bounds = Aabb::of_finite_points(tris.iter().flatten().copied());
             let second = secondary::secondary_rays(tris, rays, &first_hits, &bounds);
             let (h, m): (Vec<_>, Vec<_>) = rays
                 .iter()

@@ -32,6 +32,15 @@ impl Aabb {
         }
     }
 
+    /// The box around the finite points of `points` (empty when none is).
+    pub fn of_finite_points(points: impl IntoIterator<Item = Vec3>) -> Aabb {
+        let mut b = Aabb::EMPTY;
+        for p in points.into_iter().filter(|p| p.is_finite()) {
+            b.grow_point(p.into());
+        }
+        b
+    }
+
     /// Grows the box to hold `p`.
     #[inline]
     pub fn grow_point(&mut self, p: Vec3A) {
@@ -134,5 +143,26 @@ impl Aabb {
         let near = Vec3A::select(near.cmpeq(near), near, Vec3A::NEG_INFINITY);
         let far = Vec3A::select(far.cmpeq(far), far, Vec3A::INFINITY);
         (near.max_element(), far.min_element())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The box of the finite points only: NaN and infinite ones are left out, and none at all
+    /// is the empty box.
+    #[test]
+    fn of_finite_points_leaves_out_the_rest() {
+        let b = Aabb::of_finite_points([
+            Vec3::new(1.0, -2.0, 3.0),
+            Vec3::new(f32::NAN, 100.0, 0.0),
+            Vec3::new(-1.0, 0.5, f32::INFINITY),
+            Vec3::new(0.0, 4.0, -5.0),
+        ]);
+        assert_eq!(Vec3::from(b.min), Vec3::new(0.0, -2.0, -5.0));
+        assert_eq!(Vec3::from(b.max), Vec3::new(1.0, 4.0, 3.0));
+        assert!(Aabb::of_finite_points([Vec3::splat(f32::NAN)]).is_empty());
+        assert!(Aabb::of_finite_points([]).is_empty());
     }
 }

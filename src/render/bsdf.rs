@@ -655,9 +655,6 @@ mod tests {
             .collect()
     }
 
-    /// Every sampled direction's density is what `pdf` says for it, and the glossy lobe's
-    /// density integrates to at most 1 over the sphere (exactly 1 less what falls under the
-    /// surface: checked by the share of samples that come back).
     /// The bent normal's shadowing: 1 without a bend and along the unbent normal, falling
     /// towards the horizon (faster the more the map bends), 0 under it, the formula's values
     /// at known angles, and its roughness capped at 1 (a bend past `atan(sqrt(8))`).
@@ -704,6 +701,9 @@ mod tests {
         assert!((ratio - Vec3::splat(expected)).abs().max_element() < 1e-5);
     }
 
+    /// Every sampled direction's density is what `pdf` says for it, and the glossy lobe's
+    /// density integrates to at most 1 over the sphere (exactly 1 less what falls under the
+    /// surface: checked by the share of samples that come back).
     #[test]
     fn sampled_densities_match_pdf() {
         let mut rng = Rng(7);

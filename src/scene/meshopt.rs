@@ -58,14 +58,8 @@ pub(super) fn decompress(name: &str, doc: Gltf, buffers: &mut Vec<Buffer>) -> Re
             continue;
         };
         let at = format!("{name}: bufferViews[{}]: {ext_name}", view.index());
-        let bytes = decode_view(&at, ext, ext_name == KHR_EXTENSION, buffers)?;
-        if bytes.len() < view.length() {
-            bail!(
-                "{at}: decodes to {} bytes, the view's byteLength says {}",
-                bytes.len(),
-                view.length()
-            );
-        }
+        let khr = ext_name == KHR_EXTENSION;
+        let bytes = decode_view(&at, ext, khr, view.length(), buffers)?;
         decoded.push((view.index(), bytes));
     }
     if decoded.is_empty() {
@@ -104,9 +98,15 @@ pub(super) fn decompress(name: &str, doc: Gltf, buffers: &mut Vec<Buffer>) -> Re
     })
 }
 
-/// The bytes of one compressed view, described by its extension object `ext` (of the KHR
-/// extension when `khr`).
-fn decode_view(at: &str, ext: &Value, khr: bool, buffers: &[Buffer]) -> Result<Vec<u8>> {
+/// The bytes of one compressed view of `length` bytes, described by its extension object `ext`
+/// (of the KHR extension when `khr`).
+fn decode_view(
+    at: &str,
+    ext: &Value,
+    khr: bool,
+    length: usize,
+    buffers: &[Buffer],
+) -> Result<Vec<u8>> {
     let field = |key: &str| -> Result<usize> {
         ext.get(key)
             .and_then(Value::as_u64)
@@ -125,7 +125,11 @@ fn decode_view(at: &str, ext: &Value, khr: bool, buffers: &[Buffer]) -> Result<V
         None => 0,
         Some(_) => field("byteOffset")?,
     };
-    let (length, stride, count) = (field("byteLength")?, field("byteStride")?, field("count")?);
+    let (stored, stride, count) = (field("byteLength")?, field("byteStride")?, field("count")?);
+    // What it decodes to is the view itself: checked before anything is decoded (or allocated).
+    if count.checked_mul(stride) != Some(length) {
+        bail!("{at}: {count} elements of {stride} bytes, where the view's byteLength is {length}");
+    }
     let mode_name = text("mode", None)?;
     let filter_name = text("filter", Some("NONE"))?;
     let mode = Mode::parse(&mode_name).map_err(|_| anyhow!("{at}: unknown mode {mode_name}"))?;
@@ -142,11 +146,11 @@ fn decode_view(at: &str, ext: &Value, khr: bool, buffers: &[Buffer]) -> Result<V
         None => bail!("{at}: buffers[{b}] does not exist"),
     };
     let source = offset
-        .checked_add(length)
+        .checked_add(stored)
         .and_then(|end| data.get(offset..end))
         .ok_or_else(|| {
             anyhow!(
-                "{at}: bytes {offset}..+{length} run past buffers[{b}] ({} bytes)",
+                "{at}: bytes {offset}..+{stored} run past buffers[{b}] ({} bytes)",
                 data.len()
             )
         })?;

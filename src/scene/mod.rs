@@ -611,15 +611,7 @@ impl Mesh {
 
     /// Box around all finite vertices.
     pub fn bounds(&self) -> Aabb {
-        let mut b = Aabb::EMPTY;
-        for t in &self.triangles {
-            for v in t {
-                if v.is_finite() {
-                    b.grow_point((*v).into());
-                }
-            }
-        }
-        b
+        Aabb::of_finite_points(self.triangles.iter().flatten().copied())
     }
 }
 
