@@ -124,12 +124,15 @@ impl PixelSampler {
                 // with `i` the shuffled index, `x = nested_uniform_scramble(i.reverse_bits(),
                 // sx)` and `y = nested_uniform_scramble(sobol_dim1(i), sy)`. Computed on the
                 // reversed bits throughout, where the scrambles work (`i` reversed is `w`, and
-                // `sobol_dim1(i)` reversed is a table lookup of `w`): three bit reversals a
-                // point instead of seven, the same bits (`tests/sampling.rs`).
+                // `sobol_dim1(i)` reversed is a table lookup of `w`): two bit reversals a point
+                // instead of seven, the same bits (`tests/sampling.rs`). The second reverses
+                // both axes side by side in 64 bits: `x` in the high half comes back reversed
+                // in the low half, `y` the other way round.
                 let w = laine_karras(self.index_rev, h as u32);
                 let x = laine_karras(w.reverse_bits(), (h >> 32) as u32 ^ 0x68bc_21eb);
                 let y = laine_karras(sobol_dim1_reversed(w), (h >> 16) as u32 ^ 0x02e5_be93);
-                glam::Vec2::new(unit(x.reverse_bits()), unit(y.reverse_bits()))
+                let both = ((x as u64) << 32 | y as u64).reverse_bits();
+                glam::Vec2::new(unit(both as u32), unit((both >> 32) as u32))
             }
         }
     }

@@ -136,7 +136,8 @@ fn the_byte_table_sobol_dimension_equals_the_bitwise_one() {
     }
 }
 
-/// The Sobol sampler computes its points on bit-reversed values (three reversals a point):
+/// The Sobol sampler computes its points on bit-reversed values (a 32-bit reversal a point,
+/// and one of 64 bits for both axes):
 /// every point equals the formula as written, a shuffle of the index, then Owen scrambling
 /// of the first dimension (the reversed index) and of the second (`sobol_dim1_bitwise`), for
 /// seeds, pixels, sample indices (edges included, and through `with_index`) and dimensions.
