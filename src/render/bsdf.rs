@@ -183,9 +183,31 @@ pub struct Sample {
 }
 
 impl Bsdf {
+    /// True for a Lambertian lobe alone: no glossy lobe, sheen or coat, and no bent normal
+    /// to shadow. [`Bsdf::eval`], [`Bsdf::pdf`], [`Bsdf::sample`] and
+    /// [`Bsdf::gloss_probability`] then take a short path inlined where they are called, with
+    /// the same bits as the general one (which reduces to it term by term).
+    #[inline]
+    fn is_lambertian(&self) -> bool {
+        matches!(self.gloss, Gloss::None)
+            && self.coat.weight <= 0.0
+            && self.bump.alpha2 <= 0.0
+            && !self.sheen.is_some()
+    }
+
     /// Reflected radiance per unit irradiance from `wi` towards `wo` (both unit, away from the
     /// surface).
+    #[inline]
     pub fn eval(&self, wi: Vec3, wo: Vec3) -> Vec3 {
+        if self.is_lambertian() {
+            return self.diffuse * FRAC_1_PI;
+        }
+        self.eval_layers(wi, wo)
+    }
+
+    /// [`Bsdf::eval`] of any lobes.
+    #[inline(never)]
+    fn eval_layers(&self, wi: Vec3, wo: Vec3) -> Vec3 {
         self.eval_unbent(wi, wo) * self.bump.shadowing(wi)
     }
 
@@ -258,7 +280,17 @@ impl Bsdf {
 
     /// Probability that a bounce seen from `wo` samples a glossy lobe, the coat or the glossy
     /// lobe under it (0 without either, or when `wo` lies under the shading normal).
+    #[inline]
     pub fn gloss_probability(&self, wo: Vec3) -> f32 {
+        if self.is_lambertian() {
+            return 0.0;
+        }
+        self.gloss_probability_layers(wo)
+    }
+
+    /// [`Bsdf::gloss_probability`] of any lobes.
+    #[inline(never)]
+    fn gloss_probability_layers(&self, wo: Vec3) -> f32 {
         let pc = self.coat_probability(wo);
         pc + (1.0 - pc) * self.base_gloss_probability(wo)
     }
@@ -332,7 +364,17 @@ impl Bsdf {
     }
 
     /// Density over solid angle with which [`Bsdf::sample`] picks `wi` seen from `wo`.
+    #[inline]
     pub fn pdf(&self, wi: Vec3, wo: Vec3) -> f32 {
+        if self.is_lambertian() {
+            return self.mixture_pdf(0.0, wi, wo);
+        }
+        self.pdf_layers(wi, wo)
+    }
+
+    /// [`Bsdf::pdf`] of any lobes.
+    #[inline(never)]
+    fn pdf_layers(&self, wi: Vec3, wo: Vec3) -> f32 {
         let pc = self.coat_probability(wo);
         let base = self.mixture_pdf(self.base_gloss_probability(wo), wi, wo);
         if pc == 0.0 {
@@ -354,6 +396,7 @@ impl Bsdf {
     }
 
     /// [`Bsdf::pdf`] with the glossy lobe's probability `ps` already found.
+    #[inline]
     fn mixture_pdf(&self, ps: f32, wi: Vec3, wo: Vec3) -> f32 {
         let cos = self.n.dot(wi);
         let diffuse = if cos > 0.0 { cos * FRAC_1_PI } else { 0.0 };
@@ -365,7 +408,17 @@ impl Bsdf {
 
     /// A direction seen from `wo`, from the uniform random numbers `u` (`None` when the glossy
     /// lobe's half vector turns away from `wo`).
+    #[inline]
     pub fn sample(&self, wo: Vec3, u: Vec2) -> Option<Sample> {
+        if self.is_lambertian() {
+            return Some(self.sample_cosine(u));
+        }
+        self.sample_layers(wo, u)
+    }
+
+    /// [`Bsdf::sample`] of any lobes.
+    #[inline(never)]
+    fn sample_layers(&self, wo: Vec3, u: Vec2) -> Option<Sample> {
         let pc = self.coat_probability(wo);
         if pc > 0.0 {
             // The first number picks the coat or the lobes under it and, stretched back to
@@ -390,11 +443,7 @@ impl Bsdf {
     fn sample_base(&self, wo: Vec3, u: Vec2) -> Option<Sample> {
         let ps = self.base_gloss_probability(wo);
         if ps == 0.0 {
-            let wi = cosine_direction(self.n, u);
-            return Some(Sample {
-                wi,
-                pdf: self.n.dot(wi).max(0.0) * FRAC_1_PI,
-            });
+            return Some(self.sample_cosine(u));
         }
         // The first number picks the lobe and, stretched back to [0, 1), samples it.
         let wi = if u.x < ps {
@@ -408,6 +457,16 @@ impl Bsdf {
             wi,
             pdf: self.mixture_pdf(ps, wi, wo),
         })
+    }
+
+    /// A cosine-weighted direction about the normal, with its density.
+    #[inline]
+    fn sample_cosine(&self, u: Vec2) -> Sample {
+        let wi = cosine_direction(self.n, u);
+        Sample {
+            wi,
+            pdf: self.n.dot(wi).max(0.0) * FRAC_1_PI,
+        }
     }
 
     /// The glossy lobe's own density at `wi` seen from `wo` (`wo` above the shading normal).
@@ -653,6 +712,50 @@ mod tests {
             .iter()
             .map(|&c| (n * c + (t * 0.8 + b * 0.6) * (1.0 - c * c).sqrt()).normalize())
             .collect()
+    }
+
+    /// A Lambertian lobe's short path (taken inline at every call) gives the general path's
+    /// bits: values, densities, sampled directions and the glossy odds, for directions above
+    /// and below the normal, diffuse colours black and white included; and only Lambertian
+    /// lobes take it (every other lobe of [`lobes`], a bent normal's shadowing too).
+    #[test]
+    fn the_lambertian_short_path_gives_the_general_paths_bits() {
+        let mut rng = Rng(17);
+        let mut lambertian = lobes()[0];
+        assert!(lambertian.is_lambertian());
+        for other in &lobes()[1..] {
+            assert!(!other.is_lambertian(), "{other:?}");
+        }
+        let bent = Bsdf {
+            bump: Bump::new(lambertian.n, Vec3::new(0.5, 0.8, 0.1).normalize()),
+            ..lambertian
+        };
+        assert!(!bent.is_lambertian());
+        let bits = |v: Vec3| v.to_array().map(f32::to_bits);
+        for diffuse in [Vec3::ZERO, Vec3::new(0.8, 0.2, 0.1), Vec3::ONE] {
+            lambertian.diffuse = diffuse;
+            let b = lambertian;
+            for _ in 0..2000 {
+                let dir = |u: Vec2| {
+                    let z = 1.0 - 2.0 * u.x;
+                    let r = (1.0 - z * z).max(0.0).sqrt();
+                    let phi = 2.0 * PI * u.y;
+                    Vec3::new(r * phi.cos(), r * phi.sin(), z)
+                };
+                let (wi, wo) = (dir(rng.next_2d()), dir(rng.next_2d()));
+                let u = rng.next_2d();
+                assert_eq!(bits(b.eval(wi, wo)), bits(b.eval_layers(wi, wo)));
+                assert_eq!(b.pdf(wi, wo).to_bits(), b.pdf_layers(wi, wo).to_bits());
+                assert_eq!(
+                    b.gloss_probability(wo).to_bits(),
+                    b.gloss_probability_layers(wo).to_bits()
+                );
+                let (short, general) = (b.sample(wo, u), b.sample_layers(wo, u));
+                let (short, general) = (short.expect("a cosine sample"), general.expect("one"));
+                assert_eq!(bits(short.wi), bits(general.wi));
+                assert_eq!(short.pdf.to_bits(), general.pdf.to_bits());
+            }
+        }
     }
 
     /// The bent normal's shadowing: 1 without a bend and along the unbent normal, falling

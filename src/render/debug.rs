@@ -155,7 +155,7 @@ impl Tracer<'_> {
             }),
             nodes,
         });
-        if s.diffuse != Vec3::ZERO || s.gloss != super::bsdf::Gloss::None {
+        if s.bsdf.diffuse != Vec3::ZERO || s.bsdf.gloss != super::bsdf::Gloss::None {
             let origin = s.origin;
             for (li, light) in self.scene.lights.iter().enumerate() {
                 let (to_point, t_max) = match *light {

@@ -270,7 +270,7 @@ impl Tracer<'_> {
                 counts.transmission += 1;
                 let (dir, side) = transmit(ray.dir, &s);
                 let through = Ray::new(offset_ray_origin(s.p, s.p_err, side), dir);
-                let tint = m.transmission(alpha, s.diffuse);
+                let tint = m.transmission(alpha, s.bsdf.diffuse);
                 // Shadow rays pass straight through transparent surfaces: light a bounce
                 // finds beyond one is weighted as if the bounce had found it directly.
                 let arrival = match arrival {
@@ -445,8 +445,7 @@ impl Tracer<'_> {
         }
         let p_light = d2 / (cos_l * self.lights.area);
         let (pass, crossed) = self.shadow_through(s.origin, q - s.origin, 1.0 - 1e-4, counts);
-        let mat = self.scene.material_of(prim);
-        let le = super::shade::textured(self.scene, mat, prim, b1, b2).emission;
+        let le = self.look(prim, b1, b2).emission;
         Some(EmissiveSample {
             value: brdf(s, wi, wo) * cos * le * pass / p_light,
             p_light,
@@ -476,8 +475,7 @@ impl Tracer<'_> {
         }
         let d = (s.p - (s.origin + hit.t * wi)).length();
         let p_light = d * d / (cos_l * self.lights.area);
-        let mat = self.scene.material_of(hit.prim);
-        let le = super::shade::textured(self.scene, mat, hit.prim, hit.u, hit.v).emission;
+        let le = self.look(hit.prim, hit.u, hit.v).emission;
         le * power(count as f32, pdf, p_light)
     }
 

@@ -35,6 +35,9 @@ pub struct Tracer<'a> {
     /// What both integrators sample besides the scene's lights: the emissive triangles no
     /// rectangle light stands for.
     pub lights: std::sync::Arc<LightSet>,
+    /// Per material, its look when no texture varies it (the same at every point), found once
+    /// instead of at every hit.
+    looks: Vec<Option<Look>>,
 }
 
 /// Where a ray met a surface.
@@ -52,35 +55,23 @@ pub(super) struct Surface<'a> {
     /// True when the ray arrived on the side the triangle's winding calls outside.
     pub(super) entering: bool,
     pub(super) material: &'a Material,
-    /// The material's diffuse colour here (its texture applied).
-    pub(super) diffuse: Vec3,
     /// The material's emitted radiance here (its texture applied).
     pub(super) emission: Vec3,
     /// The material's opacity here (its texture's alpha applied, for `BLEND` and `MASK`).
     pub(super) opacity: f32,
-    /// The material's glossy lobe here.
-    pub(super) gloss: Gloss,
-    /// The material's sheen here ([`Sheen::NONE`]: none).
-    pub(super) sheen: Sheen,
-    /// The material's clear coat here ([`Coat::NONE`]: none).
-    pub(super) coat: Coat,
     /// The material's mirror reflectance here (zero: no reflection ray).
     pub(super) mirror: Vec3,
-    /// The shadowing of a normal a map bent here ([`Bump::NONE`]: none, or not softened).
-    pub(super) bump: Bump,
+    /// What the surface reflects here, about its shading normal `n`: the material's diffuse
+    /// colour (its texture applied), glossy lobe, sheen ([`Sheen::NONE`]: none) and clear
+    /// coat ([`Coat::NONE`]: none) here, and the shadowing of a normal a map bent
+    /// ([`Bump::NONE`]: none, or not softened). Kept whole, so that each use borrows it.
+    pub(super) bsdf: Bsdf,
 }
 
 impl Surface<'_> {
     /// What the surface reflects here, about its shading normal.
-    pub(super) fn bsdf(&self) -> Bsdf {
-        Bsdf {
-            n: self.n,
-            diffuse: self.diffuse,
-            gloss: self.gloss,
-            sheen: self.sheen,
-            coat: self.coat,
-            bump: self.bump,
-        }
+    pub(super) fn bsdf(&self) -> &Bsdf {
+        &self.bsdf
     }
 
     /// True when the surface reflects like a mirror here.
@@ -94,11 +85,9 @@ impl Surface<'_> {
     /// their lobes in [`Surface::bsdf`]).
     pub(super) fn mirror_tint(&self, wo: Vec3) -> Vec3 {
         let c = wo.dot(self.n);
-        let shadowing = self.bump.shadowing(reflect(-wo, self.n));
-        self.mirror.min(Vec3::ONE)
-            * (1.0 - self.coat.reflects(c))
-            * self.sheen.scaling(c, c)
-            * shadowing
+        let b = &self.bsdf;
+        let shadowing = b.bump.shadowing(reflect(-wo, self.n));
+        self.mirror.min(Vec3::ONE) * (1.0 - b.coat.reflects(c)) * b.sheen.scaling(c, c) * shadowing
     }
 }
 
@@ -133,6 +122,11 @@ impl<'a> Tracer<'a> {
         env: &'a EnvironmentMap,
         lights: std::sync::Arc<LightSet>,
     ) -> Self {
+        let looks = scene
+            .materials
+            .iter()
+            .map(|m| (m.textures().next().is_none()).then(|| textured(scene, m, 0, 0.0, 0.0)))
+            .collect();
         Self {
             scene,
             bvh,
@@ -140,6 +134,17 @@ impl<'a> Tracer<'a> {
             max_depth,
             env,
             lights,
+            looks,
+        }
+    }
+
+    /// The look of triangle `prim`'s material at barycentric `(u, v)` ([`textured`]): the one
+    /// found at the start when no texture varies it.
+    pub(super) fn look(&self, prim: u32, u: f32, v: f32) -> Look {
+        let id = self.scene.mesh.material_ids[prim as usize] as usize;
+        match self.looks.get(id) {
+            Some(Some(look)) => *look,
+            _ => textured(self.scene, &self.scene.materials[id], prim, u, v),
         }
     }
 
@@ -238,7 +243,7 @@ impl<'a> Tracer<'a> {
             sheen,
             mut coat,
             mirror,
-        } = textured(scene, material, prim, u, v);
+        } = self.look(prim, u, v);
         if coat.weight > 0.0 {
             // The coat's own normal: the interpolated one, or its own map's about it.
             coat.n = plain;
@@ -260,14 +265,17 @@ impl<'a> Tracer<'a> {
             n,
             entering,
             material,
-            diffuse,
             emission,
             opacity,
-            gloss,
-            sheen,
-            coat,
             mirror,
-            bump,
+            bsdf: Bsdf {
+                n,
+                diffuse,
+                gloss,
+                sheen,
+                coat,
+                bump,
+            },
         }
     }
 
@@ -310,7 +318,7 @@ impl<'a> Tracer<'a> {
             counts.transmission += 1;
             let (dir, side) = transmit(ray.dir, &s);
             let through = Ray::new(offset_ray_origin(s.p, s.p_err, side), dir);
-            let tint = m.transmission(alpha, s.diffuse);
+            let tint = m.transmission(alpha, s.bsdf.diffuse);
             l += tint * self.trace(&through, depth + 1, rng, counts);
         }
         if self.plan.absorption && !s.entering && m.is_transparent() {
@@ -401,7 +409,7 @@ impl<'a> Tracer<'a> {
             sum += e.value * w;
         }
         if by_bsdf > 0 {
-            sum += self.lights_by_bsdf(s, &bsdf, wo, by_bsdf, rng, counts);
+            sum += self.lights_by_bsdf(s, bsdf, wo, by_bsdf, rng, counts);
         }
         sum
     }
@@ -731,6 +739,7 @@ pub(super) fn rect_hit(
 }
 
 /// What a material looks like at one point of a surface.
+#[derive(Clone, Copy)]
 pub(super) struct Look {
     pub(super) diffuse: Vec3,
     pub(super) emission: Vec3,
