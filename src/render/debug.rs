@@ -151,7 +151,7 @@ impl Tracer<'_> {
                 t: hit.t,
                 prim: hit.prim,
                 point: s.p,
-                normal: s.n,
+                normal: s.n(),
             }),
             nodes,
         });
@@ -180,7 +180,7 @@ impl Tracer<'_> {
             return;
         }
         if self.plan.reflections && s.is_mirror() {
-            let r = reflect(ray.dir, s.n);
+            let r = reflect(ray.dir, s.n());
             if r.dot(s.ng) > 0.0 {
                 let bounce = Ray::new(s.origin, r.normalize());
                 self.debug_segment(

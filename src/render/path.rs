@@ -248,7 +248,7 @@ impl Tracer<'_> {
             l += alpha * self.lights_at(&s, wo, depth, rng, counts);
             l += alpha * self.bounce(&s, wo, depth, beta * alpha, rng, counts);
             if self.plan.reflections && s.is_mirror() {
-                let r = reflect(ray.dir, s.n);
+                let r = reflect(ray.dir, s.n());
                 if r.dot(s.ng) > 0.0 {
                     counts.reflection += 1;
                     let bounce = Ray::new(s.origin, r);
@@ -439,7 +439,7 @@ impl Tracer<'_> {
         let d2 = to.length_squared();
         let wi = to / d2.sqrt();
         let cos_l = face_normal(tri).dot(wi).abs();
-        let cos = s.n.dot(wi);
+        let cos = s.n().dot(wi);
         if cos <= 0.0 || cos_l <= 0.0 || s.ng.dot(to) <= 0.0 {
             return None;
         }
@@ -510,7 +510,7 @@ impl Tracer<'_> {
         let Some(Sample { wi, pdf }) = bsdf.sample(wo, u) else {
             return Vec3::ZERO;
         };
-        let cos = s.n.dot(wi);
+        let cos = s.n().dot(wi);
         if cos <= 0.0 || wi.dot(s.ng) <= 0.0 || pdf <= 0.0 {
             return Vec3::ZERO;
         }

@@ -50,8 +50,6 @@ pub(super) struct Surface<'a> {
     /// `p` moved off the surface on the side of `ng` ([`offset_ray_origin`]): where shadow
     /// rays, bounces and reflections leave from, made once for all of them.
     pub(super) origin: Vec3,
-    /// Shading normal on the same side as `ng`.
-    pub(super) n: Vec3,
     /// True when the ray arrived on the side the triangle's winding calls outside.
     pub(super) entering: bool,
     pub(super) material: &'a Material,
@@ -74,6 +72,11 @@ impl Surface<'_> {
         &self.bsdf
     }
 
+    /// Shading normal on the same side as `ng` (the BSDF's).
+    pub(super) fn n(&self) -> Vec3 {
+        self.bsdf.n
+    }
+
     /// True when the surface reflects like a mirror here.
     pub(super) fn is_mirror(&self) -> bool {
         self.mirror.max_element() > 0.0
@@ -84,9 +87,9 @@ impl Surface<'_> {
     /// and dimmed by a sheen's albedo scaling (the coat's and the sheen's own reflection are
     /// their lobes in [`Surface::bsdf`]).
     pub(super) fn mirror_tint(&self, wo: Vec3) -> Vec3 {
-        let c = wo.dot(self.n);
         let b = &self.bsdf;
-        let shadowing = b.bump.shadowing(reflect(-wo, self.n));
+        let c = wo.dot(b.n);
+        let shadowing = b.bump.shadowing(reflect(-wo, b.n));
         self.mirror.min(Vec3::ONE) * (1.0 - b.coat.reflects(c)) * b.sheen.scaling(c, c) * shadowing
     }
 }
@@ -262,7 +265,6 @@ impl<'a> Tracer<'a> {
             p_err,
             ng,
             origin: offset_ray_origin(p, p_err, ng),
-            n,
             entering,
             material,
             emission,
@@ -307,7 +309,7 @@ impl<'a> Tracer<'a> {
 
         let mut l = alpha * (s.emission + self.direct(&s, wo, rng, counts));
         if self.plan.reflections && s.is_mirror() && depth < self.max_depth {
-            let r = reflect(ray.dir, s.n);
+            let r = reflect(ray.dir, s.n());
             if r.dot(s.ng) > 0.0 {
                 counts.reflection += 1;
                 let bounce = Ray::new(s.origin, r);
@@ -434,7 +436,7 @@ impl<'a> Tracer<'a> {
             let Some(Sample { wi, pdf }) = bsdf.sample(wo, rng.next_2d()) else {
                 continue;
             };
-            let cos = s.n.dot(wi);
+            let cos = s.n().dot(wi);
             if cos <= 0.0 || wi.dot(s.ng) <= 0.0 || pdf <= 0.0 {
                 continue;
             }
@@ -515,11 +517,11 @@ impl<'a> Tracer<'a> {
         let to = position - s.p;
         let d2 = to.length_squared();
         let wi = to / d2.sqrt();
-        if s.n.dot(wi) <= 0.0 || s.ng.dot(to) <= 0.0 {
+        if s.n().dot(wi) <= 0.0 || s.ng.dot(to) <= 0.0 {
             return Vec3::ZERO;
         }
         let pass = self.shadow(origin, position - origin, 1.0, counts);
-        brdf(s, wi, wo) * s.n.dot(wi) * intensity * pass / d2
+        brdf(s, wi, wo) * s.n().dot(wi) * intensity * pass / d2
     }
 
     /// Light the rectangle light `rect` sends to `s` and `s` reflects towards `wo`, from
@@ -554,7 +556,7 @@ impl<'a> Tracer<'a> {
             let Some(sample) = rect_sample(s, corner, edge_u, edge_v, ln, rng.next_2d()) else {
                 continue;
             };
-            let cos = s.n.dot(sample.wi);
+            let cos = s.n().dot(sample.wi);
             let w = weight(&sample, cos, area);
             if w == 0.0 {
                 continue;
@@ -695,7 +697,7 @@ pub(super) fn rect_sample(
     let d2 = to.length_squared();
     let wi = to / d2.sqrt();
     let cos_l = -ln.dot(wi);
-    if s.n.dot(wi) <= 0.0 || cos_l <= 0.0 || s.ng.dot(to) <= 0.0 {
+    if s.n().dot(wi) <= 0.0 || cos_l <= 0.0 || s.ng.dot(to) <= 0.0 {
         return None;
     }
     Some(RectSample { q, wi, d2, cos_l })
@@ -977,12 +979,12 @@ pub(super) fn transmit(d: Vec3, s: &Surface) -> (Vec3, Vec3) {
     }
     let eta = if s.entering { 1.0 / ior } else { ior };
     let dn = d.normalize();
-    let cos_i = -dn.dot(s.n);
+    let cos_i = -dn.dot(s.n());
     let k = 1.0 - eta * eta * (1.0 - cos_i * cos_i);
     if k < 0.0 {
-        (reflect(dn, s.n), s.ng) // total internal reflection
+        (reflect(dn, s.n()), s.ng) // total internal reflection
     } else {
-        (eta * dn + (eta * cos_i - k.sqrt()) * s.n, -s.ng)
+        (eta * dn + (eta * cos_i - k.sqrt()) * s.n(), -s.ng)
     }
 }
 
