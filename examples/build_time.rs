@@ -1,9 +1,9 @@
 //! Times the SAH build alone: `BUILDS` builds of a mesh on a pool of `THREADS` threads, and
 //! prints the fastest and the median (of the build as it times itself, and of the whole call as
 //! `tracery bench` times it, statistics included) and the tree (SAH cost, leaves, levels), so
-//! two builders can be compared by running their binaries one after the other (the machines
-//! are noisy: alternate them, compare within a session). Embree's build time, beside ours in
-//! one run, is in `tracery bench` (`--features embree`).
+//! two builders can be compared by running their binaries one after the other (a shared
+//! machine is noisy: alternate them, and compare runs made close together). Embree's build time, beside ours in
+//! one run, is in `tracery bench`.
 //!
 //! `cargo run --release --no-default-features --example build_time -- MESH [BUILDS] [THREADS]
 //! [cold]`

@@ -11,7 +11,7 @@
 //! The gap between image order and one ray is what the memory and the branch predictor cost
 //! each engine. Rates are the best of `ROUNDS`, the two engines alternating.
 //!
-//! `cargo run --release --no-default-features --features embree --example repeat_time -- MESH [R] [ROUNDS]`
+//! `cargo run --release --no-default-features --example repeat_time -- MESH [R] [ROUNDS]`
 
 use std::path::PathBuf;
 use std::time::Instant;

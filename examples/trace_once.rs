@@ -8,7 +8,7 @@
 //! branches of a simulated predictor.
 //!
 //! ```text
-//! cargo build --release --no-default-features --features embree --example trace_once
+//! cargo build --release --no-default-features --example trace_once
 //! TRACERY_KERNEL=avx2 valgrind --tool=cachegrind --cache-sim=yes --branch-sim=yes \
 //!     --D1=49152,12,64 --LL=2097152,16,64 target/release/examples/trace_once MESH ENGINE QUERY [setup]
 //! ```

@@ -2,7 +2,7 @@
 //! `ROUNDS` times, one by one (closest hits, then shadow queries) and in packets of 8 x 8
 //! pixel tiles (closest hits), and prints the fastest and median rates of each. Two builds of the traversal are compared by running
 //! their binaries one after the other, alternating (the machines are noisy); Embree's rate
-//! beside ours in one run is in `tracery bench --features embree`. `TRACERY_KERNEL` picks the
+//! beside ours in one run is in `tracery bench`. `TRACERY_KERNEL` picks the
 //! kernel as everywhere.
 //!
 //! `cargo run --release --no-default-features --example trace_time -- MESH [ROUNDS] [QUERY] [RAYS]`

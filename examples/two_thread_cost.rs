@@ -9,7 +9,7 @@
 //! starts with the second core's caches holding the other engine's data); round 1 is left out
 //! of the sums.
 //!
-//! `cargo run --release --no-default-features --features embree --example two_thread_cost -- MESH [ROUNDS]`
+//! `cargo run --release --no-default-features --example two_thread_cost -- MESH [ROUNDS]`
 use anyhow::{Context, Result};
 use rayon::prelude::*;
 use std::path::PathBuf;

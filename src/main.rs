@@ -5,13 +5,11 @@ mod cli;
 
 use std::process::ExitCode;
 
-use clap::Parser;
-
 fn main() -> ExitCode {
     // Rust ignores SIGPIPE, so a print after the reader of a pipe has gone panics; with the
     // signal's default the process ends quietly, as `cat` or `grep` do.
     sigpipe::reset();
-    let args = cli::Cli::parse();
+    let args = cli::parse();
     match cli::run(args) {
         Ok(code) => code,
         Err(e) => {

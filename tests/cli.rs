@@ -102,6 +102,46 @@ fn render_to_exr_and_hdr_writes_the_linear_radiance_of_the_same_render() {
     );
 }
 
+/// `--version` names the version, the commit it was built from, the features and the kernel
+/// (the one `TRACERY_KERNEL` picks, among those this CPU runs); `-V` is the one-line form.
+#[test]
+fn version_names_the_commit_the_features_and_the_kernel() {
+    let o = Command::new(env!("CARGO_BIN_EXE_tracery"))
+        .arg("--version")
+        .env("TRACERY_KERNEL", "scalar")
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let v = text(&o.stdout);
+    let first = v.lines().next().unwrap_or_default();
+    assert!(
+        first.starts_with(&format!("tracery {} (commit ", env!("CARGO_PKG_VERSION"))),
+        "{v}"
+    );
+    let features = v
+        .lines()
+        .find_map(|l| l.strip_prefix("features: "))
+        .expect("a features line");
+    assert_eq!(features.contains("viewer"), cfg!(feature = "viewer"), "{v}");
+    let embree = v
+        .lines()
+        .find_map(|l| l.strip_prefix("embree: "))
+        .expect("an embree line");
+    assert_eq!(embree.contains("not found"), !common::embree(), "{v}");
+    let kernel = v
+        .lines()
+        .find_map(|l| l.strip_prefix("kernel: "))
+        .expect("a kernel line");
+    assert!(kernel.starts_with("scalar (this CPU runs scalar"), "{v}");
+    let short = tracery(&["-V"]);
+    let short = text(&short.stdout);
+    assert_eq!(short.lines().count(), 1, "{short}");
+    assert!(
+        short.starts_with(&format!("tracery {} (", env!("CARGO_PKG_VERSION"))),
+        "{short}"
+    );
+}
+
 #[test]
 fn stats_json_has_both_builders() {
     let o = tracery(&["stats", "--json"]);
@@ -167,11 +207,7 @@ fn bench_json_and_output_files_follow_the_formats() {
     let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
     let rows = v.as_array().unwrap();
     let engines: Vec<&str> = rows.iter().map(|r| r["engine"].as_str().unwrap()).collect();
-    let peers: &[&str] = if cfg!(feature = "peers") {
-        &["obvhs-bvh2", "obvhs-cwbvh"]
-    } else {
-        &[]
-    };
+    let peers: &[&str] = &["obvhs-bvh2", "obvhs-cwbvh"];
     for &e in ["tracery-sah", "tracery-median"].iter().chain(peers) {
         assert_eq!(
             engines.iter().filter(|x| **x == e).count(),
@@ -388,11 +424,7 @@ fn bench_leaves_out_non_finite_triangles_before_any_engine_sees_them() {
         out.contains("3 with NaN or infinite vertices left out for every engine"),
         "{out}"
     );
-    let peers: &[&str] = if cfg!(feature = "peers") {
-        &["obvhs-bvh2", "obvhs-cwbvh"]
-    } else {
-        &[]
-    };
+    let peers: &[&str] = &["obvhs-bvh2", "obvhs-cwbvh"];
     for &engine in ["tracery-sah", "tracery-packet"].iter().chain(peers) {
         assert!(out.contains(engine), "{engine} missing: {out}");
     }
@@ -481,7 +513,7 @@ fn bench_isa_holds_every_engine_to_one_instruction_set() {
     let o = tracery(&args);
     assert!(o.status.success(), "{}", text(&o.stderr));
     let out = text(&o.stdout);
-    let expected = if cfg!(feature = "embree") {
+    let expected = if common::embree() {
         "tracery kernel scalar, Embree held to isa=sse2"
     } else {
         "tracery kernel scalar"
@@ -599,7 +631,7 @@ fn report_scaling_prints_each_builders_speed_up_from_one_thread_to_all() {
     let (header, rows) = (&lines[0], &lines[2..]);
     assert_eq!(rows.len(), 1, "one row, the generated terrain:\n{stdout}");
     let column = |name: &dyn Fn(&str) -> bool| header.iter().position(|h| name(h));
-    let engines: &[&str] = if cfg!(feature = "embree") {
+    let engines: &[&str] = if common::embree() {
         &["ours", "Embree"]
     } else {
         &["ours"]

@@ -2,8 +2,8 @@
 //! disassembly (`objdump` from binutils): the single-ray walks hold no 512-bit instruction.
 //!
 //! With AVX-512 enabled the compiler may join scalar and 256-bit memory operations into 512-bit
-//! ones. In session 30 it had put 12 into the closest-hit walk (the pair test's answer zeroed,
-//! two of its lanes read), and on an Intel Xeon that walk ran 8-9% slower than the same code
+//! ones. It once put 12 into the closest-hit walk (the pair test's answer zeroed, two of its
+//! lanes read), and on an Intel Xeon that walk ran 8-9% slower than the same code
 //! compiled for AVX2 alone. The walk's code is not timed here (timings belong in benchmarks):
 //! its instructions are checked, which a change to the walks can break.
 

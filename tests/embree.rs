@@ -1,4 +1,4 @@
-//! Embree through our FFI (`src/bench/embree.rs`, the `embree` feature), the peer every speed
+//! Embree through our FFI (`src/bench/embree.rs`, loaded at run time), the peer every speed
 //! figure is measured against, checked as our own BVH is: its single-ray closest hits and
 //! occlusion against brute force, its 16-ray packets through the benchmark's agreement column,
 //! on each instruction set `tracery bench --isa` can hold it to. A wrong field offset in the
@@ -85,6 +85,9 @@ fn meshes() -> Vec<(&'static str, Vec<[Vec3; 3]>)> {
 
 #[test]
 fn embree_single_rays_match_brute_force_on_every_isa() {
+    if !common::embree() {
+        return;
+    }
     for (name, tris) in meshes() {
         for isa in isas() {
             check_single_rays(name, &tris, isa);
@@ -98,6 +101,9 @@ fn embree_single_rays_match_brute_force_on_every_isa() {
 /// set it ran.
 #[test]
 fn embree_packets_agree_with_ours_on_every_isa() {
+    if !common::embree() {
+        return;
+    }
     let tris = shapes::icosphere(5);
     let rays = bench::canonical_rays(&Mesh::from_triangles(tris.clone(), 0).bounds());
     let width = CANONICAL_SIZE as usize;

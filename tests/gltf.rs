@@ -1,4 +1,4 @@
-//! glTF 2.0 scenes and textures (issue 14): files written here, whose answer is known (node
+//! glTF 2.0 scenes and textures: files written here, whose answer is known (node
 //! transforms, instancing, mirrored nodes, materials, camera and lights, embedded textures,
 //! and every kind of bad input with the message it must give), and every glTF of assimp's test
 //! models (fetched by `scripts/fetch-assets gltf`) against an independent loader's triangle
@@ -187,7 +187,7 @@ fn node_transforms_compose_and_instances_and_mirrors_are_placed() {
     );
 }
 
-/// Metallic-roughness materials as the README's table says.
+/// Metallic-roughness materials as docs/formats.md's glTF table says.
 #[test]
 fn materials_map_base_colour_metal_emission_alpha_and_transmission() {
     let dir = tempfile::tempdir().unwrap();
@@ -1042,7 +1042,7 @@ fn a_node_graph_that_doubles_at_every_level_is_refused_not_followed() {
 
 /// `KHR_texture_transform`: an offset of half the image reads the texel half an image along;
 /// a quarter turn takes `u` to `-v` (the direction that points the extension sample's arrows
-/// at their green markers: README picture); scale multiplies before the offset.
+/// at their green markers: the picture in docs/formats.md); scale multiplies before the offset.
 #[test]
 fn texture_transforms_offset_rotate_and_scale_lookups() {
     use tracery::scene::gltf::uv_transform;
@@ -2318,7 +2318,7 @@ fn extensions_used_but_not_read_are_said() {
 /// 16-bit integers scaled back by the node, normals as normalised bytes, texture coordinates
 /// as normalised 16-bit integers and a morph displacement as normalised 16-bit integers are
 /// read as the floats they stand for (a normal's byte -128 as -1). Fails with the accessors'
-/// `normalized` ignored, or with integer attributes refused (as before session 40).
+/// `normalized` ignored, or with integer attributes refused.
 #[test]
 fn quantized_attributes_are_read_as_the_floats_they_stand_for() {
     let dir = tempfile::tempdir().unwrap();

@@ -1,4 +1,4 @@
-//! The long run (issue 5): 10,000 frames of the viewer's windowless app (`MinimalPlugins` and
+//! The long run: 10,000 frames of the viewer's windowless app (`MinimalPlugins` and
 //! the core plugins) with a random setting change every few frames: camera moves, resolution
 //! scale, the still delay, bounce depth, shadows, sampler, depth of field, environment,
 //! render mode and level, BVH split, bins and leaf size, and scene switches including a bad

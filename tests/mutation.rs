@@ -1,4 +1,4 @@
-//! Property-based bad input (issue 5): valid OBJ, PLY (ASCII and binary), glTF (its JSON, its
+//! Property-based bad input: valid OBJ, PLY (ASCII and binary), glTF (its JSON, its
 //! buffer file, and GLB) and scene files are
 //! mutated at random (bytes flipped, dropped, duplicated, tokens spliced in, the file cut
 //! short) and loaded. Each load must return a scene or an error naming the file, within a

@@ -1,4 +1,4 @@
-//! Stiff and extreme cases (issue 5), each a named test: triangles swept one ulp at a time,
+//! Stiff and extreme cases, each a named test: triangles swept one ulp at a time,
 //! scale, traversal limits, builds from permuted input, and camera and sampling extremes.
 //! Other families live beside the code they guard: `geometry.rs` (slab and triangle cases),
 //! `bvh_degenerate.rs` (builds), `traversal.rs`, `shading.rs`, `environment.rs`,

@@ -3,7 +3,8 @@
 //! quality, `rtcIntersect1` / `rtcOccluded1` for single rays and `rtcIntersect16` /
 //! `rtcOccluded16` for coherent 4x4-pixel packets.
 //!
-//! Only the `embree` cargo feature compiles this module (it links `libembree3`). The struct
+//! Embree is not linked: its library (`libembree3.so.3`) is loaded when the benchmark first
+//! asks for it ([`available`]), so every build has the peer where Embree is installed. The struct
 //! layouts follow `embree3/rtcore_ray.h` and `rtcore_common.h` of Embree 3.13 with
 //! `RTC_MAX_INSTANCE_LEVEL_COUNT` 1 and `RTC_MIN_WIDTH` 0, Debian's configuration;
 //! `tests/embree.rs` checks single rays against brute force and packets against ours, on every
@@ -120,46 +121,130 @@ impl RtcIntersectContext {
     }
 }
 
-#[link(name = "embree3")]
-unsafe extern "C" {
-    fn rtcNewDevice(config: *const c_char) -> RtcDevice;
-    fn rtcReleaseDevice(device: RtcDevice);
-    fn rtcGetDeviceError(device: RtcDevice) -> c_int;
-    fn rtcNewScene(device: RtcDevice) -> RtcScene;
-    fn rtcReleaseScene(scene: RtcScene);
-    fn rtcSetSceneBuildQuality(scene: RtcScene, quality: c_int);
-    fn rtcNewGeometry(device: RtcDevice, kind: c_int) -> RtcGeometry;
-    fn rtcSetNewGeometryBuffer(
+/// The Embree 3 functions the benchmark calls, looked up in the shared library when the
+/// benchmark first asks for Embree: a build of Tracery needs no Embree, and a machine that has
+/// one gets it as a peer without a rebuild.
+struct Api {
+    new_device: unsafe extern "C" fn(config: *const c_char) -> RtcDevice,
+    release_device: unsafe extern "C" fn(device: RtcDevice),
+    get_device_error: unsafe extern "C" fn(device: RtcDevice) -> c_int,
+    new_scene: unsafe extern "C" fn(device: RtcDevice) -> RtcScene,
+    release_scene: unsafe extern "C" fn(scene: RtcScene),
+    set_scene_build_quality: unsafe extern "C" fn(scene: RtcScene, quality: c_int),
+    new_geometry: unsafe extern "C" fn(device: RtcDevice, kind: c_int) -> RtcGeometry,
+    set_new_geometry_buffer: unsafe extern "C" fn(
         geometry: RtcGeometry,
         kind: c_int,
         slot: c_uint,
         format: c_int,
         byte_stride: usize,
         item_count: usize,
-    ) -> *mut c_void;
-    fn rtcCommitGeometry(geometry: RtcGeometry);
-    fn rtcAttachGeometry(scene: RtcScene, geometry: RtcGeometry) -> c_uint;
-    fn rtcReleaseGeometry(geometry: RtcGeometry);
-    fn rtcCommitScene(scene: RtcScene);
-    fn rtcIntersect1(scene: RtcScene, context: *mut RtcIntersectContext, rayhit: *mut RtcRayHit);
-    fn rtcOccluded1(scene: RtcScene, context: *mut RtcIntersectContext, ray: *mut RtcRay);
-    fn rtcIntersect16(
+    ) -> *mut c_void,
+    commit_geometry: unsafe extern "C" fn(geometry: RtcGeometry),
+    attach_geometry: unsafe extern "C" fn(scene: RtcScene, geometry: RtcGeometry) -> c_uint,
+    release_geometry: unsafe extern "C" fn(geometry: RtcGeometry),
+    commit_scene: unsafe extern "C" fn(scene: RtcScene),
+    intersect1: unsafe extern "C" fn(
+        scene: RtcScene,
+        context: *mut RtcIntersectContext,
+        rayhit: *mut RtcRayHit,
+    ),
+    occluded1:
+        unsafe extern "C" fn(scene: RtcScene, context: *mut RtcIntersectContext, ray: *mut RtcRay),
+    intersect16: unsafe extern "C" fn(
         valid: *const c_int,
         scene: RtcScene,
         context: *mut RtcIntersectContext,
         rayhit: *mut RtcRayHit16,
-    );
-    fn rtcOccluded16(
+    ),
+    occluded16: unsafe extern "C" fn(
         valid: *const c_int,
         scene: RtcScene,
         context: *mut RtcIntersectContext,
         ray: *mut RtcRay16,
-    );
+    ),
+    /// The file the functions came from.
+    path: String,
+    /// Keeps the library loaded while the function pointers above are in use (for the rest of
+    /// the process: the `Api` lives in a static).
+    _library: libloading::Library,
+}
+
+/// The file names tried, in order: the runtime library's SONAME (Debian's `libembree3-3`),
+/// then the development link (`libembree-dev`).
+const LIBRARY_NAMES: [&str; 2] = ["libembree3.so.3", "libembree3.so"];
+
+impl Api {
+    fn load() -> std::result::Result<Api, String> {
+        let mut tried = Vec::new();
+        for name in LIBRARY_NAMES {
+            // SAFETY: loading Embree runs its library initialisers, which have no
+            // preconditions on the caller; the library stays loaded for the process.
+            match unsafe { libloading::Library::new(name) } {
+                Ok(library) => return Self::from_library(library, name),
+                Err(e) => tried.push(format!("{name}: {e}")),
+            }
+        }
+        Err(format!(
+            "Embree 3 not found ({}); on Debian or Ubuntu: apt-get install libembree-dev",
+            tried.join("; ")
+        ))
+    }
+
+    fn from_library(library: libloading::Library, name: &str) -> std::result::Result<Api, String> {
+        /// Looks up one function; its Rust type must match Embree 3's C declaration.
+        fn get<T: Copy>(
+            library: &libloading::Library,
+            symbol: &str,
+        ) -> std::result::Result<T, String> {
+            // SAFETY: each call below names a function of Embree 3's C API with the type of
+            // its declaration in `embree3/rtcore_*.h` (the field's type), so calling the
+            // pointer through that type is sound.
+            unsafe { library.get::<T>(symbol.as_bytes()) }
+                .map(|s| *s)
+                .map_err(|e| format!("{symbol}: {e}"))
+        }
+        let l = &library;
+        let path = format!("{name} (Embree 3)");
+        Ok(Api {
+            new_device: get(l, "rtcNewDevice")?,
+            release_device: get(l, "rtcReleaseDevice")?,
+            get_device_error: get(l, "rtcGetDeviceError")?,
+            new_scene: get(l, "rtcNewScene")?,
+            release_scene: get(l, "rtcReleaseScene")?,
+            set_scene_build_quality: get(l, "rtcSetSceneBuildQuality")?,
+            new_geometry: get(l, "rtcNewGeometry")?,
+            set_new_geometry_buffer: get(l, "rtcSetNewGeometryBuffer")?,
+            commit_geometry: get(l, "rtcCommitGeometry")?,
+            attach_geometry: get(l, "rtcAttachGeometry")?,
+            release_geometry: get(l, "rtcReleaseGeometry")?,
+            commit_scene: get(l, "rtcCommitScene")?,
+            intersect1: get(l, "rtcIntersect1")?,
+            occluded1: get(l, "rtcOccluded1")?,
+            intersect16: get(l, "rtcIntersect16")?,
+            occluded16: get(l, "rtcOccluded16")?,
+            path,
+            _library: library,
+        })
+    }
+}
+
+/// Embree's functions, loaded on first use; the error says what was tried and how to install
+/// Embree.
+fn api() -> std::result::Result<&'static Api, &'static str> {
+    static API: std::sync::OnceLock<std::result::Result<Api, String>> = std::sync::OnceLock::new();
+    API.get_or_init(Api::load).as_ref().map_err(|e| e.as_str())
+}
+
+/// Whether Embree 3 can be loaded: the library's name, or why not (with how to install it).
+pub fn available() -> std::result::Result<&'static str, &'static str> {
+    api().map(|a| a.path.as_str())
 }
 
 /// An Embree device and a committed scene over a triangle list (built with a given number of
 /// threads; tracing runs on whatever threads call it).
 pub struct Embree {
+    api: &'static Api,
     device: RtcDevice,
     scene: RtcScene,
     /// Milliseconds the scene took to build: from `rtcNewScene` to the end of
@@ -192,17 +277,19 @@ impl Embree {
         threads: usize,
         isa: Option<Kernel>,
     ) -> Result<Embree> {
+        let api = api().map_err(anyhow::Error::msg)?;
         let isa = isa.map(Self::isa_name);
         let held = isa.map_or(String::new(), |i| format!(",isa={i}"));
         let config = std::ffi::CString::new(format!("threads={}{held}", threads.max(1)))
             .expect("no NUL in a number or an ISA name");
         // SAFETY: `config` is a NUL-terminated string that outlives the call.
-        let device = unsafe { rtcNewDevice(config.as_ptr()) };
+        let device = unsafe { (api.new_device)(config.as_ptr()) };
         if device.is_null() {
-            bail!("Embree: rtcNewDevice failed (is libembree3 installed and the CPU supported?)");
+            bail!("Embree: rtcNewDevice failed (is this CPU one Embree supports?)");
         }
         // From here `Drop` releases the device (and the scene once it is set).
         let mut e = Embree {
+            api,
             device,
             scene: std::ptr::null_mut(),
             build_ms: 0.0,
@@ -210,15 +297,15 @@ impl Embree {
         };
         let start = std::time::Instant::now();
         // SAFETY: `device` is a live device handle.
-        e.scene = unsafe { rtcNewScene(device) };
+        e.scene = unsafe { (api.new_scene)(device) };
         if e.scene.is_null() {
             bail!("Embree: rtcNewScene failed ({})", e.error());
         }
         // SAFETY: `e.scene` is a live scene handle.
-        unsafe { rtcSetSceneBuildQuality(e.scene, RTC_BUILD_QUALITY_MEDIUM) };
+        unsafe { (api.set_scene_build_quality)(e.scene, RTC_BUILD_QUALITY_MEDIUM) };
         let n = triangles.len();
         // SAFETY: `device` is live; the geometry is released below after attaching.
-        let geometry = unsafe { rtcNewGeometry(device, RTC_GEOMETRY_TYPE_TRIANGLE) };
+        let geometry = unsafe { (api.new_geometry)(device, RTC_GEOMETRY_TYPE_TRIANGLE) };
         if geometry.is_null() {
             bail!("Embree: rtcNewGeometry failed ({})", e.error());
         }
@@ -226,7 +313,7 @@ impl Embree {
         // buffers of `3 n` float3 and `n` uint3 items, or null on failure.
         let (vertices, indices) = unsafe {
             (
-                rtcSetNewGeometryBuffer(
+                (api.set_new_geometry_buffer)(
                     geometry,
                     RTC_BUFFER_TYPE_VERTEX,
                     0,
@@ -234,13 +321,19 @@ impl Embree {
                     12,
                     3 * n,
                 ) as *mut f32,
-                rtcSetNewGeometryBuffer(geometry, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3, 12, n)
-                    as *mut u32,
+                (api.set_new_geometry_buffer)(
+                    geometry,
+                    RTC_BUFFER_TYPE_INDEX,
+                    0,
+                    RTC_FORMAT_UINT3,
+                    12,
+                    n,
+                ) as *mut u32,
             )
         };
         if n > 0 && (vertices.is_null() || indices.is_null()) {
             // SAFETY: `geometry` is live and not attached.
-            unsafe { rtcReleaseGeometry(geometry) };
+            unsafe { (api.release_geometry)(geometry) };
             bail!(
                 "Embree: cannot allocate buffers for {n} triangles ({})",
                 e.error()
@@ -266,10 +359,10 @@ impl Embree {
         // SAFETY: `geometry` and `e.scene` are live; the scene keeps its own reference to the
         // geometry, so ours is released at once.
         unsafe {
-            rtcCommitGeometry(geometry);
-            rtcAttachGeometry(e.scene, geometry);
-            rtcReleaseGeometry(geometry);
-            rtcCommitScene(e.scene);
+            (api.commit_geometry)(geometry);
+            (api.attach_geometry)(e.scene, geometry);
+            (api.release_geometry)(geometry);
+            (api.commit_scene)(e.scene);
         }
         e.build_ms = start.elapsed().as_secs_f64() * 1e3;
         match e.error() {
@@ -280,7 +373,7 @@ impl Embree {
 
     fn error(&self) -> c_int {
         // SAFETY: `self.device` is live until `drop`.
-        unsafe { rtcGetDeviceError(self.device) }
+        unsafe { (self.api.get_device_error)(self.device) }
     }
 }
 
@@ -289,9 +382,9 @@ impl Drop for Embree {
         // SAFETY: both handles are live (or null, which is checked) and released once.
         unsafe {
             if !self.scene.is_null() {
-                rtcReleaseScene(self.scene);
+                (self.api.release_scene)(self.scene);
             }
-            rtcReleaseDevice(self.device);
+            (self.api.release_device)(self.device);
         }
     }
 }
@@ -349,7 +442,7 @@ impl Embree {
         let mut ctx = RtcIntersectContext::new(RTC_INTERSECT_CONTEXT_FLAG_INCOHERENT);
         // SAFETY: the scene is committed and live; `ctx` and `rh` are valid, aligned and
         // exclusively borrowed for the call.
-        unsafe { rtcIntersect1(self.scene, &mut ctx, &mut rh) };
+        unsafe { (self.api.intersect1)(self.scene, &mut ctx, &mut rh) };
         if rh.hit.geom_id == RTC_INVALID_GEOMETRY_ID {
             HitRecord::MISS
         } else {
@@ -365,7 +458,7 @@ impl Embree {
         let mut r = rtc_ray(ray);
         let mut ctx = RtcIntersectContext::new(RTC_INTERSECT_CONTEXT_FLAG_INCOHERENT);
         // SAFETY: as in `closest`.
-        unsafe { rtcOccluded1(self.scene, &mut ctx, &mut r) };
+        unsafe { (self.api.occluded1)(self.scene, &mut ctx, &mut r) };
         r.tfar == f32::NEG_INFINITY
     }
 }
@@ -439,7 +532,7 @@ impl Engine for EmbreePackets {
         let mut ctx = RtcIntersectContext::new(RTC_INTERSECT_CONTEXT_FLAG_COHERENT);
         // SAFETY: the scene is committed; `valid`, `ctx` and the 64-byte aligned packet are
         // live and exclusively borrowed for the call; unused lanes are 0 in `valid`.
-        unsafe { rtcIntersect16(valid.as_ptr(), self.0.scene, &mut ctx, &mut p) };
+        unsafe { (self.0.api.intersect16)(valid.as_ptr(), self.0.scene, &mut ctx, &mut p) };
         for (k, &at) in at
             .iter()
             .enumerate()
@@ -460,7 +553,7 @@ impl Engine for EmbreePackets {
         let (mut p, valid, _) = packet(band, width, x0);
         let mut ctx = RtcIntersectContext::new(RTC_INTERSECT_CONTEXT_FLAG_COHERENT);
         // SAFETY: as in `closest_tile`; `rtcOccluded16` reads and writes the ray part only.
-        unsafe { rtcOccluded16(valid.as_ptr(), self.0.scene, &mut ctx, &mut p.ray) };
+        unsafe { (self.0.api.occluded16)(valid.as_ptr(), self.0.scene, &mut ctx, &mut p.ray) };
         (0..16)
             .filter(|&k| valid[k] != 0 && p.ray.tfar[k] == f32::NEG_INFINITY)
             .count()

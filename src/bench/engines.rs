@@ -142,9 +142,9 @@ impl Engine for Packets {
 /// Every chunk (and every band of tiles) is a job of its own (`with_max_len(1)`): rayon's
 /// default split makes four sequential pieces for two threads, and a thread that has finished
 /// cannot take over a piece the other has started, so it waited out the other's last piece
-/// (the canonical rays cost unevenly down the image). Measured with `examples/split_idle.rs`
-/// (session 41, Zen 5): the idler thread's mean wait per two-thread trace fell from 190-320 to
-/// 120-180 us (of 17-22 ms); what is left is mostly waking the workers.
+/// (the canonical rays cost unevenly down the image). `examples/split_idle.rs` measures
+/// the idle thread's wait per two-thread trace with and without it; what is left is mostly
+/// waking the workers.
 const CHUNK: usize = 1024;
 
 /// Closest hits of all rays into `out` (one per ray) on the current rayon pool: one ray at a

@@ -1,16 +1,14 @@
 //! The benchmark of DESIGN.md: canonical camera rays, the rays and hits file formats, and our
 //! BVH traced side by side with the engines users would pick instead, on the same rays:
-//! Embree 3 (`embree`, single rays and its own coherent 16-ray packets; cargo feature
-//! `embree`) and the `obvhs` crate (`obvhs`).
+//! Embree 3 (`embree`, single rays and its own coherent 16-ray packets; loaded at run time
+//! where it is installed) and the `obvhs` crate (`obvhs`).
 //!
 //! Triangles with a NaN or infinite vertex are left out before any engine sees them (some
 //! peers would index out of bounds on them), and counted.
 
 pub mod chart;
-#[cfg(feature = "embree")]
 pub mod embree;
 mod engines;
-#[cfg(feature = "peers")]
 mod obvhs;
 pub mod scaling;
 pub mod secondary;
@@ -228,14 +226,9 @@ impl BenchConfig {
             .into()
     }
 
-    /// True when this build can measure Embree.
+    /// True when Embree 3 can be loaded on this machine ([`embree::available`] says why not).
     pub fn embree_available() -> bool {
-        cfg!(feature = "embree")
-    }
-
-    /// True when this build can measure obvhs (the `peers` feature).
-    pub fn obvhs_available() -> bool {
-        cfg!(feature = "peers")
+        embree::available().is_ok()
     }
 }
 
@@ -377,8 +370,7 @@ pub fn run(
             }),
         ));
     }
-    #[cfg(feature = "embree")]
-    if config.embree {
+    if config.embree && BenchConfig::embree_available() {
         builders.push((
             "embree".into(),
             Box::new(move |threads| {
@@ -396,7 +388,6 @@ pub fn run(
             }),
         ));
     }
-    #[cfg(feature = "peers")]
     if config.obvhs {
         builders.push((
             "obvhs-bvh2".into(),

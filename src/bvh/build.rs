@@ -198,8 +198,8 @@ fn subtree(
 /// A subtree as the parallel build returns it: one thread's node array, or a node whose two
 /// halves were built at once. Laid out in the tree's node array once, at the end
 /// ([`Part::into_nodes`]): joining each pair of halves into a new array as they finished
-/// copied every node once per parallel level above it, the root's join on one thread
-/// (session 34: 25-35 ms of a 4M-triangle build on two threads).
+/// copied every node once per parallel level above it, the root's join on one thread (tens of
+/// milliseconds of a 4M-triangle build on two threads).
 ///
 /// A part's array, as [`Part::into_nodes`] makes it, is its root at 0, slot 1 unused, then its
 /// root's two children and the rest of its nodes (its body): a node whose children are the
@@ -373,7 +373,7 @@ struct Builder<'a> {
 /// all four lanes even where it uses one), so the bits must read as a normal float: an index
 /// alone reads as a denormal (every index below 2^23), and arithmetic on a denormal costs
 /// Intel CPUs a microcode assist per instruction (a hundred cycles or more), which made every
-/// build 5-6x slower on session 22's Xeon. Clearing the lane before the arithmetic did not
+/// build several times slower on an Intel Xeon. Clearing the lane before the arithmetic did not
 /// hold: where one lane of the result was used, the compiler dropped the clearing and kept the
 /// four-lane multiplication.
 #[derive(Clone, Copy)]
@@ -760,7 +760,7 @@ impl Builder<'_> {
         let (mut cost, mut split) = (f64::INFINITY, 0);
         let mut acc = Aabb::EMPTY;
         // A zip from 1: `.enumerate().take(n).skip(1)` left a call (`Take::nth`) in every
-        // sweep (2.5% of a build's instructions, session 24).
+        // sweep (a few percent of a build's instructions).
         for (k, &right) in (1..n).zip(&right_area[1..n]) {
             acc.grow(&at(k - 1).bounds());
             let c = sah::leaf_tests(k) * acc.half_area() + sah::leaf_tests(n - k) * right;
@@ -787,12 +787,10 @@ impl Builder<'_> {
 }
 
 /// Ranges of fewer references than this bin into at most [`FEW_BINS`] bins, whatever
-/// [`BuildOptions::bins`] asks: the bins count where ranges are large. Session 21 (`tracery
-/// report bins`, closest-hit walks of the canonical rays): 32 bins instead of 12 over ranges
-/// of 256 references or more took the nodes tested per hitting ray from 7.33 to 7.03 and the
-/// triangle blocks from 2.12 to 2.00 on the dragon 202k (0.4-1.4% fewer nodes on the bunny and
-/// the other two dragons), for 0.6% more instructions in the build; 32 bins over the small
-/// ranges as well gave trees no better for 4.2% more (callgrind, one build of the dragon).
+/// [`BuildOptions::bins`] asks: the bins count where ranges are large. More bins over the large
+/// ranges make trees whose walks test fewer nodes and triangle blocks for little build time;
+/// over the small ranges they make trees no better for more build time. `tracery report bins
+/// MESH` prints the nodes and blocks the canonical rays' walks test for each bin count.
 const FEW_BINS_BELOW: usize = 256;
 
 /// The bins of ranges under [`FEW_BINS_BELOW`] references.
@@ -843,14 +841,13 @@ impl BinPlan {
     /// the axis), writing each one's bin to `keys`. Ranges of [`ROWS_MIN`] references or more
     /// are binned as four quarters side by side into four rows, merged at the end:
     /// neighbouring triangles mostly share a bin, and with one row each update waited for the
-    /// store of the one before. (Two halves into two rows until session 25; four rows took
-    /// the dragon 202k's build 1-2% faster, the same trees.)
+    /// store of the one before. (Four rows build faster than two; the trees are the same.)
     ///
     /// Kept out of line, like [`partition`]: inlined into [`Builder::split`], the loops over
     /// every reference had their registers allocated together with the whole split's (the
-    /// partition compared each slot against a length reloaded from the stack). Session 23,
-    /// `examples/build_time`, fastest of 30, alternating: dragon 202k 34.5-36.3 -> 31.8-35.4
-    /// ms (faster in 6 pairs of 6), bunny 10.2-10.5 -> 9.7-10.3 (3 of 3); the same trees.
+    /// partition compared each slot against a length reloaded from the stack); out of line the
+    /// build is faster and the trees are the same (`examples/build_time`, two binaries
+    /// alternating).
     #[inline(never)]
     fn fill<const AXIS: usize>(
         &self,
@@ -1045,7 +1042,7 @@ mod tests {
 
     /// Building takes no denormal operand: the triangle indices kept in the references' `w`
     /// lanes read as denormals, and one multiplication of them per reference made every build
-    /// 5-6x slower on an Intel Xeon (a microcode assist each). The builds run on a pool of one
+    /// several times slower on an Intel Xeon (a microcode assist each). The builds run on a pool of one
     /// thread, whose MXCSR the check reads, the triangles first so that loading them is not
     /// counted.
     #[test]

@@ -37,7 +37,7 @@ pub enum SplitMethod {
     /// Object median on the longest axis of the centroid bounds: fast to build, balanced, but
     /// blind to where the triangles are.
     Median,
-    /// Binned surface area heuristic (Wald 2007) on all three axes of the centroid bounds.
+    /// Binned surface area heuristic (Wald 2007) along the longest axis of the centroid bounds.
     Sah,
 }
 
@@ -76,11 +76,11 @@ pub mod sah {
     pub const C_TRAVERSE: f64 = 1.0;
     /// Cost of testing one block of four triangles.
     pub const C_INTERSECT: f64 = 1.0;
-    /// Cost of testing two blocks together, in block tests. Session 28, dragon 202k and
-    /// bunny, against leaves of one block (leaf size 4): 1.2 made trees whose closest hits were
-    /// 4-8% slower (more triangles tested a ray), 1.8 no better, 1.35 to 1.65 alike; at 1.5
-    /// builds 5-7% faster (half the wide nodes), occlusion 5-9% faster, closest hits the same
-    /// on the dragon and 6% slower on the bunny.
+    /// Cost of testing two blocks together, in block tests. Lower (1.2) makes trees whose
+    /// closest hits are slower (more triangles tested a ray), higher (1.8) no better; 1.35 to
+    /// 1.65 behave alike. Against leaves of one block, 1.5 with leaves of two blocks halves the
+    /// wide nodes, builds faster and answers occlusion faster (`tracery bench` with
+    /// `--leaf-size 4` and `8`; docs/benchmarks.md).
     pub const PAIR_TEST: f64 = 1.5;
 
     /// Cost of testing a leaf of `n` triangles, in block tests: its blocks of
@@ -96,14 +96,15 @@ pub mod sah {
     }
 }
 
-/// Build settings. The defaults are the ones the quality report in the README chose.
+/// Build settings. The defaults are the ones `tracery report splits` and `tracery report bins`
+/// favour (docs/bvh.md).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
 pub struct BuildOptions {
     /// Median split or binned SAH.
     pub split: SplitMethod,
     /// SAH bins per axis (2..=64) for ranges of 256 triangles or more (smaller ranges use at
-    /// most 12). More bins find better splits but cost build time; the README's table shows
-    /// the trade-off on the dragon. Ignored by the median split.
+    /// most 12). More bins find better splits but cost build time; `tracery report bins`
+    /// shows the trade-off (docs/bvh.md). Ignored by the median split.
     pub bins: u32,
     /// Largest number of triangles a leaf may hold (1..=255). The SAH builder may stop earlier
     /// when a leaf is cheaper than any split; the median builder splits down to this size.
@@ -111,10 +112,9 @@ pub struct BuildOptions {
 }
 
 impl BuildOptions {
-    /// Default SAH bin count (see the README's bins table).
+    /// Default SAH bin count (see `tracery report bins`).
     pub const DEFAULT_BINS: u32 = 32;
-    /// Default maximum leaf size: two blocks, tested together (see [`sah::PAIR_TEST`]; 4
-    /// until session 28).
+    /// Default maximum leaf size: two blocks, tested together (see [`sah::PAIR_TEST`]).
     pub const DEFAULT_LEAF_SIZE: u32 = 8;
 
     /// Binned SAH with the default bins and leaf size.

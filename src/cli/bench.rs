@@ -1,5 +1,5 @@
-//! `tracery bench`: build and trace the canonical camera rays with our BVH, Embree (with the
-//! `embree` feature) and obvhs.
+//! `tracery bench`: build and trace the canonical camera rays with our BVH, Embree (where its
+//! library is installed) and obvhs.
 
 use std::path::{Path, PathBuf};
 
@@ -102,17 +102,10 @@ pub fn run(a: BenchArgs) -> Result<()> {
         packets: true,
         isa: a.isa,
     };
-    if config.obvhs && !BenchConfig::obvhs_available() {
-        eprintln!(
-            "note: built without the `peers` feature, so obvhs is not measured \
-             (cargo build --release --features peers)"
-        );
-    }
-    if config.embree && !BenchConfig::embree_available() {
-        eprintln!(
-            "note: built without the `embree` feature, so Embree is not measured \
-             (apt-get install libembree-dev, then cargo build --release --features embree)"
-        );
+    if config.embree
+        && let Err(why) = tracery::bench::embree::available()
+    {
+        eprintln!("note: Embree is not measured: {why}");
     }
 
     let sources: Vec<Option<PathBuf>> = if a.meshes.is_empty() {

@@ -13,7 +13,7 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 use anyhow::{Context, Result};
-use clap::{Args, Parser, Subcommand};
+use clap::{Args, CommandFactory, FromArgMatches, Parser, Subcommand};
 use tracery::bvh::{BuildOptions, SplitMethod};
 use tracery::scene::Scene;
 
@@ -38,12 +38,12 @@ enum Command {
     /// Build the BVH of a mesh or scene and print its statistics (median and SAH side by side).
     Stats(stats::StatsArgs),
     /// Benchmark the builders and traversal on the canonical camera rays, against Embree 3
-    /// (with the `embree` feature) and obvhs: single rays, camera-ray packets, build times.
+    /// (where it is installed) and obvhs: single rays, camera-ray packets, build times.
     Bench(bench::BenchArgs),
     /// Check a mesh: bounds, counts, non-finite, degenerate, needle and duplicate triangles,
     /// open and non-manifold edges. Exit status 0 clean, 1 not clean, 2 unreadable.
     CheckMesh(check_mesh::CheckMeshArgs),
-    /// Print the README's measurement tables (Markdown).
+    /// Print the measurement tables of docs/benchmarks.md and docs/bvh.md (Markdown).
     Report(report::ReportArgs),
     /// Measure image error against render time per sampler; write a CSV and a log-log plot.
     Convergence(convergence::ConvergenceArgs),
@@ -73,6 +73,67 @@ impl BvhArgs {
         o.validate().map_err(anyhow::Error::msg)?;
         Ok(o)
     }
+}
+
+/// The commit the program was built from (and its date), as the build script found it.
+const COMMIT: &str = env!("TRACERY_COMMIT");
+const COMMIT_DATE: &str = env!("TRACERY_COMMIT_DATE");
+
+/// The cargo features this build has (the ones that change what the program does).
+fn features() -> Vec<&'static str> {
+    let mut f = Vec::new();
+    if cfg!(feature = "viewer") {
+        f.push("viewer");
+    }
+    if cfg!(feature = "no-conservative-slab") {
+        f.push("no-conservative-slab (test-only)");
+    }
+    if cfg!(feature = "no-watertight-fallback") {
+        f.push("no-watertight-fallback (test-only)");
+    }
+    f
+}
+
+/// `tracery --version`: the version, the commit, the features, the traversal kernel this CPU
+/// gets (`TRACERY_KERNEL` included) and whether Embree, the benchmark's peer, can be loaded.
+pub fn long_version() -> String {
+    use tracery::bvh::wide::Kernel;
+    let date = if COMMIT_DATE.is_empty() {
+        String::new()
+    } else {
+        format!(", {COMMIT_DATE}")
+    };
+    let features = features();
+    let available: Vec<&str> = Kernel::available().iter().map(|k| k.name()).collect();
+    format!(
+        "{} (commit {COMMIT}{date})\nfeatures: {}\nkernel: {} (this CPU runs {})\nembree: {}",
+        env!("CARGO_PKG_VERSION"),
+        if features.is_empty() {
+            "none".to_string()
+        } else {
+            features.join(", ")
+        },
+        Kernel::detect().name(),
+        available.join(", "),
+        match tracery::bench::embree::available() {
+            Ok(library) => format!("{library}, for tracery bench"),
+            Err(why) => why.to_string(),
+        },
+    )
+}
+
+/// Parses the command line (`--version` with [`long_version`]); exits on `--help`, `--version`
+/// and usage errors, as clap does.
+pub fn parse() -> Cli {
+    // clap takes `&'static str`s; the two strings live for the one parse of the process.
+    let version: &'static str =
+        Box::leak(format!("{} ({COMMIT})", env!("CARGO_PKG_VERSION")).into_boxed_str());
+    let long: &'static str = Box::leak(long_version().into_boxed_str());
+    let matches = Cli::command()
+        .version(version)
+        .long_version(long)
+        .get_matches();
+    Cli::from_arg_matches(&matches).unwrap_or_else(|e| e.exit())
 }
 
 /// Runs the parsed command; the exit status is success unless the command says otherwise.

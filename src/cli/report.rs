@@ -1,4 +1,4 @@
-//! `tracery report`: the README's tables, printed as Markdown by the command they cite.
+//! `tracery report`: the tables of docs/benchmarks.md and docs/bvh.md, printed as Markdown by the command they cite.
 
 use std::path::PathBuf;
 use std::time::Instant;
@@ -30,8 +30,8 @@ enum ReportKind {
         #[arg(long, default_value_t = 3)]
         repeat: usize,
     },
-    /// Build time against size: our SAH build (with the 8-wide collapse) and Embree's (with
-    /// the `embree` feature), on one thread and on every thread, with the growth per doubling
+    /// Build time against size: our SAH build (with the 8-wide collapse) and Embree's (where
+    /// it is installed), on one thread and on every thread, with the growth per doubling
     /// of the triangle count and each builder's speed-up from one thread to all.
     Scaling {
         /// Meshes, smallest first.
@@ -302,14 +302,11 @@ fn scaling(
             for (p, (threads, pool)) in pools.iter().enumerate() {
                 let ms = build_ms(pool, || Ok(Bvh::build(tris, &BuildOptions::sah())))?;
                 best[0][p] = best[0][p].min(ms);
-                #[cfg(feature = "embree")]
                 if embree {
                     // The scene's build, as `tracery bench` counts it (not the device's).
                     let e = pool.install(|| bench::embree::Embree::build(tris, *threads))?;
                     best[1][p] = best[1][p].min(e.build_ms);
                 }
-                #[cfg(not(feature = "embree"))]
-                let _ = threads;
             }
         }
         let row = ScalingRow {

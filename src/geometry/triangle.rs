@@ -296,7 +296,7 @@ fn owns_edge(q: (f32, f32), r: (f32, f32), opposite: (f32, f32)) -> bool {
 ///
 /// The three conversions are written out: `t.map(..)` stayed a call of its own (`try_map`),
 /// whose result the build's reference loop read back from memory with wider loads than it was
-/// written with, a store-forwarding stall per triangle (about 4% of a build; session 24).
+/// written with, a store-forwarding stall per triangle (a few percent of a build).
 #[inline]
 pub fn is_degenerate(t: &[Vec3; 3]) -> bool {
     let (a, b, c) = (t[0].as_dvec3(), t[1].as_dvec3(), t[2].as_dvec3());

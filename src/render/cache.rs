@@ -999,8 +999,8 @@ mod tests {
 
     /// The Cornell box's soft shadows and bounces are noisy: tracing the same pixels of the
     /// same view again gives other samples, and the tiles' change shows it. With one sample
-    /// index for every call (until session 13) the second call repeated the first exactly, so
-    /// a noisy tile looked settled and lost its priority.
+    /// index for every call the second call would repeat the first exactly, so a noisy tile
+    /// would look settled and lose its priority.
     #[test]
     fn pixels_traced_again_get_new_samples() {
         use crate::bvh::{BuildOptions, Bvh};

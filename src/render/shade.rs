@@ -170,8 +170,8 @@ impl<'a> Tracer<'a> {
     /// batch of samples (a tile, a chunk of the viewer's cache, [`Tracer::radiance`]): the
     /// compiler computes three-float arithmetic in four-lane (or two in four) vector
     /// instructions whose spare lanes hold whatever the registers and the stack held, often a
-    /// denormal, and each such instruction cost Intel CPUs a microcode assist: the Cornell box
-    /// rendered in 0.6x the time with the flush on (session 22, Intel Xeon). Values that small
+    /// denormal, and each such instruction cost Intel CPUs a microcode assist: on an Intel Xeon
+    /// the Cornell box renders in 0.6x the time with the flush on. Values that small
     /// are far below anything a pixel shows.
     pub fn radiance_from_hit(
         &self,

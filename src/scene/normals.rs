@@ -1,6 +1,6 @@
 //! Shading normals for meshes whose file gives none.
 //!
-//! The rule, by source (the README's "Normals" says the same):
+//! The rule, by source (docs/formats.md, "Normals", says the same):
 //! - A file's own normals (OBJ `vn`, PLY `nx ny nz`) are used as they are.
 //! - OBJ without normals: faces are flat, except inside a smoothing group (`s 1`, `s 2`, ...;
 //!   `s off` and `s 0` end smoothing), where a vertex's normal averages the faces of its group

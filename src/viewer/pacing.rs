@@ -8,7 +8,7 @@
 //! (main thread, Bevy's task pools, the driver's threads). Drawing as fast as it could (about
 //! 50 frames a second on two cores) took the window 0.81-0.88 of a core while the moving
 //! picture changed on every second frame; paced at 30 ms it takes 0.59-0.76 and the trace
-//! worker gets the rest (the `--orbit` figures in the README).
+//! worker gets the rest (the `--orbit` figures in docs/viewer.md).
 
 use std::time::Duration;
 

@@ -33,6 +33,19 @@ pub fn external(rel: &str) -> Option<PathBuf> {
     None
 }
 
+/// Whether Embree 3, the benchmark's peer, can be loaded here; when it cannot, a note (the
+/// test then checks what it can without Embree), and in CI (`CI` set) a failure instead.
+pub fn embree() -> bool {
+    match tracery::bench::embree::available() {
+        Ok(_) => true,
+        Err(why) if std::env::var_os("CI").is_some() => panic!("CI needs Embree: {why}"),
+        Err(why) => {
+            eprintln!("without Embree: {why}");
+            false
+        }
+    }
+}
+
 /// Loads `path` as a scene on its own thread: its triangle count, or the error's text (with
 /// its causes). Panics, naming the file, when the loader panics or takes over 30 s.
 pub fn load_bounded(path: &Path) -> Result<usize, String> {
@@ -144,7 +157,7 @@ pub fn both_builders() -> [BuildOptions; 2] {
     [BuildOptions::sah(), BuildOptions::median()]
 }
 
-/// The BVH once per kernel this CPU runs (scalar, SSE2, AVX2), named for messages.
+/// The BVH once per kernel this CPU runs (scalar, SSE2, AVX2, AVX-512), named for messages.
 pub fn every_kernel(bvh: &Bvh) -> Vec<(String, Bvh)> {
     tracery::bvh::wide::Kernel::available()
         .into_iter()

@@ -505,8 +505,8 @@ fn leaf_child(nodes: &mut Vec<WideNode>, leaf: &BvhNode, first: u32, count: u32)
 /// Each lane's eight keys (one per octant) are made as two four-lane vectors, and each of the
 /// 28 pairs of lanes is compared in all eight octants at once: the comparison's eight bits,
 /// spread into the bytes of a word, add one to the octants' ranks of the lane that comes later.
-/// Session 25: ranking each octant's lanes apart (each lane compared against the other seven,
-/// octant by octant) took 3.6% of a bunny build's samples, this 2.2%.
+/// Ranking each octant's lanes apart (each lane compared against the other seven, octant by
+/// octant) costs the build about half as much again.
 fn octant_order(node: &WideNode) -> [u32; WIDTH] {
     // Byte `q` of `SPREAD[m]` is bit `q` of `m`: eight octants' ones, added to eight byte
     // counters at once (a rank never exceeds 7, so no byte carries into the next).
@@ -578,9 +578,8 @@ fn fill_blocks(sources: &[(u32, u32)], triangles: &[[Vec3; 3]], prim_ids: &[u32]
     use rayon::prelude::*;
     // The triangles are read in leaf order, scattered over the caller's array: each block
     // asks for the triangles of the block `AHEAD` of it, so that their cache misses overlap,
-    // both ends of each (36 bytes cross a cache line more often than not). Session 25,
-    // `examples/build_time` alternating: the start alone and 8 blocks ahead took about 0.5 ms
-    // more of a dragon 202k build (fill 3.7-4.5 ms against 3.3-3.8, cold).
+    // both ends of each (36 bytes cross a cache line more often than not). Asking for the
+    // start alone, or only 8 blocks ahead, builds slower (`examples/build_time MESH 20 1 cold`).
     const AHEAD: usize = 24;
     (0..sources.len())
         .into_par_iter()

@@ -89,7 +89,7 @@ pub enum Kernel {
 
 impl Kernel {
     /// The kernel new BVHs use: the fastest this CPU runs, or the one the environment variable
-    /// `TRACERY_KERNEL` names (`scalar`, `sse2` or `avx2`; tests run whole suites on each, and
+    /// `TRACERY_KERNEL` names (`scalar`, `sse2`, `avx2` or `avx512`; tests run whole suites on each, and
     /// it helps to compare them). A name this CPU cannot run is reported once on stderr and the
     /// fastest kernel is used.
     pub fn detect() -> Kernel {
@@ -316,7 +316,7 @@ pub(crate) trait Lanes: Sized {
     /// [`Lanes::block`] on two blocks at once: lanes 0-3 are `a`'s, 4-7 `b`'s. The scalar and
     /// SSE2 kernels make it of two block tests ([`pair_of_blocks`]); the AVX2 and AVX-512
     /// kernels test the eight lanes in 256-bit registers (leaves of five to eight triangles,
-    /// the default since session 28, cost one test).
+    /// the default leaf size's, cost one test).
     fn block_pair(
         a: &TriBlock,
         b: &TriBlock,
@@ -366,9 +366,9 @@ pub(crate) struct BlockHits<V = [[f32; BLOCK]; 3]> {
 /// The pair test of the AVX2 and AVX-512 kernels keeps them in registers and reads a lane by
 /// a lane permutation (`x86`'s `Tuv8`). Written out to arrays, they cost the AVX-512 kernel's
 /// closest-hit walk its only 512-bit instructions: the compiler zeroed the arrays with merged
-/// 512-bit stores and read a lane's two weights with one masked 512-bit load, and on session
-/// 30's Intel Xeon that walk ran 8-9% slower than the same code compiled for AVX2 alone
-/// (dragon, `examples/trace_time`); without them the two are level.
+/// 512-bit stores and read a lane's two weights with one masked 512-bit load, and on an
+/// Intel Xeon that walk ran 8-9% slower than the same code compiled for AVX2 alone (dragon,
+/// `examples/trace_time`); without them the two are level. `tests/codegen.rs` guards it.
 pub(crate) trait LaneValues: Copy {
     /// Lane `k`'s distance.
     fn t(&self, k: usize) -> f32;

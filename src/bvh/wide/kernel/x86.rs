@@ -15,16 +15,15 @@
 //! same bits) compiled with AVX-512 F, VL, BW and DQ enabled: 32 vector registers instead of
 //! 16, and EVEX encodings. (More registers did not keep the box test's ray constants in
 //! registers: the closest-hit walk still reads them from the stack at every node, as memory
-//! operands of its arithmetic, in both kernels; session 24's disassembly.) On session 13's
-//! Zen 4 it traced the dragon's canonical rays 2-4% faster (closest, occlusion and packets;
-//! `examples/trace_time`, three pairs). Its
+//! operands of its arithmetic, in both kernels.) On an AVX-512 CPU it traces a few percent
+//! faster than the AVX2 kernel (`examples/trace_time` against `TRACERY_KERNEL=avx2`). Its
 //! one part of its own, a packet's rays tested against a triangle sixteen at a time, is in
 //! [`super::lanes16`].
 //!
 //! The single-ray walks use no 512-bit instruction, and must not: with AVX-512 enabled the
 //! compiler is free to join scalar and 256-bit memory operations into 512-bit ones, and on
-//! session 30's Intel Xeon the closest-hit walk ran 8-9% slower than the AVX2 kernel's for the
-//! 12 it had (zeroing the pair test's answer, reading two of its lanes), all from the pair
+//! an Intel Xeon a closest-hit walk ran 8-9% slower than the AVX2 kernel's for the
+//! 12 such instructions it had (zeroing the pair test's answer, reading two of its lanes), all from the pair
 //! test's answer written to memory. That answer now stays in registers ([`Tuv8`]); check with
 //! `objdump -d` that `avx512::closest_inner` and `each_hit_inner` mention no `zmm` after a
 //! change to the walks (the packet walk uses 512-bit registers by design).
