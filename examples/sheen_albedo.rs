@@ -4,7 +4,7 @@
 //! angles over half the circle about the normal). The renderer reads it to dim the lobes under a sheen; a test in
 //! `src/render/sheen.rs` integrates entries again and compares.
 //!
-//! `cargo run --release --no-default-features --example sheen_albedo`
+//! `cargo run --release --example sheen_albedo`
 use anyhow::Result;
 use rayon::prelude::*;
 use std::fmt::Write;
@@ -47,7 +47,13 @@ fn main() -> Result<()> {
     }
     out += "];\n";
     let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("src/render/sheen_albedo.rs");
-    std::fs::write(&path, out)?;
-    println!("wrote {}", path.display());
+    // Written only when the table changed: rewriting the same bytes would make cargo rebuild
+    // the crate (and everything built on it) for nothing.
+    if std::fs::read_to_string(&path).ok().as_deref() == Some(out.as_str()) {
+        println!("{} is up to date", path.display());
+    } else {
+        std::fs::write(&path, out)?;
+        println!("wrote {}", path.display());
+    }
     Ok(())
 }
