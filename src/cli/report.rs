@@ -1,4 +1,5 @@
-//! `tracery report`: the tables of docs/benchmarks.md and docs/bvh.md, printed as Markdown by the command they cite.
+//! `tracery report`: the tables of docs/benchmarks.md and docs/bvh.md, printed as Markdown by
+//! the command they cite.
 
 use std::path::PathBuf;
 use std::time::Instant;
