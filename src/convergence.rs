@@ -13,7 +13,8 @@ use anyhow::{Context, Result, bail};
 use glam::Vec3;
 
 use crate::bvh::Bvh;
-use crate::render::{EnvironmentMap, RenderPlan, RenderSettings, render_with_plan};
+use crate::denoise::{Denoiser, Inputs};
+use crate::render::{EnvironmentMap, RenderPlan, RenderSettings, render_layers, render_with_plan};
 use crate::sampling::SamplerKind;
 use crate::scene::Scene;
 
@@ -38,6 +39,10 @@ pub struct ConvergenceConfig {
     /// Error at which to compare the samplers' times; default: the first sampler's RMSE at
     /// `max_spp`.
     pub target_rmse: Option<f64>,
+    /// Also denoise each render of the first sampler ([`crate::denoise`], guided by render
+    /// layers of the same samples) and measure it as a series of its own, timed with its
+    /// layers and the denoising.
+    pub denoise: bool,
 }
 
 impl ConvergenceConfig {
@@ -79,6 +84,8 @@ pub struct Point {
     pub rmse: f64,
     /// Mean of `(x - ref)^2 / (ref^2 + 0.01)`.
     pub relmse: f64,
+    /// True for the render denoised (its time includes the layers and the denoising).
+    pub denoised: bool,
 }
 
 /// A sampler's fitted convergence.
@@ -103,6 +110,9 @@ pub struct Report {
     pub means: Vec<(SamplerKind, u32, f64, f64, f64)>,
     /// Per sampler fits.
     pub fits: Vec<Fit>,
+    /// The first sampler's renders denoised, means over seeds: `(spp, seconds, rmse,
+    /// relmse)` (empty unless asked for).
+    pub denoised: Vec<(u32, f64, f64, f64)>,
     /// The error the samplers' times are compared at.
     pub target_rmse: f64,
     /// Reference render time in seconds (0 when the reference was given).
@@ -267,22 +277,41 @@ pub fn run(
     };
     let plan = RenderPlan::new(scene, &base);
     let env = EnvironmentMap::load(&scene.environment, plan.environment)?;
+    let denoiser = config.denoise.then(Denoiser::new).transpose()?;
+    let settings_of = |spp: u32, seed: u64, sampler: SamplerKind| RenderSettings {
+        spp,
+        seed,
+        sampler,
+        ..base.clone()
+    };
     let render = |spp: u32, seed: u64, sampler: SamplerKind| {
-        let settings = RenderSettings {
-            spp,
-            seed,
-            sampler,
-            ..base.clone()
-        };
+        let settings = settings_of(spp, seed, sampler);
         let start = Instant::now();
         let out = render_with_plan(scene, bvh, &env, &settings, plan, &|_| {});
         (out.film.mean(), start.elapsed().as_secs_f64())
+    };
+    // The render's layers traced and the picture denoised: its image and the seconds taken.
+    let denoise = |d: &Denoiser, img: &[Vec3], spp: u32, seed: u64, sampler| -> Result<_> {
+        let settings = settings_of(spp, seed, sampler);
+        let start = Instant::now();
+        let layers = render_layers(scene, bvh, &env, &settings, plan);
+        let clean = d.run(&Inputs {
+            width: config.width,
+            height: config.height,
+            color: img,
+            albedo: Some(&layers.albedo_mean()),
+            normal: Some(&layers.normal_mean()),
+        })?;
+        Ok((clean, start.elapsed().as_secs_f64()))
     };
     let levels: Vec<u32> = (0..=config.max_spp.trailing_zeros())
         .map(|k| 1 << k)
         .collect();
     let own = usize::from(reference.is_none());
-    let total = own + levels.len() * config.seeds as usize * config.samplers.len();
+    let total = own
+        + levels.len()
+            * config.seeds as usize
+            * (config.samplers.len() + usize::from(config.denoise));
     let mut done = 0;
     let (reference, reference_seconds) = match reference {
         Some(r) => (r, 0.0),
@@ -298,7 +327,7 @@ pub fn run(
     for &spp in &levels {
         for seed in 1..=config.seeds as u64 {
             // Samplers interleaved, so load elsewhere on the machine hits both alike.
-            for &sampler in &config.samplers {
+            for (k, &sampler) in config.samplers.iter().enumerate() {
                 let (img, seconds) = render(spp, seed, sampler);
                 let (rmse, relmse) = errors(&img, &reference);
                 points.push(Point {
@@ -308,9 +337,25 @@ pub fn run(
                     seconds,
                     rmse,
                     relmse,
+                    denoised: false,
                 });
                 done += 1;
                 progress(done, total);
+                if let (Some(d), 0) = (&denoiser, k) {
+                    let (clean, more) = denoise(d, &img, spp, seed, sampler)?;
+                    let (rmse, relmse) = errors(&clean, &reference);
+                    points.push(Point {
+                        sampler,
+                        spp,
+                        seed,
+                        seconds: seconds + more,
+                        rmse,
+                        relmse,
+                        denoised: true,
+                    });
+                    done += 1;
+                    progress(done, total);
+                }
             }
         }
     }
@@ -320,7 +365,7 @@ pub fn run(
         for &spp in &levels {
             let p: Vec<&Point> = points
                 .iter()
-                .filter(|p| p.sampler == sampler && p.spp == spp)
+                .filter(|p| p.sampler == sampler && p.spp == spp && !p.denoised)
                 .collect();
             let n = p.len() as f64;
             let mean = |f: fn(&Point) -> f64| p.iter().map(|x| f(x)).sum::<f64>() / n;
@@ -333,6 +378,25 @@ pub fn run(
             ));
         }
     }
+    let denoised = levels
+        .iter()
+        .filter_map(|&spp| {
+            let p: Vec<&Point> = points
+                .iter()
+                .filter(|p| p.denoised && p.spp == spp)
+                .collect();
+            let n = p.len() as f64;
+            let mean = |f: fn(&Point) -> f64| p.iter().map(|x| f(x)).sum::<f64>() / n;
+            (!p.is_empty()).then(|| {
+                (
+                    spp,
+                    mean(|p| p.seconds),
+                    mean(|p| p.rmse),
+                    mean(|p| p.relmse),
+                )
+            })
+        })
+        .collect();
     let target = config.target_rmse.unwrap_or_else(|| {
         means
             .iter()
@@ -361,6 +425,7 @@ pub fn run(
         points,
         means,
         fits,
+        denoised,
         target_rmse: target,
         reference_seconds,
         peers: Vec::new(),
@@ -400,12 +465,12 @@ pub fn write_csv(path: &Path, report: &Report) -> Result<()> {
         std::fs::File::create(path)
             .with_context(|| format!("{}: cannot create", path.display()))?,
     );
-    writeln!(f, "sampler,spp,seed,seconds,rmse,relmse")?;
+    writeln!(f, "sampler,spp,seed,seconds,rmse,relmse,denoised")?;
     for p in &report.points {
         writeln!(
             f,
-            "{},{},{},{:.6},{:.8},{:.8}",
-            p.sampler, p.spp, p.seed, p.seconds, p.rmse, p.relmse
+            "{},{},{},{:.6},{:.8},{:.8},{}",
+            p.sampler, p.spp, p.seed, p.seconds, p.rmse, p.relmse, p.denoised
         )?;
     }
     f.flush()
@@ -436,6 +501,7 @@ pub fn plot(path: &Path, report: &Report, title: &str) -> Result<()> {
     let all: Vec<(f64, f64)> = means
         .iter()
         .map(|m| (m.2, m.3))
+        .chain(report.denoised.iter().map(|d| (d.1, d.2)))
         .chain(
             report
                 .peers
@@ -509,6 +575,25 @@ pub fn plot(path: &Path, report: &Report, title: &str) -> Result<()> {
                 )))
                 .map_err(|e| anyhow::anyhow!("{e}"))?;
         }
+    }
+    if let (false, Some(fit)) = (report.denoised.is_empty(), report.fits.first()) {
+        // The first sampler's colour, dashed.
+        let c = colours[0];
+        let pts: Vec<(f64, f64)> = report.denoised.iter().map(|d| (d.1, d.2)).collect();
+        let reach = time_to(&pts, report.target_rmse)
+            .map_or("never reaches".into(), |t| format!("{} s to", tick(t)));
+        chart
+            .draw_series(DashedLineSeries::new(pts.clone(), 8, 5, c.stroke_width(2)))
+            .map_err(|e| anyhow::anyhow!("{e}"))?
+            .label(format!(
+                "tracery {} denoised (OIDN): {reach} RMSE {}",
+                fit.sampler,
+                tick(report.target_rmse)
+            ))
+            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], c.stroke_width(1)));
+        chart
+            .draw_series(pts.iter().map(|&p| TriangleMarker::new(p, 5, c.filled())))
+            .map_err(|e| anyhow::anyhow!("{e}"))?;
     }
     let peer_colours = [BLACK, CYAN, RGBColor(230, 140, 0)];
     for (k, peer) in report.peers.iter().enumerate() {

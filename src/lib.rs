@@ -10,6 +10,8 @@
 //! - [`camera`], [`render`], [`film`], [`sampling`]: from camera rays to an 8-bit image.
 //! - [`mod@bench`]: the canonical benchmark rays, their file formats, and peers measured alike.
 //! - [`convergence`]: image error against render time, per sampler, with a plot.
+//! - [`denoise`]: Intel Open Image Denoise over a render and its albedo and normal layers
+//!   (the `denoise` feature).
 //!
 //! ```
 //! use glam::Vec3;
@@ -32,6 +34,7 @@ pub mod bench;
 pub mod bvh;
 pub mod camera;
 pub mod convergence;
+pub mod denoise;
 pub mod film;
 pub mod geometry;
 pub mod plot_font;

@@ -123,6 +123,11 @@ fn version_names_the_commit_the_features_and_the_kernel() {
         .find_map(|l| l.strip_prefix("features: "))
         .expect("a features line");
     assert_eq!(features.contains("viewer"), cfg!(feature = "viewer"), "{v}");
+    assert_eq!(
+        features.contains("denoise"),
+        cfg!(feature = "denoise"),
+        "{v}"
+    );
     let embree = v
         .lines()
         .find_map(|l| l.strip_prefix("embree: "))

@@ -31,6 +31,7 @@ fn depth_of_field_scene_converges_at_the_expected_rates() {
         max_depth: 5,
         samplers: vec![SamplerKind::Random, SamplerKind::Sobol],
         target_rmse: None,
+        denoise: false,
     };
     let report = run(&scene, &bvh, &config, None, &mut |_, _| {}).unwrap();
     assert_eq!(report.points.len(), 7 * 5 * 2);
@@ -62,7 +63,7 @@ fn depth_of_field_scene_converges_at_the_expected_rates() {
     write_csv(&dir.path().join("c.csv"), &report).unwrap();
     let csv = std::fs::read_to_string(dir.path().join("c.csv")).unwrap();
     assert_eq!(csv.lines().count(), 1 + report.points.len());
-    assert!(csv.starts_with("sampler,spp,seed,seconds,rmse,relmse"));
+    assert!(csv.starts_with("sampler,spp,seed,seconds,rmse,relmse,denoised"));
     plot(&dir.path().join("c.png"), &report, "test").unwrap();
     let img = image::open(dir.path().join("c.png")).unwrap();
     assert_eq!((img.width(), img.height()), (900, 600));
@@ -79,6 +80,7 @@ fn a_reference_with_too_few_samples_is_refused() {
         max_depth: 5,
         samplers: vec![SamplerKind::Random],
         target_rmse: None,
+        denoise: false,
     };
     assert!(format!("{:#}", config.validate(false).unwrap_err()).contains("64 x 16"));
     let bad = ConvergenceConfig {
@@ -159,4 +161,42 @@ fn an_external_reference_must_match_the_render_size() {
     assert_eq!(px[4 + 3], glam::Vec3::new(3.0, 1.0, 1.0));
     let e = format!("{:#}", load_reference(&path, 8, 6).unwrap_err());
     assert!(e.contains("ref.exr") && e.contains("4x3"), "{e}");
+}
+
+/// With `denoise`, the first sampler's renders are also measured denoised: a point per render,
+/// timed longer than the plain render it came from (layers and denoising included), and
+/// closer to the reference in relative error at every sample count.
+#[cfg(feature = "denoise")]
+#[test]
+fn denoised_renders_are_measured_beside_the_plain_ones() {
+    let mut scene = Scene::cornell_box();
+    scene.integrator = tracery::render::Integrator::Path;
+    let bvh = Bvh::build(&scene.mesh.triangles, &BuildOptions::sah());
+    let config = ConvergenceConfig {
+        width: 160,
+        height: 120,
+        max_spp: 8,
+        seeds: 1,
+        reference_spp: 64 * 8,
+        max_depth: 5,
+        samplers: vec![SamplerKind::Sobol],
+        target_rmse: None,
+        denoise: true,
+    };
+    let report = run(&scene, &bvh, &config, None, &mut |_, _| {}).unwrap();
+    assert_eq!(report.points.len(), 4 * 2);
+    assert_eq!(report.denoised.len(), 4);
+    for &(spp, seconds, _, relmse) in &report.denoised {
+        let plain = report
+            .points
+            .iter()
+            .find(|p| !p.denoised && p.spp == spp)
+            .unwrap();
+        assert!(seconds > plain.seconds, "{spp} spp: {seconds} s");
+        assert!(
+            relmse < plain.relmse,
+            "{spp} spp: relMSE {relmse} denoised, {} plain",
+            plain.relmse
+        );
+    }
 }

@@ -2,7 +2,8 @@
 //! exactly when its settings or the scene change, accumulation starts over when the camera
 //! moves, a stale job's picture is never shown, a pure pan carries every still-valid pixel
 //! over, a bad file keeps the old scene and shows its error, a debug ray's hits are the
-//! core's closest hits, and the traced image equals the headless render of the same view.
+//! core's closest hits, the traced image equals the headless render of the same view, and the
+//! denoised still picture is the headless render denoised.
 #![cfg(feature = "viewer")]
 
 use std::path::{Path, PathBuf};
@@ -31,6 +32,8 @@ fn app(scene: Option<&str>) -> App {
         bvh: BuildOptions::sah(),
         settings: ViewSettings {
             max_samples: 64,
+            // The pictures shown are the traced ones (the denoised still has a test of its own).
+            denoise: false,
             ..ViewSettings::default()
         },
         viewport: SIZE,
@@ -563,4 +566,71 @@ fn the_camera_ignores_input_while_the_inspector_has_it() {
         app.update();
         assert!(enabled(&app));
     }
+}
+
+/// With the denoiser on, the still picture shown at its sample limit is the headless render of
+/// the same samples denoised with the same render layers (to within OIDN's own rounding), and
+/// differs from the picture as traced.
+#[cfg(feature = "denoise")]
+#[test]
+fn the_denoised_still_picture_is_the_headless_render_denoised() {
+    use tracery::denoise::{Denoiser, Inputs};
+    use tracery::film::rmse_levels;
+    use tracery::render::{EnvironmentMap, RenderPlan, render_layers};
+    use tracery::viewer::still_denoise::LAYER_SAMPLES;
+
+    let mut app = app(None);
+    {
+        let mut s = app.world_mut().resource_mut::<ViewSettings>();
+        s.max_samples = 4;
+        s.integrator = Some(tracery::render::Integrator::Path);
+        s.denoise = true;
+    }
+    settle(&mut app, "4 samples, denoised", |w| {
+        let (i, s) = (w.resource::<TracedImage>(), w.resource::<TraceStats>());
+        !i.preview
+            && i.samples == 4
+            && s.denoised
+            && i.generation == w.resource::<Accumulation>().generation
+    });
+    let shown = app.world().resource::<TracedImage>().rgba.clone();
+
+    let mut scene = Scene::cornell_box();
+    scene.integrator = tracery::render::Integrator::Path;
+    let bvh = Bvh::build(&scene.mesh.triangles, &BuildOptions::sah());
+    let settings = RenderSettings {
+        width: SIZE.x,
+        height: SIZE.y,
+        spp: 4,
+        ..RenderSettings::default()
+    };
+    let plain = render(&scene, &bvh, &settings, &|_| {}).unwrap().film;
+    let plan = RenderPlan::new(&scene, &settings);
+    let layer_settings = RenderSettings {
+        spp: LAYER_SAMPLES,
+        ..settings.clone()
+    };
+    let layers = render_layers(&scene, &bvh, &EnvironmentMap::None, &layer_settings, plan);
+    let clean = Denoiser::new()
+        .unwrap()
+        .run(&Inputs {
+            width: SIZE.x,
+            height: SIZE.y,
+            color: &plain.mean(),
+            albedo: Some(&layers.albedo_mean()),
+            normal: Some(&layers.normal_mean()),
+        })
+        .unwrap();
+    let mut expected = vec![0u8; clean.len() * 4];
+    tracery::film::encode_rgba8(&clean, 1.0, &mut expected);
+    let against_denoised = rmse_levels(&shown, &expected);
+    let against_plain = rmse_levels(&shown, &plain.to_rgba8(1.0));
+    assert!(
+        against_denoised < 0.5,
+        "the shown picture is {against_denoised:.2} levels from the headless render denoised"
+    );
+    assert!(
+        against_plain > 2.0,
+        "the shown picture is only {against_plain:.2} levels from the picture as traced"
+    );
 }

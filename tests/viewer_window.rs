@@ -59,7 +59,16 @@ fn screenshot_with(
         .args(["-a", "-s", "-screen 0 1280x1024x24", bin(), "view"])
         .args(args)
         .args(size)
-        .args(["--frames", "8", "--spp", "4", "--wait-spp", "--screenshot"])
+        // The picture as traced: the test compares it with the headless render.
+        .args([
+            "--no-denoise",
+            "--frames",
+            "8",
+            "--spp",
+            "4",
+            "--wait-spp",
+            "--screenshot",
+        ])
         .arg(&out)
         .env("WGPU_BACKEND", "vulkan")
         .envs(env.iter().copied())

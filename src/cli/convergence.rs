@@ -55,6 +55,11 @@ pub struct ConvergenceArgs {
     /// How light is gathered (default: the scene's).
     #[arg(long)]
     integrator: Option<Integrator>,
+    /// Also denoise each render of the first sampler (Intel Open Image Denoise, guided by
+    /// albedo and normal layers of the same samples) and draw it as a curve of its own, its
+    /// time including the layers and the denoising.
+    #[arg(long)]
+    denoise: bool,
 }
 
 pub fn run(a: ConvergenceArgs) -> Result<()> {
@@ -88,6 +93,7 @@ pub fn run(a: ConvergenceArgs) -> Result<()> {
         max_depth: a.max_depth,
         samplers: a.samplers,
         target_rmse,
+        denoise: a.denoise,
     };
     config.validate(reference.is_some())?;
     let bvh = Bvh::build(&scene.mesh.triangles, &BuildOptions::sah());
@@ -163,6 +169,22 @@ pub fn run(a: ConvergenceArgs) -> Result<()> {
             f.seconds_to_target
         );
     }
+    if let (false, Some(f)) = (report.denoised.is_empty(), report.fits.first()) {
+        let pts: Vec<(f64, f64)> = report.denoised.iter().map(|d| (d.1, d.2)).collect();
+        let by_spp: Vec<(f64, f64)> = report
+            .denoised
+            .iter()
+            .map(|d| ((d.0 as f64).ln(), d.2.ln()))
+            .collect();
+        let t = time_to(&pts, target);
+        measured.push((format!("tracery {} denoised", f.sampler), t));
+        println!(
+            "| tracery {} denoised | {:.3} | {} | |",
+            f.sampler,
+            convergence::least_squares(&by_spp).0,
+            show(t)
+        );
+    }
     for p in &report.peers {
         let pts = p.means();
         let by_spp: Vec<(f64, f64)> = p
@@ -187,6 +209,29 @@ pub fn run(a: ConvergenceArgs) -> Result<()> {
                     "{first} reaches RMSE {} in {:.2}x the time of {name}",
                     tick(target),
                     t0 / t
+                );
+            }
+        }
+    }
+    if !report.denoised.is_empty() {
+        // Per sample count, the first sampler's mean time and relative RMSE (the square root
+        // of relMSE) as rendered and denoised.
+        let first = report.fits.first().map(|f| f.sampler);
+        println!(
+            "\n| spp | seconds | relative RMSE | seconds, denoised | relative RMSE, denoised |"
+        );
+        println!("|---:|---:|---:|---:|---:|");
+        for &(spp, seconds, _, relmse) in &report.denoised {
+            if let Some(m) = report
+                .means
+                .iter()
+                .find(|m| Some(m.0) == first && m.1 == spp)
+            {
+                println!(
+                    "| {spp} | {:.3} | {:.4} | {seconds:.3} | {:.4} |",
+                    m.2,
+                    m.4.sqrt(),
+                    relmse.sqrt()
                 );
             }
         }

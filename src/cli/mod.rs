@@ -85,6 +85,9 @@ fn features() -> Vec<&'static str> {
     if cfg!(feature = "viewer") {
         f.push("viewer");
     }
+    if cfg!(feature = "denoise") {
+        f.push("denoise");
+    }
     if cfg!(feature = "no-conservative-slab") {
         f.push("no-conservative-slab (test-only)");
     }

@@ -1,14 +1,21 @@
 //! `tracery render`: render a scene to PNG (tone mapped) or EXR / HDR (linear radiance) on all
-//! cores, with a progress bar.
+//! cores, with a progress bar; optionally its render layers (albedo, normal, depth, samples)
+//! as EXR channels, and the picture denoised.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::Result;
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 use tracery::bvh::Bvh;
-use tracery::render::{Explain, Integrator, RenderPlan, RenderSettings, render};
+use tracery::denoise::{Denoiser, Inputs};
+use tracery::film::{Film, OutputKind};
+use tracery::render::aov::Aov;
+use tracery::render::{
+    EnvironmentMap, Explain, Integrator, RenderPlan, RenderSettings, render_layers,
+    render_with_plan,
+};
 use tracery::sampling::SamplerKind;
 
 use super::{BvhArgs, ensure_parent, load_scene, set_threads};
@@ -59,6 +66,28 @@ pub struct RenderArgs {
     /// Threads to render with (default: every core).
     #[arg(long, default_value_t = 0)]
     threads: usize,
+    /// Render layers to write, comma-separated: albedo, normal, depth, samples. They go into
+    /// the output as extra EXR channels (`albedo.R`, `normal.X`, `depth.Z`, `samples.N`, …)
+    /// when it is `.exr`, else into `<output>.aov.exr` beside it.
+    #[arg(long, value_delimiter = ',', value_parser = Aov::parse)]
+    aov: Vec<Aov>,
+    /// Denoise the picture (Intel Open Image Denoise, guided by the albedo and normal layers)
+    /// before writing it.
+    #[arg(long)]
+    denoise: bool,
+    /// With --denoise: also write the picture as rendered, to `<output>.noisy.<ext>`.
+    #[arg(long, requires = "denoise")]
+    keep_noisy: bool,
+}
+
+/// `out/render.png` with `tag` and `ext`: `out/render.<tag>.<ext>`.
+fn beside(path: &Path, tag: &str, ext: &str) -> PathBuf {
+    let stem = path
+        .file_stem()
+        .map_or_else(Default::default, |s| s.to_os_string());
+    let mut name = stem;
+    name.push(format!(".{tag}.{ext}"));
+    path.with_file_name(name)
 }
 
 pub fn run(a: RenderArgs) -> Result<()> {
@@ -105,23 +134,89 @@ pub fn run(a: RenderArgs) -> Result<()> {
             String::new()
         }
     );
+    // Asked before the render, so a build without the denoiser does not render for nothing.
+    let denoiser = a.denoise.then(Denoiser::new).transpose()?;
     let bar = ProgressBar::new(settings.height as u64).with_style(
         ProgressStyle::with_template(
             "rendering {bar:40} {pos}/{len} rows, {elapsed} elapsed, eta {eta}",
         )
         .expect("valid template"),
     );
+    let plan = RenderPlan::new(&scene, &settings);
+    let env = EnvironmentMap::load(&scene.environment, plan.environment)?;
     let start = Instant::now();
-    let out = render(&scene, &bvh, &settings, &|_| bar.inc(1))?;
+    let out = render_with_plan(&scene, &bvh, &env, &settings, plan.clone(), &|_| bar.inc(1));
     let took = start.elapsed();
     bar.finish_and_clear();
     let path = ensure_parent(&a.output)?;
-    out.film.save(&path, a.exposure)?;
+    let mut written = a.aov.clone();
+    written.sort();
+    written.dedup();
+    let layers = (!written.is_empty() || denoiser.is_some()).then(|| {
+        let t = Instant::now();
+        let layers = render_layers(&scene, &bvh, &env, &settings, plan);
+        (layers, t.elapsed().as_secs_f64())
+    });
+    if let Some((_, secs)) = &layers {
+        eprintln!("render layers traced in {:.0} ms", secs * 1e3);
+    }
+    let film = match (&denoiser, &layers) {
+        (Some(d), Some((l, _))) => {
+            if a.keep_noisy {
+                let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("png");
+                let noisy = beside(&path, "noisy", ext);
+                out.film.save(&noisy, a.exposure)?;
+                println!("wrote {} (as rendered)", noisy.display());
+            }
+            let t = Instant::now();
+            let (color, albedo, normal) = (out.film.mean(), l.albedo_mean(), l.normal_mean());
+            let clean = d.run(&Inputs {
+                width: settings.width,
+                height: settings.height,
+                color: &color,
+                albedo: Some(&albedo),
+                normal: Some(&normal),
+            })?;
+            eprintln!("denoised in {:.0} ms", t.elapsed().as_secs_f64() * 1e3);
+            // Kept as sums over the render's samples, so the film's mean is the denoised picture.
+            let k = settings.spp as f32;
+            Film {
+                sum: clean.into_iter().map(|c| c * k).collect(),
+                ..out.film.clone()
+            }
+        }
+        _ => out.film.clone(),
+    };
+    if let (false, Some((l, _))) = (written.is_empty(), &layers) {
+        if OutputKind::of(&path)? == OutputKind::Linear
+            && path
+                .extension()
+                .is_some_and(|e| e.eq_ignore_ascii_case("exr"))
+        {
+            l.save_exr(&path, &written, Some(&film))?;
+        } else {
+            film.save(&path, a.exposure)?;
+            let aov_path = beside(&path, "aov", "exr");
+            l.save_exr(&aov_path, &written, None)?;
+            println!(
+                "wrote {} ({})",
+                aov_path.display(),
+                written
+                    .iter()
+                    .map(|l| l.name())
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            );
+        }
+    } else {
+        film.save(&path, a.exposure)?;
+    }
     let secs = took.as_secs_f64();
     let r = &out.rays;
     println!(
-        "wrote {} ({}x{}, {} spp) in {:.0} ms: rays {} camera, {} shadow, {} reflection, {} transmission, {} bounce; {:.2} Mrays/s{}",
+        "wrote {}{} ({}x{}, {} spp) in {:.0} ms: rays {} camera, {} shadow, {} reflection, {} transmission, {} bounce; {:.2} Mrays/s{}",
         path.display(),
+        if denoiser.is_some() { ", denoised" } else { "" },
         settings.width,
         settings.height,
         settings.spp,

@@ -60,6 +60,10 @@ pub struct ViewArgs {
     /// Hide the inspector and status line (Tab shows them).
     #[arg(long)]
     no_ui: bool,
+    /// Show the still picture as traced, not denoised (N toggles it; the default in builds
+    /// with the denoiser is on).
+    #[arg(long)]
+    no_denoise: bool,
     #[command(flatten)]
     bvh: BvhArgs,
     /// Scripted run: run this many frames, then save --screenshot (if given) and exit.
@@ -164,6 +168,7 @@ pub fn run(a: ViewArgs) -> Result<()> {
         scale: a.scale,
         level: a.level,
         frame_ms: a.frame_ms,
+        denoise: tracery::denoise::AVAILABLE && !a.no_denoise,
         mode: match a.mode {
             Mode::Shaded => RenderMode::Shaded,
             Mode::Cost => RenderMode::TraversalCost,

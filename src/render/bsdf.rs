@@ -195,6 +195,19 @@ impl Bsdf {
             && !self.sheen.is_some()
     }
 
+    /// The surface's colour for render layers ([`super::aov`]): its diffuse colour plus its
+    /// glossy lobe's (Blinn-Phong's highlight colour, GGX's reflectance at normal incidence),
+    /// clamped to 1. Not an exact directional albedo: a denoiser wants the texture's detail
+    /// and the colour, not the lobes' angular falloff.
+    pub fn albedo(&self) -> Vec3 {
+        let gloss = match self.gloss {
+            Gloss::None => Vec3::ZERO,
+            Gloss::Phong { color, .. } => color,
+            Gloss::Ggx { f0, .. } => f0,
+        };
+        (self.diffuse + gloss).clamp(Vec3::ZERO, Vec3::ONE)
+    }
+
     /// Reflected radiance per unit irradiance from `wi` towards `wo` (both unit, away from the
     /// surface).
     #[inline]

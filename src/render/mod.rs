@@ -4,6 +4,7 @@
 //! Every pixel draws its samples from its own random stream, seeded from the pixel index and
 //! the sample index, so an image is the same for any number of threads.
 
+pub mod aov;
 pub mod bsdf;
 pub mod cache;
 pub mod debug;
@@ -184,6 +185,29 @@ pub fn render_with_plan(
     RenderOutput { film, rays }
 }
 
+/// The render layers ([`aov`]) of the samples a render with `settings` takes: the same camera
+/// rays, traced on all cores.
+pub fn render_layers(
+    scene: &Scene,
+    bvh: &Bvh,
+    env: &EnvironmentMap,
+    settings: &RenderSettings,
+    plan: RenderPlan,
+) -> aov::AovFilm {
+    let (w, h) = (settings.width, settings.height);
+    let cam = CameraRays::new(&scene.camera, w, h);
+    let tracer = Tracer::new(scene, bvh, plan, settings.max_depth, env);
+    let mut layers = aov::AovFilm::new(w, h);
+    let samples = SampleRange {
+        sampler: settings.sampler,
+        seed: settings.seed,
+        first: 0,
+        count: settings.spp,
+    };
+    layers.add(&tracer, &cam, &samples);
+    layers
+}
+
 /// Which samples of each pixel to take: indices `first..first + count` of the pixel's
 /// stream, so an image built up over several calls equals one rendered in a single call.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -222,10 +246,25 @@ pub fn trace_rows(
     y0: u32,
     rows: &mut [Vec3],
 ) -> (RayCounts, u64) {
+    trace_rows_until(tracer, cam, samples, y0, rows, &|| false)
+        .expect("a render that is never cancelled completes")
+}
+
+/// [`trace_rows`] that gives up as soon as `cancel` returns true (checked before each sample
+/// of each tile): `None`, and `rows` as they were. The viewer's still picture traces long
+/// rounds of samples this way and still leaves them at once when the view changes.
+pub fn trace_rows_until(
+    tracer: &Tracer,
+    cam: &CameraRays,
+    samples: &SampleRange,
+    y0: u32,
+    rows: &mut [Vec3],
+    cancel: &(dyn Fn() -> bool + Sync),
+) -> Option<(RayCounts, u64)> {
     use crate::bvh::wide::packet::PACKET;
     let w = cam.width as usize;
     if w == 0 {
-        return (RayCounts::default(), 0);
+        return Some((RayCounts::default(), 0));
     }
     debug_assert!(rows.len().is_multiple_of(w) && rows.len() / w <= BAND as usize);
     let height = rows.len() / w;
@@ -233,7 +272,7 @@ pub fn trace_rows(
     // The pixel of a tile's `k`-th ray: (x0 + k % tw, row k / tw of the band).
     let at = |x0: usize, tw: usize, k: usize| k / tw * w + x0 + k % tw;
     let before = &*rows;
-    let tiles: Vec<([Vec3; PACKET], RayCounts, u64)> = (0..w.div_ceil(tile))
+    let tiles: Option<Vec<([Vec3; PACKET], RayCounts, u64)>> = (0..w.div_ceil(tile))
         .into_par_iter()
         .map(|c| {
             let (x0, tw) = (c * tile, tile.min(w - c * tile));
@@ -252,11 +291,13 @@ pub fn trace_rows(
                     (x0, y0 as usize),
                     (tw, height),
                     &mut sums,
+                    cancel,
                 )
-            });
-            (sums, rays, rejected)
+            })?;
+            Some((sums, rays, rejected))
         })
         .collect();
+    let tiles = tiles?;
     let mut rays = RayCounts::default();
     let mut rejected = 0u64;
     for (c, (sums, r, n)) in tiles.into_iter().enumerate() {
@@ -267,12 +308,31 @@ pub fn trace_rows(
         rays = rays + r;
         rejected += n;
     }
-    (rays, rejected)
+    Some((rays, rejected))
+}
+
+/// The camera ray of the sample `sampler` of pixel `(x, y)`: jittered within the pixel, and
+/// from a point of the lens when `thin_lens`.
+#[inline]
+pub(crate) fn camera_ray(
+    cam: &CameraRays,
+    sampler: &PixelSampler,
+    x: u32,
+    y: u32,
+    thin_lens: bool,
+) -> crate::geometry::Ray {
+    let jitter = sampler.get_2d(dim::PIXEL);
+    let (px, py) = (x as f32 + jitter.x, y as f32 + jitter.y);
+    if thin_lens {
+        cam.thin_lens(px, py, concentric_disk(sampler.get_2d(dim::LENS)))
+    } else {
+        cam.pinhole(px, py)
+    }
 }
 
 /// The samples of the `size.0 x size.1` tile of pixels from `corner` (at most one packet), added
 /// to `sums` (row by row of the tile); returns the rays traced and the non-finite samples left
-/// out.
+/// out, or `None` once `cancel` says to stop.
 fn trace_tile(
     tracer: &Tracer,
     cam: &CameraRays,
@@ -280,7 +340,8 @@ fn trace_tile(
     corner: (usize, usize),
     size: (usize, usize),
     sums: &mut [Vec3; crate::bvh::wide::packet::PACKET],
-) -> (RayCounts, u64) {
+    cancel: &(dyn Fn() -> bool + Sync),
+) -> Option<(RayCounts, u64)> {
     use crate::bvh::wide::packet::PACKET;
     let ((x0, y0), (tw, height)) = (corner, size);
     let w = cam.width as u64;
@@ -299,16 +360,13 @@ fn trace_tile(
         *f = PixelSampler::new(samples.sampler, samples.seed, y as u64 * w + x as u64, 0);
     }
     for s in samples.first..samples.first.saturating_add(samples.count) {
+        if cancel() {
+            return None;
+        }
         for k in 0..n {
             let sampler = firsts[k].with_index(s);
-            let jitter = sampler.get_2d(dim::PIXEL);
             let (x, y) = pixel_of(k);
-            let (px, py) = (x as f32 + jitter.x, y as f32 + jitter.y);
-            camera_rays[k] = if thin_lens {
-                cam.thin_lens(px, py, concentric_disk(sampler.get_2d(dim::LENS)))
-            } else {
-                cam.pinhole(px, py)
-            };
+            camera_rays[k] = camera_ray(cam, &sampler, x as u32, y as u32, thin_lens);
             samplers[k] = sampler;
         }
         tracer
@@ -329,7 +387,7 @@ fn trace_tile(
             }
         }
     }
-    (rays, rejected)
+    Some((rays, rejected))
 }
 
 #[cfg(all(test, target_arch = "x86_64"))]

@@ -13,19 +13,27 @@
 //! fewer rays per second than the one-shot render, same rays). A round under way is always
 //! completed (its rows must agree in samples), so if `max_passes` drops during one, the passes
 //! end past it by what is left of that round.
+//!
+//! A round is not cut to fit the caller's time budget: a batch of rows may take longer than
+//! the budget, and a caller that must stop at once (the viewer, when the view changes) passes
+//! a `cancel` check that the tracing reads before every sample of every tile. A cancelled
+//! batch leaves the image as it was: its rows are traced into a copy, written back only when
+//! every one of them is done.
 
 use std::time::{Duration, Instant};
 
 use glam::Vec3;
 use rayon::prelude::*;
 
-use super::{BAND, RayCounts, SampleRange, Tracer, trace_rows};
+use super::{BAND, RayCounts, SampleRange, Tracer, trace_rows_until};
 use crate::camera::CameraRays;
 use crate::film::{Film, encode_rgba8};
 use crate::sampling::SamplerKind;
 
-/// Most passes one round traces (see the module docs).
-pub const MAX_ROUND: u32 = 8;
+/// Most passes one round traces (see the module docs): long enough rounds that a tile's
+/// samples keep its part of the tree in cache as the one-shot render does, and short enough
+/// that a refining picture shows progress.
+pub const MAX_ROUND: u32 = 64;
 
 /// An image being refined pass by pass.
 #[derive(Debug)]
@@ -83,6 +91,8 @@ pub struct StepReport {
     pub rays: RayCounts,
     /// Wall time spent.
     pub seconds: f64,
+    /// True when `cancel` stopped the last batch (its work was dropped).
+    pub cancelled: bool,
 }
 
 impl Progressive {
@@ -140,13 +150,14 @@ impl Progressive {
     /// pass is left to do, so progress never stalls. `rows(y0, samples, sums)` adds the
     /// samples `samples.0..samples.0 + samples.1` of every pixel of the rows from `y0` to
     /// `sums` (whole rows, at most [`BAND`] of them), each pixel's in order, and returns the
-    /// rays it traced and the number of non-finite samples it left out. Bands of rows are
-    /// traced in parallel on the rayon pool.
+    /// rays it traced and the number of non-finite samples it left out, or `None` when it
+    /// was cancelled (the step then stops, its last batch dropped). Bands of rows are traced
+    /// in parallel on the rayon pool.
     pub fn step(
         &mut self,
         budget: Duration,
         max_passes: u32,
-        rows: impl Fn(u32, (u32, u32), &mut [Vec3]) -> (RayCounts, u64) + Sync,
+        rows: impl Fn(u32, (u32, u32), &mut [Vec3]) -> Option<(RayCounts, u64)> + Sync,
     ) -> StepReport {
         let start = Instant::now();
         let mut report = StepReport::default();
@@ -161,7 +172,7 @@ impl Progressive {
                 break;
             }
             if self.next_row == 0 {
-                self.round = self.next_round(budget, max_passes, threads);
+                self.round = self.next_round(max_passes);
             }
             // Bands of rows that fit in what is left of the budget, in whole rounds of the
             // pool (`next_row` stays a multiple of the band until the round's last band).
@@ -176,11 +187,22 @@ impl Progressive {
             let samples = (self.passes, self.round);
             let t0 = Instant::now();
             let span = &mut self.sum[first as usize * w..(first + count) as usize * w];
-            let (rays, rejected) = span
+            // Traced into a copy (a memory copy, next to nothing beside the tracing), so that
+            // a cancelled batch leaves the rows as they were.
+            let mut batch = span.to_vec();
+            let done: Option<Vec<(RayCounts, u64)>> = batch
                 .par_chunks_mut(w * BAND as usize)
                 .enumerate()
                 .map(|(i, sums)| rows(first + i as u32 * BAND, samples, sums))
-                .reduce(|| (RayCounts::default(), 0), |a, b| (a.0 + b.0, a.1 + b.1));
+                .collect();
+            let Some(done) = done else {
+                report.cancelled = true;
+                break;
+            };
+            span.copy_from_slice(&batch);
+            let (rays, rejected) = done
+                .into_iter()
+                .fold((RayCounts::default(), 0), |a, b| (a.0 + b.0, a.1 + b.1));
             let per_row = t0.elapsed().as_secs_f64() / (count * self.round) as f64;
             self.row_seconds = Some(match self.row_seconds {
                 Some(old) => 0.5 * old + 0.5 * per_row,
@@ -204,20 +226,12 @@ impl Progressive {
         report
     }
 
-    /// Passes of the next round: the first pass alone, then up to four times the samples so
-    /// far, at most [`MAX_ROUND`], no more than `max_passes` asks for, and few enough that one
-    /// band per thread fits in `budget` (so a caller that traces in short slices still hears
-    /// about a newer job in time).
-    fn next_round(&self, budget: Duration, max_passes: u32, threads: u32) -> u32 {
+    /// Passes of the next round: the first pass alone, then up to three times the samples so
+    /// far (the passes reach 1, 4, 16, 64), at most [`MAX_ROUND`] and no more than
+    /// `max_passes` asks for.
+    fn next_round(&self, max_passes: u32) -> u32 {
         let left = max_passes.saturating_sub(self.passes).max(1);
-        let wanted = (3 * self.passes).clamp(1, MAX_ROUND).min(left);
-        let fits = match self.row_seconds {
-            Some(s) if s > 0.0 => {
-                (budget.as_secs_f64() / (s * BAND as f64 * threads as f64)) as u32
-            }
-            _ => 1,
-        };
-        wanted.min(fits.max(1))
+        (3 * self.passes).clamp(1, MAX_ROUND).min(left)
     }
 
     /// [`Progressive::step`] tracing the shaded image of `tracer` through `cam` (which must be
@@ -231,6 +245,20 @@ impl Progressive {
         budget: Duration,
         max_passes: u32,
     ) -> StepReport {
+        self.step_shaded_until(tracer, cam, (sampler, seed), budget, max_passes, &|| false)
+    }
+
+    /// [`Progressive::step_shaded`] that stops as soon as `cancel` returns true, dropping
+    /// its last batch ([`StepReport::cancelled`]).
+    pub fn step_shaded_until(
+        &mut self,
+        tracer: &Tracer,
+        cam: &CameraRays,
+        (sampler, seed): (SamplerKind, u64),
+        budget: Duration,
+        max_passes: u32,
+        cancel: &(dyn Fn() -> bool + Sync),
+    ) -> StepReport {
         self.step(budget, max_passes, |y, (first, count), sums| {
             let samples = SampleRange {
                 sampler,
@@ -238,7 +266,7 @@ impl Progressive {
                 first,
                 count,
             };
-            trace_rows(tracer, cam, &samples, y, sums)
+            trace_rows_until(tracer, cam, &samples, y, sums, cancel)
         })
     }
 
@@ -283,6 +311,18 @@ impl Progressive {
             samples: self.passes,
             rejected: self.rejected,
         })
+    }
+
+    /// Mean radiance of each pixel, each row by its own sample count (black where a row has
+    /// none yet).
+    pub fn mean(&self) -> Vec<Vec3> {
+        let w = self.width as usize;
+        let mut out = Vec::with_capacity(self.sum.len());
+        for (row, &n) in self.sum.chunks(w.max(1)).zip(&self.row_samples) {
+            let k = if n == 0 { 0.0 } else { 1.0 / n as f32 };
+            out.extend(row.iter().map(|s| *s * k));
+        }
+        out
     }
 
     /// The raw per-pixel sums (row 0 at the top).

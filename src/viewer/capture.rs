@@ -583,6 +583,51 @@ fn save_screenshot(image: &Image, path: &std::path::Path) {
     }
 }
 
+/// The `--orbit` report's denoising lines: what denoising cost the still picture, when its
+/// first denoised picture came, and how close that was to the converged picture against the
+/// picture as traced at 16 times that time.
+fn denoise_report(
+    w: &super::worker::WorkerStats,
+    views: &ReportViews,
+    settings: &ViewSettings,
+    film: &Progressive,
+) {
+    let d = &w.denoise;
+    if let Some(e) = &d.error {
+        println!("denoised still: none ({e})");
+        return;
+    }
+    let stop = settings.still_after_ms as f64 * 1e-3;
+    println!(
+        "denoised still: {} pictures in {:.2} s ({:.1}% of the still picture's {:.1} s), the last of {} spp",
+        d.pictures,
+        d.seconds,
+        100.0 * d.seconds / w.still_wall.max(1e-9),
+        w.still_wall,
+        d.passes
+    );
+    let probe = views
+        .worker
+        .0
+        .shared
+        .probe
+        .lock()
+        .map(|p| p.clone())
+        .unwrap_or_default();
+    let converged = picture_of(film, settings).0;
+    match (&probe.first, &probe.plain_later) {
+        (Some((t, first)), Some((later, plain))) if first.len() == converged.len() => println!(
+            "first denoised picture: {:.2} s after the camera stopped, RMSE {:.2} levels against the picture at the sample limit; the picture as traced {:.2} s after the camera stopped ({:.0}x later): RMSE {:.2} levels",
+            stop + t,
+            rmse_levels(first, &converged),
+            stop + later,
+            (stop + later) / (stop + t).max(1e-9),
+            rmse_levels(plain, &converged),
+        ),
+        _ => println!("first denoised picture: none kept to compare"),
+    }
+}
+
 fn report(
     script: &Script,
     stats: &TraceStats,
@@ -695,17 +740,22 @@ fn report(
     );
     let secs = t0.elapsed().as_secs_f64();
     let headless_mrays = headless.rays.total() as f64 / secs / 1e6;
+    let denoising = settings.denoise && settings.mode == super::trace::RenderMode::Shaded;
     println!(
-        "still: {} spp at {}x{} in {:.2} s: viewer {:.2} Mrays/s, tracery render of the same view {:.2} Mrays/s ({:.2} s), ratio {:.2}",
+        "still: {} spp at {}x{} in {:.2} s (denoiser {}): viewer {:.2} Mrays/s, tracery render of the same view {:.2} Mrays/s ({:.2} s), ratio {:.2}",
         film.passes(),
         film.width(),
         film.height(),
         w.still_wall,
+        if denoising { "on" } else { "off" },
         viewer_mrays,
         headless_mrays,
         secs,
         viewer_mrays / headless_mrays.max(1e-9)
     );
+    if denoising {
+        denoise_report(&w, views, settings, &film);
+    }
     // The moving picture against the converged one of the same pose, and the stretched
     // preview (the earlier design: a reduced picture with as many fresh samples, bilinear).
     let converged = resize_rgba8(

@@ -98,6 +98,7 @@ pub const KEYS: &[(&str, &str)] = &[
     ("R", "debug ray drawing"),
     ("H", "traversal cost heatmap"),
     ("G", "where the samples go (work heatmap)"),
+    ("N", "denoise the still picture on / off"),
     ("P", "save the full-resolution image as PNG"),
     ("Tab", "show / hide the inspector"),
     ("F1", "this help"),
@@ -119,9 +120,13 @@ fn keys(
     focus: Res<UiFocus>,
     mut state: ResMut<InspectorState>,
     mut save: MessageWriter<SavePng>,
+    mut settings: ResMut<ViewSettings>,
 ) {
     if focus.keyboard {
         return;
+    }
+    if input.just_pressed(KeyCode::KeyN) && crate::denoise::AVAILABLE {
+        settings.denoise = !settings.denoise;
     }
     if input.just_pressed(KeyCode::F1) {
         state.help = !state.help;
@@ -172,10 +177,10 @@ fn status_line(
     };
     let picture = if stats.moving {
         format!("moving, {} fresh samples", stats.fresh)
-    } else if stats.idle {
-        format!("{} spp, done", stats.spp)
     } else {
-        format!("{} spp", stats.spp)
+        let denoised = if stats.denoised { ", denoised" } else { "" };
+        let done = if stats.idle { ", done" } else { "" };
+        format!("{} spp{denoised}{done}", stats.spp)
     };
     let mut text = format!(
         "{}\n{picture}\n{:.1} Mrays/s | {frame}\nBVH {:.1} ms | {}x{}",
@@ -442,6 +447,15 @@ fn render_section(
                     .text("ms still before refining"),
             );
             ui.checkbox(&mut s.smooth_moving, "smooth the moving picture");
+            let denoise = ui.add_enabled(
+                crate::denoise::AVAILABLE && stats.denoise_error.is_none(),
+                egui::Checkbox::new(&mut s.denoise, "denoise the still picture (N)"),
+            );
+            if !crate::denoise::AVAILABLE {
+                denoise.on_disabled_hover_text(crate::denoise::NOT_BUILT);
+            } else if let Some(e) = &stats.denoise_error {
+                denoise.on_disabled_hover_text(e.as_str());
+            }
             if s.mode != RenderMode::Shaded {
                 heat_legend(ui, s, stats);
             }

@@ -22,6 +22,7 @@ pub mod inspector;
 pub mod pacing;
 pub mod panel_cache;
 pub mod scene;
+pub mod still_denoise;
 pub mod task;
 pub mod trace;
 pub mod worker;

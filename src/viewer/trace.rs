@@ -153,6 +153,9 @@ pub struct ViewSettings {
     /// Show the moving picture with each sample averaged with its neighbours on the same
     /// surface (display only: the samples and the still picture are untouched).
     pub smooth_moving: bool,
+    /// Show the still picture denoised ([`crate::denoise`]; display only, the samples are
+    /// untouched). On by default in builds with the denoiser.
+    pub denoise: bool,
 }
 
 impl Default for ViewSettings {
@@ -183,15 +186,15 @@ impl Default for ViewSettings {
             frame_ms: 30.0,
             still_after_ms: 120.0,
             smooth_moving: true,
+            denoise: crate::denoise::AVAILABLE,
         }
     }
 }
 
 impl ViewSettings {
     /// The settings that change the traced samples (everything but exposure, the heatmap
-    /// scale, the budgets, the frame pacing, the sample limit and the moving picture's
-    /// smoothing): a change of
-    /// these starts the pictures over.
+    /// scale, the budgets, the frame pacing, the sample limit, the moving picture's smoothing
+    /// and the still picture's denoising): a change of these starts the pictures over.
     pub fn trace_key(&self) -> ViewSettings {
         ViewSettings {
             exposure: 1.0,
@@ -200,6 +203,7 @@ impl ViewSettings {
             frame_ms: 0.0,
             still_after_ms: 0.0,
             smooth_moving: true,
+            denoise: false,
             max_samples: 0,
             // The work view traces what the shaded view traces.
             mode: if self.mode == RenderMode::Work {
@@ -459,6 +463,10 @@ pub struct TraceStats {
     pub still_rays: u64,
     /// Seconds the worker spent tracing the still picture since it started over.
     pub still_seconds: f64,
+    /// True when the picture shown is the still one denoised.
+    pub denoised: bool,
+    /// Why the still picture cannot be denoised, if it cannot.
+    pub denoise_error: Option<String>,
 }
 
 /// The camera of a transform and projection, for an image of `size`.
@@ -503,6 +511,7 @@ fn pose_bits(t: &Transform, p: &Projection) -> [u32; 8] {
 }
 
 /// One [`Progressive::step`] of the chosen mode.
+#[allow(clippy::too_many_arguments)]
 pub(super) fn step_mode(
     film: &mut Progressive,
     settings: &ViewSettings,
@@ -511,15 +520,16 @@ pub(super) fn step_mode(
     cam: &CameraRays,
     budget: Duration,
     max_passes: u32,
+    cancel: &(dyn Fn() -> bool + Sync),
 ) -> StepReport {
     match settings.mode {
-        RenderMode::Shaded | RenderMode::Work => film.step_shaded(
+        RenderMode::Shaded | RenderMode::Work => film.step_shaded_until(
             tracer,
             cam,
-            settings.sampler,
-            settings.seed,
+            (settings.sampler, settings.seed),
             budget,
             max_passes,
+            cancel,
         ),
         RenderMode::TraversalCost | RenderMode::Overlap => {
             // One pass: the counts are exact, more samples would not change them.
@@ -536,7 +546,7 @@ pub(super) fn step_mode(
                     camera: sums.len() as u64,
                     ..Default::default()
                 };
-                (rays, 0)
+                Some((rays, 0))
             })
         }
     }
@@ -642,12 +652,16 @@ fn take_picture(
     }
     stats.mrays_per_s = w.mrays_per_s;
     stats.idle = w.idle;
+    if stats.denoise_error != w.denoise.error {
+        stats.denoise_error = w.denoise.error;
+    }
     let Some(p) = worker.0.take_picture() else {
         return;
     };
     stats.moving = p.moving;
     stats.heat = p.heat;
     stats.spp = p.samples;
+    stats.denoised = p.denoised;
     stats.fresh = p.fresh;
     stats.holes = p.holes;
     image.rgba = p.rgba;

@@ -26,6 +26,7 @@ use std::time::{Duration, Instant};
 use bevy::prelude::UVec2;
 use glam::Vec3;
 
+use super::still_denoise::StillDenoise;
 use super::trace::{RenderMode, ViewSettings, picture_of, step_mode};
 use crate::bvh::Bvh;
 use crate::camera::CameraRays;
@@ -112,6 +113,8 @@ pub struct Picture {
     pub holes: u64,
     /// Heatmap mean and top (cost, overlap and work views).
     pub heat: (f32, f32),
+    /// True for a denoised still picture.
+    pub denoised: bool,
 }
 
 /// What the worker reports besides pictures.
@@ -140,6 +143,34 @@ pub struct WorkerStats {
     /// Seconds the moving picture spent carrying samples to new views, tracing, and making
     /// pictures (tone mapping, filling holes, resizing).
     pub moving_time: MovingTime,
+    /// The still picture's denoising.
+    pub denoise: DenoiseStats,
+}
+
+/// What denoising the still picture did since it started over.
+#[derive(Clone, Debug, Default)]
+pub struct DenoiseStats {
+    /// Denoised pictures made.
+    pub pictures: u32,
+    /// Passes behind the last denoised picture.
+    pub passes: u32,
+    /// Seconds all of them took (their render layers included).
+    pub seconds: f64,
+    /// Seconds from the still picture's start to its first denoised picture being shown.
+    pub first_after: Option<f64>,
+    /// Why the denoiser cannot run, if it cannot.
+    pub error: Option<String>,
+}
+
+/// Pictures kept for the `--orbit` report's denoising figures (traced size, RGBA8): the first
+/// denoised picture of the still, shown `first.0` seconds after it started, and the picture
+/// as traced at 16 times that time.
+#[derive(Clone, Debug, Default)]
+pub struct DenoiseProbe {
+    /// Seconds after the start and the first denoised picture.
+    pub first: Option<(f64, Vec<u8>)>,
+    /// Seconds after the start and the picture as traced then.
+    pub plain_later: Option<(f64, Vec<u8>)>,
 }
 
 /// Where the moving picture's time goes, in seconds.
@@ -194,6 +225,8 @@ pub struct Shared {
     pub still: Mutex<Option<Progressive>>,
     /// Called after a picture is published (wakes a waiting event loop).
     pub wake: Mutex<Option<Box<dyn Fn() + Send>>>,
+    /// The current still picture's first denoised picture, and the plain one 16 times later.
+    pub probe: Mutex<DenoiseProbe>,
 }
 
 impl Shared {
@@ -311,6 +344,8 @@ struct State {
     reshow: bool,
     /// The light set of the last scene traced.
     lights: LightCache,
+    /// The still picture's denoising.
+    denoise: StillDenoise,
     done: bool,
 }
 
@@ -334,6 +369,7 @@ fn run(rx: Receiver<Job>, shared: Arc<Shared>) {
         last_shown: None,
         reshow: false,
         lights: None,
+        denoise: StillDenoise::default(),
         done: true,
     };
     loop {
@@ -430,6 +466,34 @@ fn publish(shared: &Shared, job: &Job, mut p: Picture) -> bool {
         w();
     }
     true
+}
+
+/// Keeps the still picture's first denoised picture for the `--orbit` report.
+fn keep_for_probe(still_start: Instant, shared: &Shared, rgba: &[u8], denoised: bool) {
+    if !denoised {
+        return;
+    }
+    if let Ok(mut p) = shared.probe.lock()
+        && p.first.is_none()
+    {
+        p.first = Some((still_start.elapsed().as_secs_f64(), rgba.to_vec()));
+    }
+}
+
+/// Keeps the still picture as traced at 16 times the time its first denoised picture took,
+/// for the `--orbit` report (the plain picture's error at that time against the denoised).
+fn plain_for_probe(still_start: Instant, shared: &Shared, film: &Progressive, job: &Job) {
+    let Ok(mut p) = shared.probe.lock() else {
+        return;
+    };
+    let Some((first, _)) = p.first else {
+        return;
+    };
+    let now = still_start.elapsed().as_secs_f64();
+    let at_limit = film.passes() >= job.settings.max_samples.max(1);
+    if p.plain_later.is_none() && (now >= 16.0 * first || at_limit) {
+        p.plain_later = Some((now, film.to_rgba8(job.settings.exposure)));
+    }
 }
 
 /// A picture of the traced size resized to the job's display (unchanged at the same size).
@@ -662,7 +726,7 @@ fn work_heatmap(
 
 /// One slice of the still picture: start it over if needed, trace passes for a while, publish
 /// now and then, stop at the sample limit.
-fn still_step(st: &mut State, job: &Job, shared: &Shared, stale: &dyn Fn() -> bool) {
+fn still_step(st: &mut State, job: &Job, shared: &Shared, stale: &(dyn Fn() -> bool + Sync)) {
     let cam = &job.camera;
     let size = UVec2::new(cam.width, cam.height);
     let restarted = st.still.is_none();
@@ -671,11 +735,19 @@ fn still_step(st: &mut State, job: &Job, shared: &Shared, stale: &dyn Fn() -> bo
         .get_or_insert_with(|| Progressive::new(size.x, size.y));
     if restarted {
         st.still_start = Instant::now();
+        st.denoise.reset();
         if let Ok(mut s) = shared.stats.lock() {
             s.passes = 0;
             s.still_rays = RayCounts::default();
             s.still_seconds = 0.0;
             s.still_wall = 0.0;
+            s.denoise = DenoiseStats {
+                error: s.denoise.error.take(),
+                ..DenoiseStats::default()
+            };
+        }
+        if let Ok(mut p) = shared.probe.lock() {
+            *p = DenoiseProbe::default();
         }
     }
     let traced = matches!(job.settings.mode, RenderMode::Shaded | RenderMode::Work);
@@ -687,7 +759,16 @@ fn still_step(st: &mut State, job: &Job, shared: &Shared, stale: &dyn Fn() -> bo
     let mut completed = false;
     if film.passes() < target {
         let t = tracer(job, None, lights_for(&mut st.lights, job));
-        let r = step_mode(film, &job.settings, &t, &job.bvh, cam, STILL_SLICE, target);
+        let r = step_mode(
+            film,
+            &job.settings,
+            &t,
+            &job.bvh,
+            cam,
+            STILL_SLICE,
+            target,
+            stale,
+        );
         if stale() {
             return;
         }
@@ -703,6 +784,7 @@ fn still_step(st: &mut State, job: &Job, shared: &Shared, stale: &dyn Fn() -> bo
         }
     }
     let finished = film.passes() >= target;
+    plain_for_probe(st.still_start, shared, film, job);
     let since = st.last_shown.map(|t| t.elapsed());
     let doubled = completed && film.passes().is_power_of_two();
     let due = match since {
@@ -710,7 +792,48 @@ fn still_step(st: &mut State, job: &Job, shared: &Shared, stale: &dyn Fn() -> bo
         Some(t) => (completed && t >= STILL_REFRESH) || t >= STILL_PARTIAL,
     };
     // The moving picture stays up until the still one has a complete pass.
-    let show = film.passes() >= 1 && (doubled || st.reshow || due || finished && completed);
+    let mut show = film.passes() >= 1 && (doubled || st.reshow || due || finished && completed);
+    // Denoised: a new picture when one is due, the last one again when only the tone mapping
+    // changed, and otherwise the last one stays up (see `still_denoise`).
+    let denoising = job.settings.denoise
+        && job.settings.mode == RenderMode::Shaded
+        && st.denoise.error().is_none();
+    let mut denoised: Option<Vec<u8>> = None;
+    if denoising && show {
+        let fresh = st.denoise.due(finished && completed);
+        if fresh {
+            let t = tracer(job, None, lights_for(&mut st.lights, job));
+            let start = Instant::now();
+            let made = st
+                .denoise
+                .run(film, &t, cam, (job.settings.sampler, job.settings.seed))
+                .map(|p| p.to_vec());
+            let took = start.elapsed().as_secs_f64();
+            if stale() {
+                return;
+            }
+            if let Ok(mut s) = shared.stats.lock() {
+                match &made {
+                    Ok(_) => {
+                        s.denoise.pictures += 1;
+                        s.denoise.passes = film.passes();
+                        s.denoise.seconds += took;
+                    }
+                    Err(e) => s.denoise.error = Some(e.clone()),
+                }
+            }
+        }
+        match st.denoise.picture() {
+            Some((p, _)) if fresh || st.reshow => {
+                let mut rgba = vec![0u8; p.len() * 4];
+                crate::film::encode_rgba8(p, job.settings.exposure, &mut rgba);
+                denoised = Some(rgba);
+            }
+            // The last denoised picture stays up.
+            Some(_) => show = st.reshow,
+            None => {}
+        }
+    }
     if show {
         let (rgba, heat) = if job.settings.mode == RenderMode::Work {
             // Every pixel took the same samples.
@@ -739,7 +862,10 @@ fn still_step(st: &mut State, job: &Job, shared: &Shared, stale: &dyn Fn() -> bo
         if completed && (finished || long) && job.settings.mode == RenderMode::Shaded {
             seed_moving(st, job, shared, &rgba);
         }
-        let rgba = to_display(rgba, size, job);
+        let was_denoised = denoised.is_some();
+        let shown = denoised.unwrap_or(rgba);
+        keep_for_probe(st.still_start, shared, &shown, was_denoised);
+        let rgba = to_display(shown, size, job);
         let picture = Picture {
             rgba,
             width: job.display.x,
@@ -747,12 +873,19 @@ fn still_step(st: &mut State, job: &Job, shared: &Shared, stale: &dyn Fn() -> bo
             samples: passes,
             moving: false,
             heat,
+            denoised: was_denoised,
             ..Picture::default()
         };
         if publish(shared, job, picture) {
             st.last_shown = Some(Instant::now());
             st.reshow = false;
             st.view_changed = false;
+            if was_denoised
+                && let Ok(mut s) = shared.stats.lock()
+                && s.denoise.first_after.is_none()
+            {
+                s.denoise.first_after = Some(st.still_start.elapsed().as_secs_f64());
+            }
         }
     }
     if finished && !st.reshow {
@@ -775,6 +908,7 @@ mod tests {
             fresh: 0,
             holes: 0,
             heat: (0.0, 0.0),
+            denoised: false,
         }
     }
 
