@@ -104,6 +104,58 @@ fn render_to_exr_and_hdr_writes_the_linear_radiance_of_the_same_render() {
 
 /// `--version` names the version, the commit it was built from, the features and the kernel
 /// (the one `TRACERY_KERNEL` picks, among those this CPU runs); `-V` is the one-line form.
+/// `render --denoise` writes the picture denoised, `--keep-noisy` the one as rendered beside
+/// it, and `--aov` the layers into `STEM.aov.exr`; an unknown layer is refused by name.
+#[cfg(feature = "denoise")]
+#[test]
+fn render_denoise_and_layers_write_the_files_they_name() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("cb.png");
+    let o = tracery(&[
+        "render",
+        "--integrator",
+        "path",
+        "--width",
+        "48",
+        "--height",
+        "36",
+        "--spp",
+        "2",
+        "--denoise",
+        "--keep-noisy",
+        "--aov",
+        "albedo,depth",
+        "-o",
+        out.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    assert!(text(&o.stdout).contains(", denoised"), "{}", text(&o.stdout));
+    let (clean, noisy) = (
+        image::open(&out).unwrap().to_rgb8(),
+        image::open(dir.path().join("cb.noisy.png")).unwrap().to_rgb8(),
+    );
+    assert_ne!(clean, noisy, "the denoised picture is the noisy one");
+    assert!(dir.path().join("cb.aov.exr").is_file());
+    let bad = tracery(&["render", "--aov", "albedo,colour", "-o", "x.png"]);
+    assert_eq!(bad.status.code(), Some(2));
+    assert!(text(&bad.stderr).contains("unknown render layer 'colour'"), "{}", text(&bad.stderr));
+}
+
+/// A build without the denoiser refuses `--denoise` before rendering, saying how to get it.
+/// (CI runs this in the test-only builds, which leave the default features out.)
+#[cfg(not(feature = "denoise"))]
+#[test]
+fn denoise_without_the_feature_says_how_to_get_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("cb.png");
+    let o = tracery(&["render", "--denoise", "-o", out.to_str().unwrap()]);
+    assert_eq!(o.status.code(), Some(1));
+    let err = text(&o.stderr);
+    assert!(err.contains("scripts/fetch-assets oidn"), "{err}");
+    assert!(err.contains("no denoiser"), "{err}");
+    assert!(!out.exists(), "rendered though it cannot denoise");
+}
+
 #[test]
 fn version_names_the_commit_the_features_and_the_kernel() {
     let o = Command::new(env!("CARGO_BIN_EXE_tracery"))

@@ -253,8 +253,8 @@ fn aov_tile(
         tracer
             .bvh
             .intersect_packet(&rays[..n], f32::INFINITY, &mut hits[..n]);
-        for k in 0..n {
-            add(k, tracer.first_surface(&rays[k], hits[k]));
+        for (k, (ray, hit)) in rays[..n].iter().zip(&hits[..n]).enumerate() {
+            add(k, tracer.first_surface(ray, *hit));
         }
     }
 }

@@ -3,11 +3,12 @@
 //!
 //! When the still picture starts over, its render layers (albedo and normal, [`LAYER_SAMPLES`]
 //! samples a pixel) are traced once; the picture is then denoised when its first pass is
-//! complete, and again whenever the worker would show a new picture, as long as denoising
-//! takes at most [`SHARE`] of the time since the last one (so a picture that takes 0.5 s to
-//! denoise is denoised at most every 5 s, and the tracing keeps nine tenths of the machine).
-//! The last picture, at the sample limit, is always denoised. Between denoised pictures the
-//! window keeps showing the last one.
+//! complete, and again whenever its passes reach a power of two, as long as denoising takes at
+//! most [`SHARE`] of the time since the last one (a scene whose passes come fast is not
+//! denoised at every doubling). The last picture, at the sample limit, is always denoised.
+//! Between denoised pictures the window keeps showing the last one. With passes doubling, the
+//! 1024 passes of the default limit are denoised about ten times: on the 202k dragon at
+//! 950x720, 0.5 s each against about two minutes of tracing.
 
 use std::time::{Duration, Instant};
 
@@ -60,12 +61,15 @@ impl StillDenoise {
     }
 
     /// True when a new denoised picture is worth making now: none yet, the last picture of
-    /// the still (`finished`), or the last denoise took at most [`SHARE`] of the time since.
-    pub fn due(&self, finished: bool) -> bool {
+    /// the still (`finished`), or the passes just `doubled` and the last denoise took at most
+    /// [`SHARE`] of the time since.
+    pub fn due(&self, finished: bool, doubled: bool) -> bool {
         match self.last {
             None => true,
             Some(_) if finished => true,
-            Some((end, took)) => took.as_secs_f64() <= SHARE * end.elapsed().as_secs_f64(),
+            Some((end, took)) => {
+                doubled && took.as_secs_f64() <= SHARE * end.elapsed().as_secs_f64()
+            }
         }
     }
 

@@ -480,8 +480,9 @@ fn keep_for_probe(still_start: Instant, shared: &Shared, rgba: &[u8], denoised: 
     }
 }
 
-/// Keeps the still picture as traced at 16 times the time its first denoised picture took,
-/// for the `--orbit` report (the plain picture's error at that time against the denoised).
+/// Keeps the still picture as traced at 16 times the time its first denoised picture took
+/// from the camera's stop, for the `--orbit` report (the plain picture's error at that time
+/// beside the denoised one's).
 fn plain_for_probe(still_start: Instant, shared: &Shared, film: &Progressive, job: &Job) {
     let Ok(mut p) = shared.probe.lock() else {
         return;
@@ -489,9 +490,12 @@ fn plain_for_probe(still_start: Instant, shared: &Shared, film: &Progressive, jo
     let Some((first, _)) = p.first else {
         return;
     };
+    // Both counted from when the camera stopped: the still picture starts `still_after_ms`
+    // later.
+    let stop = job.settings.still_after_ms.max(0.0) as f64 * 1e-3;
     let now = still_start.elapsed().as_secs_f64();
     let at_limit = film.passes() >= job.settings.max_samples.max(1);
-    if p.plain_later.is_none() && (now >= 16.0 * first || at_limit) {
+    if p.plain_later.is_none() && (stop + now >= 16.0 * (stop + first) || at_limit) {
         p.plain_later = Some((now, film.to_rgba8(job.settings.exposure)));
     }
 }
@@ -800,7 +804,7 @@ fn still_step(st: &mut State, job: &Job, shared: &Shared, stale: &(dyn Fn() -> b
         && st.denoise.error().is_none();
     let mut denoised: Option<Vec<u8>> = None;
     if denoising && show {
-        let fresh = st.denoise.due(finished && completed);
+        let fresh = st.denoise.due(finished && completed, doubled);
         if fresh {
             let t = tracer(job, None, lights_for(&mut st.lights, job));
             let start = Instant::now();
