@@ -129,16 +129,26 @@ fn render_denoise_and_layers_write_the_files_they_name() {
         out.to_str().unwrap(),
     ]);
     assert!(o.status.success(), "{}", text(&o.stderr));
-    assert!(text(&o.stdout).contains(", denoised"), "{}", text(&o.stdout));
+    assert!(
+        text(&o.stdout).contains(", denoised"),
+        "{}",
+        text(&o.stdout)
+    );
     let (clean, noisy) = (
         image::open(&out).unwrap().to_rgb8(),
-        image::open(dir.path().join("cb.noisy.png")).unwrap().to_rgb8(),
+        image::open(dir.path().join("cb.noisy.png"))
+            .unwrap()
+            .to_rgb8(),
     );
     assert_ne!(clean, noisy, "the denoised picture is the noisy one");
     assert!(dir.path().join("cb.aov.exr").is_file());
     let bad = tracery(&["render", "--aov", "albedo,colour", "-o", "x.png"]);
     assert_eq!(bad.status.code(), Some(2));
-    assert!(text(&bad.stderr).contains("unknown render layer 'colour'"), "{}", text(&bad.stderr));
+    assert!(
+        text(&bad.stderr).contains("unknown render layer 'colour'"),
+        "{}",
+        text(&bad.stderr)
+    );
 }
 
 /// A build without the denoiser refuses `--denoise` before rendering, saying how to get it.

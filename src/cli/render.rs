@@ -145,7 +145,7 @@ pub fn run(a: RenderArgs) -> Result<()> {
     let plan = RenderPlan::new(&scene, &settings);
     let env = EnvironmentMap::load(&scene.environment, plan.environment)?;
     let start = Instant::now();
-    let out = render_with_plan(&scene, &bvh, &env, &settings, plan.clone(), &|_| bar.inc(1));
+    let out = render_with_plan(&scene, &bvh, &env, &settings, plan, &|_| bar.inc(1));
     let took = start.elapsed();
     bar.finish_and_clear();
     let path = ensure_parent(&a.output)?;
