@@ -6,9 +6,11 @@
 //! of those samples cost (traced again after the orbit). No window, so no frame rate: a steady
 //! figure for changes to the cache and the shading, beside the viewer's `--orbit` run.
 //!
-//! With `QUALITY_EVERY` n > 0, every n-th view's picture (smoothed, as the viewer shows it) is
-//! compared with the headless render of its pose at 4 samples per pixel (the viewer's converged
-//! picture): the RMSE in 8-bit levels, and their mean. With `MOVING_ORBIT_SAMPLES=N` in the
+//! With `QUALITY_EVERY` n > 0, every n-th view's picture is compared with the headless render
+//! of its pose at `MOVING_ORBIT_REFERENCE_SPP` samples per pixel (default 64): the RMSE in 8-bit
+//! levels of the picture through each of the moving picture's filters, and their means; the
+//! views are traced and shown with `MOVING_ORBIT_FILTER` (`off`, `neighbours` or `wavelet`, the
+//! default). With `MOVING_ORBIT_SAMPLES=N` in the
 //! environment every view gets exactly N fresh samples instead of the time budget, so two
 //! builds' pictures can be compared sample for sample. `MOVING_ORBIT_THREADS=N` traces on N
 //! threads instead of one.
@@ -24,7 +26,7 @@ use glam::Quat;
 use tracery::bvh::{BuildOptions, Bvh};
 use tracery::camera::CameraRays;
 use tracery::film::rmse_levels;
-use tracery::render::cache::RenderCache;
+use tracery::render::cache::{MovingFilter, RenderCache};
 use tracery::render::{EnvironmentMap, RenderPlan, RenderSettings, Tracer, render_with_plan};
 use tracery::scene::Scene;
 
@@ -51,6 +53,20 @@ fn main() -> Result<()> {
         .map(|s| s.parse())
         .transpose()
         .context("MOVING_ORBIT_SAMPLES")?;
+    let reference_spp: u32 = std::env::var("MOVING_ORBIT_REFERENCE_SPP")
+        .ok()
+        .map(|s| s.parse())
+        .transpose()
+        .context("MOVING_ORBIT_REFERENCE_SPP")?
+        .unwrap_or(64);
+    let shown_filter = match std::env::var("MOVING_ORBIT_FILTER").as_deref() {
+        Err(_) | Ok("wavelet") => MovingFilter::Wavelet,
+        Ok("neighbours") => MovingFilter::Neighbours,
+        Ok("off") => MovingFilter::Off,
+        Ok(other) => {
+            anyhow::bail!("MOVING_ORBIT_FILTER: {other}: expected off, neighbours or wavelet")
+        }
+    };
     let scene = Scene::load(&path)?;
     let bvh = Bvh::build(&scene.mesh.triangles, &BuildOptions::sah());
     let env = EnvironmentMap::load(&scene.environment, true)?;
@@ -103,11 +119,12 @@ fn main() -> Result<()> {
                 pixels.extend(batch);
             }
             let t2 = Instant::now();
-            let shown = std::hint::black_box(cache.to_rgba8(true));
+            std::hint::black_box(cache.to_rgba8(shown_filter));
             let t3 = Instant::now();
             if quality_every > 0 && (view + 1) % quality_every == 0 {
                 let r = Instant::now();
-                errors.push(rmse_levels(&shown, &reference(&scene, &bvh, &env, &cam, w, h)));
+                let converged = reference(&scene, &bvh, &env, &cam, w, h, reference_spp);
+                errors.push(MovingFilter::ALL.map(|f| rmse_levels(&cache.to_rgba8(f), &converged)));
                 reference_time += r.elapsed();
             }
             reproject += (t1 - t0).as_secs_f64();
@@ -142,20 +159,23 @@ fn main() -> Result<()> {
             samples as f64 / trace / 1e6,
             camera / samples as f64 * 1e9,
         );
-        if !errors.is_empty() {
-            let list: Vec<String> = errors.iter().map(|e| format!("{e:.2}")).collect();
+        for (k, filter) in MovingFilter::ALL.into_iter().enumerate() {
+            if errors.is_empty() {
+                break;
+            }
+            let list: Vec<String> = errors.iter().map(|e| format!("{:.2}", e[k])).collect();
             println!(
-                "moving picture against the 4-spp render of its pose, every {quality_every} views: RMSE {} levels, mean {:.2}",
+                "moving picture ({}) against the {reference_spp}-spp render of its pose, every {quality_every} views: RMSE {} levels, mean {:.2}",
+                filter.name(),
                 list.join(", "),
-                errors.iter().sum::<f64>() / errors.len() as f64
+                errors.iter().map(|e| e[k]).sum::<f64>() / errors.len() as f64
             );
         }
     });
     Ok(())
 }
 
-/// The headless render of the view `cam` at 4 samples per pixel (the viewer's converged
-/// picture), as RGBA8.
+/// The headless render of the view `cam` at `spp` samples per pixel, as RGBA8.
 fn reference(
     scene: &Scene,
     bvh: &Bvh,
@@ -163,6 +183,7 @@ fn reference(
     cam: &CameraRays,
     w: u32,
     h: u32,
+    spp: u32,
 ) -> Vec<u8> {
     let mut scene = scene.clone();
     scene.camera.position = cam.eye;
@@ -171,7 +192,7 @@ fn reference(
     let settings = RenderSettings {
         width: w,
         height: h,
-        spp: 4,
+        spp,
         ..RenderSettings::default()
     };
     let plan = RenderPlan::new(&scene, &settings);

@@ -15,7 +15,7 @@ use anyhow::{Context, Result};
 use glam::Quat;
 use tracery::bvh::{BuildOptions, Bvh};
 use tracery::camera::CameraRays;
-use tracery::render::cache::RenderCache;
+use tracery::render::cache::{MovingFilter, RenderCache};
 use tracery::render::{EnvironmentMap, RenderPlan, RenderSettings, Tracer};
 use tracery::scene::Scene;
 
@@ -64,7 +64,7 @@ fn main() -> Result<()> {
             holes += empty.len();
             cache.trace(&tracer, &cam, &empty);
             let t1 = Instant::now();
-            std::hint::black_box(cache.to_rgba8(true));
+            std::hint::black_box(cache.to_rgba8(MovingFilter::Neighbours));
             picture += t1.elapsed().as_secs_f64();
         }
         let per_view = |s: f64| s * 1e3 / views as f64;

@@ -11,6 +11,7 @@ use std::time::{Duration, Instant};
 
 use bevy::prelude::*;
 use tracery::bvh::{BuildOptions, Bvh, SplitMethod};
+use tracery::render::cache::MovingFilter;
 use tracery::render::{RenderSettings, render};
 use tracery::scene::Scene;
 use tracery::viewer::CorePlugins;
@@ -288,7 +289,7 @@ fn reprojection_of_a_pure_pan_keeps_every_still_valid_pixel() {
         let mut settings = app.world_mut().resource_mut::<ViewSettings>();
         settings.still_after_ms = 1e6;
         // The carried samples themselves, not averaged with their neighbours for display.
-        settings.smooth_moving = false;
+        settings.moving_filter = MovingFilter::Off;
     }
     settle(&mut app, "a complete moving picture", |w| {
         let (i, s) = (w.resource::<TracedImage>(), w.resource::<TraceStats>());

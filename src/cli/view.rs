@@ -5,6 +5,7 @@ use std::path::PathBuf;
 use anyhow::{Result, bail};
 use bevy::math::{UVec2, Vec2, Vec3};
 use clap::{Args, ValueEnum};
+use tracery::render::cache::MovingFilter;
 use tracery::viewer::capture::CaptureScript;
 use tracery::viewer::gizmos::LeafView;
 use tracery::viewer::trace::{RenderMode, ViewSettings};
@@ -64,6 +65,9 @@ pub struct ViewArgs {
     /// with the denoiser is on).
     #[arg(long)]
     no_denoise: bool,
+    /// How the moving picture's samples, one per pixel, are filtered for display.
+    #[arg(long, value_enum, default_value_t = MovingFilterArg::Wavelet)]
+    moving_filter: MovingFilterArg,
     #[command(flatten)]
     bvh: BvhArgs,
     /// Scripted run: run this many frames, then save --screenshot (if given) and exit.
@@ -86,6 +90,17 @@ pub struct ViewArgs {
     /// stretched.png, earlier.png).
     #[arg(long, value_name = "DIR")]
     orbit_pictures: Option<PathBuf>,
+}
+
+/// The moving picture's filters, as `--moving-filter` names them.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+enum MovingFilterArg {
+    /// The samples as traced.
+    Off,
+    /// Each sample averaged with its four neighbours on the same surface.
+    Neighbours,
+    /// Edge-avoiding à-trous wavelet filter guided by normals, positions and albedos.
+    Wavelet,
 }
 
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, ValueEnum)]
@@ -169,6 +184,11 @@ pub fn run(a: ViewArgs) -> Result<()> {
         level: a.level,
         frame_ms: a.frame_ms,
         denoise: tracery::denoise::AVAILABLE && !a.no_denoise,
+        moving_filter: match a.moving_filter {
+            MovingFilterArg::Off => MovingFilter::Off,
+            MovingFilterArg::Neighbours => MovingFilter::Neighbours,
+            MovingFilterArg::Wavelet => MovingFilter::Wavelet,
+        },
         mode: match a.mode {
             Mode::Shaded => RenderMode::Shaded,
             Mode::Cost => RenderMode::TraversalCost,

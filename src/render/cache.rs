@@ -17,8 +17,10 @@
 //! ([`RenderCache::next_pixels`]): tiles whose new samples differed most from what they held
 //! (changed or noisy) and tiles not visited for longest come first, and within a tile pixels
 //! follow an ordered-dither order, so the fresh samples of one picture spread over the screen
-//! instead of sweeping it row by row. Pixels still without a sample are filled from their
-//! neighbourhood for display only (pull-push).
+//! instead of sweeping it row by row. For display, the samples go through a filter
+//! ([`MovingFilter`]: the edge-avoiding wavelet filter of `wavelet`, or the four-neighbour
+//! smoothing of `smooth`), and pixels still without a sample are filled from their
+//! neighbourhood (pull-push).
 //!
 //! Samples are taken through pixel centres with one shadow ray per area light and kept tone
 //! mapped for one exposure: the cache is for the moving picture; the still picture starts over
@@ -31,8 +33,10 @@ use super::{BAND, RayCounts, TILE_WIDTH, Tracer};
 
 #[cfg(target_arch = "x86_64")]
 mod project_x86;
+mod smooth;
 #[cfg(target_arch = "x86_64")]
 mod smooth_sse2;
+mod wavelet;
 use crate::bvh::wide::packet::PACKET;
 use crate::camera::CameraRays;
 use crate::film::encode_pixel;
@@ -61,6 +65,37 @@ const NO_COLOUR: [u8; 4] = [0; 4];
 /// The normal of a sample that left the scene (or of an empty pixel).
 const NO_NORMAL: [i8; 4] = [0; 4];
 
+/// The albedo of a sample that left the scene (or of an empty pixel).
+const NO_ALBEDO: [u8; 4] = [0; 4];
+
+/// How the moving picture's samples, one per pixel, are filtered for display (the samples and
+/// the still picture are untouched).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum MovingFilter {
+    /// The samples as traced.
+    Off,
+    /// Each sample averaged with its four neighbours that show the same surface.
+    Neighbours,
+    /// The edge-avoiding à-trous wavelet filter (module `wavelet`): a footprint of up to 15 x 15
+    /// pixels on each surface, guided by the samples' normals, points and albedos.
+    #[default]
+    Wavelet,
+}
+
+impl MovingFilter {
+    /// Every filter, in the order the inspector lists them.
+    pub const ALL: [MovingFilter; 3] = [Self::Off, Self::Neighbours, Self::Wavelet];
+
+    /// The filter's name in reports and the inspector.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Off => "off",
+            Self::Neighbours => "four neighbours",
+            Self::Wavelet => "wavelet",
+        }
+    }
+}
+
 /// Largest relative change of a sample's depth when it moves to its new pixel's centre ray;
 /// beyond it (a surface seen nearly edge-on) the sample stays where it was.
 const MAX_RECENTRE: f32 = 0.05;
@@ -74,6 +109,17 @@ fn pack_normal(n: Vec3) -> [i8; 4] {
 fn unpack_normal(n: [i8; 4]) -> Vec3 {
     Vec3::new(n[0] as f32, n[1] as f32, n[2] as f32) * (1.0 / 127.0)
 }
+
+/// An albedo in `[0, 1]` packed in bytes (linear, in 255ths), beside the samples a colour
+/// holds: one, for a fresh sample.
+fn pack_albedo(a: Vec3) -> [u8; 4] {
+    let q = |c: f32| (c.clamp(0.0, 1.0) * 255.0 + 0.5) as u8;
+    [q(a.x), q(a.y), q(a.z), 1]
+}
+
+/// The albedo of a sample that left the scene, and of one whose albedo is not known: no colour,
+/// one sample.
+const SKY_ALBEDO: [u8; 4] = [0, 0, 0, 1];
 
 /// How much a pixel's colour changed (0 to 1): the largest channel difference.
 fn change(old: [u8; 4], new: [u8; 4]) -> f32 {
@@ -94,18 +140,26 @@ pub struct RenderCache {
     rows: Rows,
     points: Vec<[f32; 3]>,
     normals: Vec<[i8; 4]>,
+    /// The albedo of the surface each sample hit, and in its fourth byte how many samples the
+    /// colour averages (1 for a fresh sample, the still picture's count up to 255 for a colour
+    /// from it; see `pack_albedo`): the wavelet filter's guide to material edges, and the
+    /// weight it gives the colour.
+    albedos: Vec<[u8; 4]>,
     colours: Vec<[u8; 4]>,
     /// Pixels holding no sample.
     holes: usize,
-    /// Buffers the reprojection reuses (the next points, normals and colours, the winner of
-    /// each pixel).
+    /// Buffers the reprojection reuses (the next points, normals, albedos and colours, the
+    /// winner of each pixel).
     spare_points: Vec<[f32; 3]>,
     spare_normals: Vec<[i8; 4]>,
+    spare_albedos: Vec<[u8; 4]>,
     spare_colours: Vec<[u8; 4]>,
     winner: Vec<u64>,
     /// Exposure the colours were tone mapped with.
     exposure: f32,
     tiles: Tiles,
+    /// Memory the wavelet filter reuses.
+    wavelet: wavelet::Scratch,
     /// Calls of [`RenderCache::trace`] so far: the sample index of the next call's samples, so
     /// that a pixel traced again draws new light (and bounce) samples instead of repeating its
     /// last ones, and a noisy tile shows as changing and keeps its priority.
@@ -357,13 +411,16 @@ impl RenderCache {
             rows: Rows::new(w),
             points: vec![NO_POINT; (w * h) as usize],
             normals: vec![NO_NORMAL; (w * h) as usize],
+            albedos: vec![NO_ALBEDO; (w * h) as usize],
             colours: vec![NO_COLOUR; (w * h) as usize],
             holes: (w * h) as usize,
             spare_points: Vec::new(),
             spare_normals: Vec::new(),
+            spare_albedos: Vec::new(),
             spare_colours: Vec::new(),
             winner: Vec::new(),
             exposure,
+            wavelet: wavelet::Scratch::default(),
             traced: 0,
             tiles: Tiles {
                 cols,
@@ -385,6 +442,31 @@ impl RenderCache {
     /// Height in pixels.
     pub fn height(&self) -> u32 {
         self.height
+    }
+
+    /// A copy of the samples and their schedule, without the buffers the reprojection and the
+    /// filter reuse: what a picture of any [`MovingFilter`] is made from, kept to compare the
+    /// filters on the same samples.
+    pub fn samples_copy(&self) -> RenderCache {
+        RenderCache {
+            width: self.width,
+            height: self.height,
+            rows: self.rows,
+            points: self.points.clone(),
+            normals: self.normals.clone(),
+            albedos: self.albedos.clone(),
+            colours: self.colours.clone(),
+            holes: self.holes,
+            spare_points: Vec::new(),
+            spare_normals: Vec::new(),
+            spare_albedos: Vec::new(),
+            spare_colours: Vec::new(),
+            winner: Vec::new(),
+            exposure: self.exposure,
+            tiles: self.tiles.clone(),
+            wavelet: wavelet::Scratch::default(),
+            traced: self.traced,
+        }
     }
 
     /// Number of pixels holding a sample.
@@ -430,9 +512,11 @@ impl RenderCache {
             self.winner = vec![u64::MAX; n];
         }
         scatter(to, w, h, &self.points, &mut self.winner);
-        let (old_points, old_normals, old_colours) = (&self.points, &self.normals, &self.colours);
+        let (old_points, old_normals, old_albedos, old_colours) =
+            (&self.points, &self.normals, &self.albedos, &self.colours);
         self.spare_points.resize(n, NO_POINT);
         self.spare_normals.resize(n, NO_NORMAL);
+        self.spare_albedos.resize(n, NO_ALBEDO);
         self.spare_colours.resize(n, NO_COLOUR);
         let grid = PixelGrid::new(to, w, h);
         // The new samples, and the pixels left empty, row by row.
@@ -441,16 +525,18 @@ impl RenderCache {
             .spare_points
             .par_chunks_mut(row)
             .zip(self.spare_normals.par_chunks_mut(row))
+            .zip(self.spare_albedos.par_chunks_mut(row))
             .zip(self.spare_colours.par_chunks_mut(row))
             .zip(self.winner.par_chunks_mut(row))
             .enumerate()
             .with_min_len(8)
-            .flat_map_iter(|(y, (((points, normals), colours), keys))| {
+            .flat_map_iter(|(y, ((((points, normals), albedos), colours), keys))| {
                 let mut holes = Vec::new();
                 let start = grid.centre_ray(y * row);
-                for (x, (((p, nrm), col), key)) in points
+                for (x, ((((p, nrm), alb), col), key)) in points
                     .iter_mut()
                     .zip(normals)
+                    .zip(albedos)
                     .zip(colours)
                     .zip(keys)
                     .enumerate()
@@ -459,6 +545,7 @@ impl RenderCache {
                     if found == u64::MAX {
                         *p = NO_POINT;
                         *nrm = NO_NORMAL;
+                        *alb = NO_ALBEDO;
                         *col = NO_COLOUR;
                         holes.push((y * row + x) as u32);
                     } else {
@@ -468,6 +555,7 @@ impl RenderCache {
                         let d = start + grid.right * x as f32;
                         *p = grid.recentre_along(d, old_points[src], old_normals[src]);
                         *nrm = old_normals[src];
+                        *alb = old_albedos[src];
                         *col = old_colours[src];
                     }
                 }
@@ -477,6 +565,7 @@ impl RenderCache {
         let holes = rows_coarse_to_fine(holes, self.rows);
         std::mem::swap(&mut self.normals, &mut self.spare_normals);
         std::mem::swap(&mut self.points, &mut self.spare_points);
+        std::mem::swap(&mut self.albedos, &mut self.spare_albedos);
         std::mem::swap(&mut self.colours, &mut self.spare_colours);
 
         self.holes = holes.len();
@@ -494,7 +583,7 @@ impl RenderCache {
 
     /// Fills every pixel with the sample of its centre ray in the view `cam` (framed for this
     /// cache's size) and the colour of the still picture `rgba` of that view (RGBA8, this
-    /// cache's size, tone mapped with its exposure): when the camera starts moving, the
+    /// cache's size, tone mapped with its exposure, `samples` per pixel): when the camera starts moving, the
     /// moving picture starts from the still one. Only the camera rays are traced, in bands of
     /// rows on the rayon pool; `stop` is asked between bands, and a stopped seed leaves the
     /// cache as it was. Returns false if it stopped.
@@ -503,6 +592,7 @@ impl RenderCache {
         tracer: &Tracer,
         cam: &CameraRays,
         rgba: &[u8],
+        samples: u32,
         stop: &(dyn Fn() -> bool + Sync),
     ) -> bool {
         let (w, n) = (self.width as usize, self.points.len());
@@ -511,13 +601,15 @@ impl RenderCache {
         }
         self.spare_points.resize(n, NO_POINT);
         self.spare_normals.resize(n, NO_NORMAL);
+        self.spare_albedos.resize(n, NO_ALBEDO);
         let stopped = std::sync::atomic::AtomicBool::new(false);
         let band = (w * BAND as usize).max(1);
         self.spare_points
             .par_chunks_mut(band)
             .zip(self.spare_normals.par_chunks_mut(band))
+            .zip(self.spare_albedos.par_chunks_mut(band))
             .enumerate()
-            .for_each(|(b, (points, normals))| {
+            .for_each(|(b, ((points, normals), albedos))| {
                 if stopped.load(std::sync::atomic::Ordering::Relaxed) {
                     return;
                 }
@@ -547,6 +639,7 @@ impl RenderCache {
                         normals[pixel(k)] = hit.map_or(NO_NORMAL, |h| {
                             pack_normal(face_normal(&tracer.scene.mesh.triangles[h.prim as usize]))
                         });
+                        albedos[pixel(k)] = hit.map_or(SKY_ALBEDO, |h| albedo_at(tracer, ray, h));
                     }
                 }
             });
@@ -555,7 +648,8 @@ impl RenderCache {
         }
         std::mem::swap(&mut self.points, &mut self.spare_points);
         std::mem::swap(&mut self.normals, &mut self.spare_normals);
-        self.set_colours(rgba);
+        std::mem::swap(&mut self.albedos, &mut self.spare_albedos);
+        self.set_colours(rgba, samples);
         let t = &mut self.tiles;
         t.change.iter_mut().for_each(|c| *c = 0.0);
         t.age.iter_mut().for_each(|a| *a = 0);
@@ -563,13 +657,21 @@ impl RenderCache {
     }
 
     /// Replaces every pixel's colour with the still picture's `rgba` (RGBA8, this cache's
-    /// size) of the view the samples were [`Self::seed`]ed for, as it refines.
-    pub fn set_colours(&mut self, rgba: &[u8]) {
+    /// size) of the view the samples were [`Self::seed`]ed for, as it refines: `samples` per
+    /// pixel, which the wavelet filter weighs the colours by.
+    pub fn set_colours(&mut self, rgba: &[u8], samples: u32) {
         if rgba.len() != 4 * self.colours.len() {
             return;
         }
-        for (c, px) in self.colours.iter_mut().zip(rgba.chunks_exact(4)) {
+        let weight = samples.clamp(1, 255) as u8;
+        for ((c, a), px) in self
+            .colours
+            .iter_mut()
+            .zip(&mut self.albedos)
+            .zip(rgba.chunks_exact(4))
+        {
             *c = [px[0], px[1], px[2], 255];
+            a[3] = weight;
         }
         self.holes = 0;
     }
@@ -640,7 +742,7 @@ impl RenderCache {
         // tile by tile (spread, traced one by one). Sorting them by 8 x 8 block first, for
         // packets, cost a tenth of the tracing and no longer pays with single rays.
         // One sample: its pixel, point, normal and colour (alpha 0: not finite, not kept).
-        type Sample = (u32, [f32; 3], [i8; 4], [u8; 4]);
+        type Sample = (u32, [f32; 3], [i8; 4], [u8; 4], [u8; 4]);
         let chunks: Vec<(Vec<Sample>, RayCounts)> = pixels
             .par_chunks(PACKET)
             .map(|chunk| {
@@ -686,12 +788,13 @@ impl RenderCache {
                                 let tri = &tracer.scene.mesh.triangles[h.prim as usize];
                                 pack_normal(face_normal(tri))
                             });
+                            let albedo = hit.map_or(SKY_ALBEDO, |h| albedo_at(tracer, &ray, h));
                             let colour = if l.is_finite() && point.is_finite() {
                                 encode_pixel(l, k)
                             } else {
                                 NO_COLOUR
                             };
-                            (i, point.into(), normal, colour)
+                            (i, point.into(), normal, albedo, colour)
                         })
                         .collect();
                     (samples, counts)
@@ -703,7 +806,7 @@ impl RenderCache {
         let mut changed = vec![(0.0f32, 0u32); tiles];
         for (samples, counts) in chunks {
             total = total + counts;
-            for (i, point, normal, colour) in samples {
+            for (i, point, normal, albedo, colour) in samples {
                 let tile = self.tile_of(i);
                 self.tiles.work[tile] += 1;
                 if colour[3] == 0 {
@@ -721,6 +824,7 @@ impl RenderCache {
                 changed[tile].1 += 1;
                 self.points[i] = point;
                 self.normals[i] = normal;
+                self.albedos[i] = albedo;
                 self.colours[i] = colour;
             }
         }
@@ -738,16 +842,22 @@ impl RenderCache {
         std::mem::replace(&mut self.tiles.work, vec![0; n])
     }
 
-    /// The picture, RGBA8: the colours (with `smooth`, each averaged with its four
-    /// neighbours' where they show the same surface: one sample per pixel is noisy, and this
-    /// takes the moving picture's error against the converged picture from about 23 to 16
-    /// levels on the dragon's orbit), holes filled from the nearest filled pixels around them
-    /// (pull-push), black in an empty cache.
-    pub fn to_rgba8(&self, smooth: bool) -> Vec<u8> {
-        let mut out = if smooth {
-            self.smoothed(true)
-        } else {
-            self.colours.as_flattened().to_vec()
+    /// The picture, RGBA8: the colours through `filter` (one sample per pixel is noisy: see
+    /// [`MovingFilter`]), holes filled from the nearest filled pixels around them (pull-push),
+    /// black in an empty cache.
+    pub fn to_rgba8(&mut self, filter: MovingFilter) -> Vec<u8> {
+        let mut out = match filter {
+            MovingFilter::Off => self.colours.as_flattened().to_vec(),
+            MovingFilter::Neighbours => self.smoothed(true),
+            MovingFilter::Wavelet => wavelet::Guides {
+                width: self.width as usize,
+                height: self.height as usize,
+                points: &self.points,
+                normals: &self.normals,
+                albedos: &self.albedos,
+                colours: &self.colours,
+            }
+            .filter(&mut self.wavelet),
         };
         if self.holes == 0 {
             return out;
@@ -774,137 +884,17 @@ impl RenderCache {
     }
 }
 
-impl RenderCache {
-    /// Per pixel, whether its sample and its right neighbour's show the same surface (bit 0),
-    /// and its sample and its lower neighbour's (bit 1): both left the scene, or both hit
-    /// surfaces whose normals agree.
-    fn links(&self) -> Vec<u8> {
-        let (w, h) = (self.width as usize, self.height as usize);
-        let mut links = vec![0u8; w * h];
-        // Written as plain loops over rows without branches, so that they vectorize.
-        let same = |a: [i8; 4], b: [i8; 4], filled_a: u8, filled_b: u8| -> u8 {
-            let dot =
-                a[0] as i32 * b[0] as i32 + a[1] as i32 * b[1] as i32 + a[2] as i32 * b[2] as i32;
-            let (sky_a, sky_b) = (a == NO_NORMAL, b == NO_NORMAL);
-            let surface = (!sky_a & !sky_b & (dot >= SAME_NORMAL)) | (sky_a & sky_b);
-            (surface & (filled_a != 0) & (filled_b != 0)) as u8
-        };
-        for y in 0..h {
-            let row = y * w..(y + 1) * w;
-            let (n, c) = (&self.normals[row.clone()], &self.colours[row.clone()]);
-            let out = &mut links[row];
-            for x in 0..w - 1 {
-                out[x] = same(n[x], n[x + 1], c[x][3], c[x + 1][3]);
-            }
-            if y + 1 < h {
-                let below = (y + 1) * w..(y + 2) * w;
-                let (nb, cb) = (&self.normals[below.clone()], &self.colours[below]);
-                for x in 0..w {
-                    out[x] |= same(n[x], nb[x], c[x][3], cb[x][3]) << 1;
-                }
-            }
-        }
-        links
-    }
-
-    /// The colours, each sample averaged with those of its four neighbours that show the same
-    /// surface (see [`Self::links`]); holes stay holes. Four pixels at a time with SSE2 on
-    /// x86-64 (`simd`), else (and at the rows' ends) one by one.
-    fn smoothed(&self, simd: bool) -> Vec<u8> {
-        let (w, h) = (self.width as usize, self.height as usize);
-        let links = self.links();
-        let mut out = vec![0u8; 4 * w * h];
-        for (y, o) in out.chunks_exact_mut(4 * w).enumerate() {
-            let row = y * w..(y + 1) * w;
-            let (c, l) = (&self.colours[row.clone()], &links[row.clone()]);
-            // Above and below: the neighbouring rows, or this row with no links at the edges.
-            let (uc, ul, up) = if y > 0 {
-                let above = row.start - w..row.start;
-                (&self.colours[above.clone()], &links[above], 1)
-            } else {
-                (c, l, 0)
-            };
-            let (dc, down) = if y + 1 < h {
-                (&self.colours[row.end..row.end + w], 1)
-            } else {
-                (c, 0)
-            };
-            let rows = SmoothRows {
-                c,
-                l,
-                uc,
-                ul,
-                up,
-                dc,
-                down,
-            };
-            #[cfg(target_arch = "x86_64")]
-            let done = if simd {
-                smooth_sse2::middle(&rows, o)
-            } else {
-                0..0
-            };
-            #[cfg(not(target_arch = "x86_64"))]
-            let done = {
-                let _ = simd;
-                0..0
-            };
-            smooth_pixels(&rows, 0..done.start, o);
-            smooth_pixels(&rows, done.end..w, o);
-        }
-        out
+/// The albedo of the surface `hit` by `ray` (packed, see `pack_albedo`): of a textured
+/// material, its shading's at the hit; else its diffuse and specular colours, which the
+/// filter needs only to tell materials apart (the full shading costs a fresh sample 7%).
+fn albedo_at(tracer: &Tracer, ray: &Ray, hit: crate::bvh::Hit) -> [u8; 4] {
+    let m = tracer.scene.material_of(hit.prim);
+    if m.diffuse_map.is_some() {
+        pack_albedo(tracer.surface(ray, hit.prim, hit.u, hit.v).bsdf.albedo())
+    } else {
+        pack_albedo(m.diffuse + m.specular)
     }
 }
-
-/// One row of the moving picture to smooth: its colours and links, the row above's (with
-/// `up` 0 at the top, where they are this row's and unused) and the row below's colours (with
-/// `down` 0 at the bottom).
-pub(super) struct SmoothRows<'a> {
-    pub c: &'a [[u8; 4]],
-    pub l: &'a [u8],
-    pub uc: &'a [[u8; 4]],
-    pub ul: &'a [u8],
-    pub up: u8,
-    pub dc: &'a [[u8; 4]],
-    pub down: u8,
-}
-
-/// Pixels `xs` of a row of [`RenderCache::smoothed`] into `o` (the row's RGBA8), one at a
-/// time: the reference the SIMD version is tested against.
-fn smooth_pixels(r: &SmoothRows, xs: std::ops::Range<usize>, o: &mut [u8]) {
-    let w = r.c.len();
-    for x in xs {
-        let (xl, xr) = (x.saturating_sub(1), (x + 1).min(w - 1));
-        // Links to the right and below are never set past the edges.
-        let m = [
-            (r.l[x] & 1) as u32,
-            ((x > 0) as u8 & r.l[xl] & 1) as u32,
-            ((r.l[x] >> 1) & 1 & r.down) as u32,
-            ((r.ul[x] >> 1) & 1 & r.up) as u32,
-        ];
-        let nb = [r.c[xr], r.c[xl], r.dc[x], r.uc[x]];
-        let n = 1 + m[0] + m[1] + m[2] + m[3];
-        // `sum / n` rounded, by a multiply (n is 1 to 5).
-        let (rc, half) = (RECIPROCAL[n as usize], n / 2);
-        let px = &mut o[4 * x..4 * x + 4];
-        for k in 0..3 {
-            let sum = r.c[x][k] as u32
-                + nb[0][k] as u32 * m[0]
-                + nb[1][k] as u32 * m[1]
-                + nb[2][k] as u32 * m[2]
-                + nb[3][k] as u32 * m[3];
-            px[k] = (((sum + half) * rc) >> 16) as u8;
-        }
-        px[3] = r.c[x][3];
-    }
-}
-
-/// `ceil(2^16 / n)` for the averages of 1 to 5 samples: `(s * RECIPROCAL[n]) >> 16` is
-/// `s / n` for every sum `s` of `n` bytes.
-pub(super) const RECIPROCAL: [u32; 6] = [0, 65536, 32768, 21846, 16384, 13108];
-
-/// Normals whose packed dot product is at least this (about cos 18 degrees) count as one surface.
-const SAME_NORMAL: i32 = (0.95 * 127.0 * 127.0) as i32;
 
 /// True when `pixels` (indices into rows of `width`) fill at least half of their bounding box:
 /// a run of a row, a block. Such a packet's rays stay close; scattered pixels (fresh samples
@@ -1196,66 +1186,6 @@ mod tests {
     }
 
     /// A cache of `w x h` pixels with these normals and grey levels (0: a hole).
-    fn painted(w: u32, h: u32, normals: &[[i8; 4]], grey: &[u8]) -> RenderCache {
-        let mut c = RenderCache::new(w, h, 1.0);
-        c.normals = normals.to_vec();
-        c.colours = grey
-            .iter()
-            .map(|&g| if g == 0 { NO_COLOUR } else { [g, g, g, 255] })
-            .collect();
-        c.points = vec![[0.0; 3]; grey.len()];
-        c.holes = grey.iter().filter(|&&g| g == 0).count();
-        c
-    }
-
-    #[test]
-    fn smoothing_averages_samples_of_one_surface_and_keeps_edges() {
-        let (up, side) = (pack_normal(Vec3::Y), pack_normal(Vec3::X));
-        // A row: three floor samples, one of a wall, two that left the scene.
-        let c = painted(
-            6,
-            1,
-            &[up, up, up, side, NO_NORMAL, NO_NORMAL],
-            &[90, 120, 150, 250, 30, 60],
-        );
-        let grey = |rgba: Vec<u8>| rgba.chunks(4).map(|p| p[0]).collect::<Vec<u8>>();
-        assert_eq!(grey(c.to_rgba8(false)), [90, 120, 150, 250, 30, 60]);
-        // Each floor sample with its floor neighbours, the wall alone, the sky with the sky.
-        assert_eq!(grey(c.to_rgba8(true)), [105, 120, 135, 250, 45, 45]);
-        // A column: the links go down as well; a hole is no neighbour (and is filled after).
-        let c = painted(1, 4, &[up, up, up, up], &[100, 200, 0, 50]);
-        let s = grey(c.to_rgba8(true));
-        assert_eq!((s[0], s[1], s[3]), (150, 150, 50));
-        assert_ne!(s[2], 0, "the hole is filled for display");
-    }
-
-    #[test]
-    fn smoothing_four_pixels_at_a_time_equals_one_at_a_time() {
-        // Pseudo-random colours, holes, sky and two normals, at widths around the four-pixel
-        // steps and the rows' ends.
-        let mut seed = 12345u32;
-        let mut next = move || {
-            seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
-            seed >> 8
-        };
-        let normals = [pack_normal(Vec3::Y), pack_normal(Vec3::X), NO_NORMAL];
-        for w in 1..=19u32 {
-            for h in 1..=4u32 {
-                let n = (w * h) as usize;
-                let norms: Vec<[i8; 4]> = (0..n).map(|_| normals[next() as usize % 3]).collect();
-                let grey: Vec<u8> = (0..n).map(|_| (next() % 256) as u8).collect();
-                let mut c = painted(w, h, &norms, &grey);
-                for col in &mut c.colours {
-                    if col[3] != 0 {
-                        col[1] = (next() % 256) as u8;
-                        col[2] = (next() % 256) as u8;
-                    }
-                }
-                assert_eq!(c.smoothed(true), c.smoothed(false), "{w}x{h}");
-            }
-        }
-    }
-
     #[test]
     fn projecting_with_the_widest_vectors_equals_the_baseline_loop() {
         // Points in front of, beside and behind a camera, on the picture's edges, NaN and

@@ -18,7 +18,9 @@ use super::trace::{
     LoadedEnvironment, TraceCamera, TraceStats, TraceWorker, TracedImage, ViewSettings,
     ViewportSize, camera_rays, picture_of,
 };
+use super::worker::Shared;
 use crate::film::rmse_levels;
+use crate::render::cache::MovingFilter;
 use crate::render::resample::{Filter, resize_rgba8};
 use crate::render::{Progressive, RenderSettings, Tracer, render_with_plan};
 
@@ -316,10 +318,20 @@ fn measure(
 
 /// Keeps a copy of each moving picture of the orbit's last frames before the display takes its
 /// pixels: the last one is compared with the converged picture of its pose.
-fn keep_snapshot(mut script: ResMut<Script>, image: Res<TracedImage>) {
+fn keep_snapshot(mut script: ResMut<Script>, image: Res<TracedImage>, worker: Res<TraceWorker>) {
     let frame = script.frame + 1;
     let orbit = script.script.orbit_frames;
-    if orbit == 0 || frame > orbit || frame + 32 < orbit || !image.is_changed() {
+    if orbit == 0 || frame + 32 < orbit {
+        return;
+    }
+    // The worker keeps the samples of its moving pictures over the orbit's last frames, to
+    // compare the filters on the last one shown.
+    let keep = &worker.0.shared.keep_moving_samples;
+    keep.store(frame <= orbit, Ordering::Relaxed);
+    if frame > orbit {
+        return;
+    }
+    if !image.is_changed() {
         return;
     }
     if image.preview && !image.rgba.is_empty() {
@@ -330,6 +342,49 @@ fn keep_snapshot(mut script: ResMut<Script>, image: Res<TracedImage>) {
             pose: None,
         });
     }
+}
+
+/// The moving picture's error through each of its filters, made from the samples of the last
+/// moving picture shown (the worker keeps them over the orbit's last frames).
+fn moving_filters(shared: &Shared, snap: &Snapshot, settings: &ViewSettings, converged: &[u8]) {
+    let kept = shared.moving_samples.lock().ok().and_then(|mut s| {
+        let i = s.iter().position(|(g, _)| *g == snap.generation)?;
+        let kept = s.remove(i);
+        s.clear();
+        kept
+    });
+    let Some((generation, mut cache)) = kept else {
+        println!("moving picture's filters: the samples of the last moving picture were not kept");
+        return;
+    };
+    if UVec2::new(cache.width(), cache.height()) != snap.size {
+        println!(
+            "moving picture's filters: traced at {}x{}, shown at {}x{}: compared only at a resolution scale of 1",
+            cache.width(),
+            cache.height(),
+            snap.size.x,
+            snap.size.y
+        );
+        return;
+    }
+    let errors: Vec<String> = MovingFilter::ALL
+        .iter()
+        .map(|&f| {
+            let t = Instant::now();
+            let rgba = cache.to_rgba8(f);
+            let ms = t.elapsed().as_secs_f64() * 1e3;
+            format!(
+                "{} {:.2} levels ({ms:.1} ms)",
+                f.name(),
+                rmse_levels(&rgba, converged)
+            )
+        })
+        .collect();
+    println!(
+        "moving picture's filters on the samples of picture {generation} against the converged one: {} (shown: {})",
+        errors.join(", "),
+        settings.moving_filter.name()
+    );
 }
 
 /// Process CPU time (user and system) in seconds, from `/proc/self/stat` (Linux; the kernel
@@ -823,6 +878,7 @@ fn report(
             earlier.0,
             fresh.0,
         );
+        moving_filters(&views.worker.0.shared, snap, settings, &converged);
         if let Some(dir) = &script.script.orbit_pictures {
             let pictures = [
                 ("moving.png", &snap.rgba),

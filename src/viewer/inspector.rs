@@ -16,6 +16,7 @@ use super::scene::{CurrentScene, LoadScene, SceneLoading, ViewerStatus, scene_fi
 use super::trace::{EXTERNAL, EnvChoice, RenderMode, TraceStats, ViewSettings};
 use super::{PanelWidth, UiFocus};
 use crate::bvh::SplitMethod;
+use crate::render::cache::MovingFilter;
 use crate::render::debug::ShadowState;
 use crate::render::heatmap::heat_color;
 use crate::sampling::SamplerKind;
@@ -446,7 +447,13 @@ fn render_section(
                 egui::Slider::new(&mut s.still_after_ms, 0.0..=1000.0)
                     .text("ms still before refining"),
             );
-            ui.checkbox(&mut s.smooth_moving, "smooth the moving picture");
+            egui::ComboBox::from_label("moving picture filter")
+                .selected_text(s.moving_filter.name())
+                .show_ui(ui, |ui| {
+                    for f in MovingFilter::ALL {
+                        ui.selectable_value(&mut s.moving_filter, f, f.name());
+                    }
+                });
             let denoise = ui.add_enabled(
                 crate::denoise::AVAILABLE && stats.denoise_error.is_none(),
                 egui::Checkbox::new(&mut s.denoise, "denoise the still picture (N)"),

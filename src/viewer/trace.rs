@@ -15,6 +15,7 @@ use super::task::Background;
 use super::worker::{Content, Job, Worker};
 use crate::bvh::Bvh;
 use crate::camera::CameraRays;
+use crate::render::cache::MovingFilter;
 use crate::render::heatmap::{cost_row, cost_summary, heatmap_rgba8, overlap_row};
 use crate::render::progressive::StepReport;
 use crate::render::{EnvironmentMap, Progressive, RayCounts, RenderPlan, RenderSettings, Tracer};
@@ -150,9 +151,9 @@ pub struct ViewSettings {
     /// How long the view must stay the same before the still picture starts over from fresh
     /// samples, in milliseconds.
     pub still_after_ms: f32,
-    /// Show the moving picture with each sample averaged with its neighbours on the same
-    /// surface (display only: the samples and the still picture are untouched).
-    pub smooth_moving: bool,
+    /// How the moving picture's samples are filtered for display (the samples and the still
+    /// picture are untouched).
+    pub moving_filter: MovingFilter,
     /// Show the still picture denoised ([`crate::denoise`]; display only, the samples are
     /// untouched). On by default in builds with the denoiser.
     pub denoise: bool,
@@ -185,7 +186,7 @@ impl Default for ViewSettings {
             moving_budget_ms: 20.0,
             frame_ms: 30.0,
             still_after_ms: 120.0,
-            smooth_moving: true,
+            moving_filter: MovingFilter::default(),
             denoise: crate::denoise::AVAILABLE,
         }
     }
@@ -202,7 +203,7 @@ impl ViewSettings {
             moving_budget_ms: 0.0,
             frame_ms: 0.0,
             still_after_ms: 0.0,
-            smooth_moving: true,
+            moving_filter: MovingFilter::default(),
             denoise: false,
             max_samples: 0,
             // The work view traces what the shaded view traces.

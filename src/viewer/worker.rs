@@ -17,7 +17,7 @@
 //! limit; then the worker waits for the next job without using the CPU. After `n` passes the
 //! still picture is exactly the headless render with `n` samples per pixel.
 
-use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::mpsc::{Receiver, Sender, TryRecvError};
 use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
@@ -227,6 +227,13 @@ pub struct Shared {
     pub wake: Mutex<Option<Box<dyn Fn() + Send>>>,
     /// The current still picture's first denoised picture, and the plain one 16 times later.
     pub probe: Mutex<DenoiseProbe>,
+    /// Set to keep a copy of the samples of each moving picture published (see
+    /// [`Shared::moving_samples`]): the `--orbit` report compares the moving picture's
+    /// filters on the samples of its last picture.
+    pub keep_moving_samples: AtomicBool,
+    /// The job generations and the samples of the last [`KEPT_MOVING`] moving pictures
+    /// published while [`Shared::keep_moving_samples`] was set, oldest first.
+    pub moving_samples: Mutex<std::collections::VecDeque<(u64, RenderCache)>>,
 }
 
 impl Shared {
@@ -235,6 +242,10 @@ impl Shared {
         self.stats.lock().map(|s| s.clone()).unwrap_or_default()
     }
 }
+
+/// Moving pictures whose samples [`Shared::moving_samples`] keeps: the one shown last may
+/// not be the last one published.
+pub const KEPT_MOVING: usize = 3;
 
 /// The worker thread and its mailbox.
 pub struct Worker {
@@ -624,7 +635,7 @@ fn moving_step(st: &mut State, job: &Job, shared: &Shared, stale: &dyn Fn() -> b
     let (rgba, heat) = if job.settings.mode == RenderMode::Work {
         work_heatmap(&work, m.cache.tiles(), size, &job.settings)
     } else {
-        (m.cache.to_rgba8(job.settings.smooth_moving), (0.0, 0.0))
+        (m.cache.to_rgba8(job.settings.moving_filter), (0.0, 0.0))
     };
     let holes = (size.x as u64 * size.y as u64).saturating_sub(m.cache.filled() as u64);
     let picture = Picture {
@@ -641,7 +652,19 @@ fn moving_step(st: &mut State, job: &Job, shared: &Shared, stale: &dyn Fn() -> b
     if let Ok(mut s) = shared.stats.lock() {
         s.moving_time.picture += pictured.elapsed().as_secs_f64();
     }
+    let kept = shared
+        .keep_moving_samples
+        .load(Ordering::Relaxed)
+        .then(|| m.cache.samples_copy());
     if publish(shared, job, picture) {
+        if let Some(samples) = kept
+            && let Ok(mut slot) = shared.moving_samples.lock()
+        {
+            if slot.len() == KEPT_MOVING {
+                slot.pop_front();
+            }
+            slot.push_back((job.generation, samples));
+        }
         m.fresh = 0;
         st.view_changed = false;
         st.reshow = false;
@@ -675,19 +698,19 @@ fn moving_cache<'a>(moving: &'a mut Option<Moving>, job: &Job) -> &'a mut Moving
     })
 }
 
-/// Makes the moving picture's cache the still picture `rgba` (traced size) of the job's view:
-/// the camera rays' hits traced once per view, the colours replaced as the picture refines. A
-/// newer job stops the seeding (the cache stays as it was).
-fn seed_moving(st: &mut State, job: &Job, shared: &Shared, rgba: &[u8]) {
+/// Makes the moving picture's cache the still picture `rgba` (traced size, `samples` per
+/// pixel) of the job's view: the camera rays' hits traced once per view, the colours replaced
+/// as the picture refines. A newer job stops the seeding (the cache stays as it was).
+fn seed_moving(st: &mut State, job: &Job, shared: &Shared, rgba: &[u8], samples: u32) {
     let cam = &job.camera;
     let m = moving_cache(&mut st.moving, job);
     if m.seeded && same_view(&m.view, cam) {
-        m.cache.set_colours(rgba);
+        m.cache.set_colours(rgba, samples);
         return;
     }
     let t = tracer(job, Some(1), lights_for(&mut st.lights, job));
     let stop = || shared.newest.load(Ordering::SeqCst) != job.generation;
-    if m.cache.seed(&t, cam, rgba, &stop) {
+    if m.cache.seed(&t, cam, rgba, samples, &stop) {
         m.view = *cam;
         m.holes.clear();
         m.seeded = true;
@@ -864,7 +887,7 @@ fn still_step(st: &mut State, job: &Job, shared: &Shared, stale: &(dyn Fn() -> b
         // already (a seed costs a tenth of that), it seeds the moving picture.
         let long = st.still_start.elapsed() >= SEED_AFTER;
         if completed && (finished || long) && job.settings.mode == RenderMode::Shaded {
-            seed_moving(st, job, shared, &rgba);
+            seed_moving(st, job, shared, &rgba, passes);
         }
         let was_denoised = denoised.is_some();
         let shown = denoised.unwrap_or(rgba);

@@ -6,7 +6,7 @@
 use std::arch::x86_64::*;
 use std::ops::Range;
 
-use super::{RECIPROCAL, SmoothRows};
+use super::smooth::{RECIPROCAL, SmoothRows};
 
 /// Smooths the pixels of the row that can go four at a time (both horizontal neighbours
 /// inside the row: from 1 while the fourth pixel's right neighbour exists) into `o`, the
