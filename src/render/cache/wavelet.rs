@@ -7,10 +7,12 @@
 //! over a footprint up to `2^LEVELS - 1` pixels to each side. A tap counts only where its pixel
 //! shows the same surface as the centre's: both samples left the scene, or their normals agree,
 //! the neighbour's point lies on the centre's tangent plane (and the centre's on the
-//! neighbour's), and their albedos are alike. Geometric and material edges stay sharp; light
-//! and shadow within one surface are blurred, which the moving picture trades for the noise of
-//! one sample a pixel. Colours are filtered in linear light (the sRGB bytes decoded) and
-//! encoded again.
+//! neighbour's), and their albedos are alike. Each colour weighs as many samples as it averages
+//! (a fresh sample one, a colour carried over from the converged still picture its count), the
+//! centre the square of that, so converged colours are kept and fresh ones lean on them.
+//! Geometric and material edges stay sharp; light and shadow within one surface are blurred,
+//! which the moving picture trades for the noise of one sample a pixel. Colours are filtered in
+//! linear light (the sRGB bytes decoded) and encoded again.
 
 use rayon::prelude::*;
 
@@ -267,10 +269,10 @@ struct Tap<'a> {
     k: f32,
 }
 
-/// One row of a pass of the filter into `out`: each pixel's centre colour weighed 4 and the
-/// taps' colours by their kernel weights where linked, each times the samples its colour
-/// averages (so a colour from the converged still picture outweighs a fresh sample beside
-/// it), divided by the weights counted. One loop of plain arithmetic over slices of one
+/// One row of a pass of the filter into `out`: each pixel's centre colour weighed 4 times the
+/// square of the samples it averages, and the taps' colours by their kernel weights where
+/// linked times the samples each averages (so a colour from the converged still picture
+/// outweighs a fresh sample beside it, and is itself kept), divided by the weights counted. One loop of plain arithmetic over slices of one
 /// length, so that it vectorizes.
 #[inline(always)]
 ///
@@ -296,7 +298,10 @@ fn filter_row(
         (colour, &tap.weight[..w], &tap.links[..w], tap.bit, tap.k)
     });
     for x in 0..w {
-        let own = weight[x] * 4.0;
+        // The centre by the square of its samples: a colour of many samples is all but kept
+        // (blurring a converged colour only adds error), while a fresh one is averaged with
+        // its neighbours, the converged ones weighing most.
+        let own = weight[x] * weight[x] * 4.0;
         let (mut r, mut g, mut b, mut total) = (cr[x] * own, cg[x] * own, cb[x] * own, own);
         for (colour, weight, links, bit, k) in &t {
             let k = ((links[x] & bit) != 0) as u8 as f32 * k * weight[x];
@@ -537,6 +542,19 @@ mod tests {
         }
         let alike = p.filtered()[middle];
         assert!(alike > 104, "middle weighed alike {alike}");
+    }
+
+    #[test]
+    fn a_converged_picture_is_kept() {
+        // The checkerboard again, each colour of 255 samples (the still picture's, carried):
+        // detail that many samples agree on is not blurred away.
+        let mut p = Picture::floor(40, 30, |x, y| if (x + y) % 2 == 0 { 80 } else { 160 });
+        for a in &mut p.albedos {
+            a[3] = 255;
+        }
+        for (i, (&g, c)) in p.filtered().iter().zip(&p.colours).enumerate() {
+            assert!(g.abs_diff(c[0]) <= 3, "pixel {i}: {} -> {g}", c[0]);
+        }
     }
 
     #[test]
