@@ -65,7 +65,7 @@ const NO_COLOUR: [u8; 4] = [0; 4];
 /// The normal of a sample that left the scene (or of an empty pixel).
 const NO_NORMAL: [i8; 4] = [0; 4];
 
-/// The albedo of a sample that left the scene (or of an empty pixel).
+/// The albedo of an empty pixel (a sample that left the scene has `SKY_ALBEDO`).
 const NO_ALBEDO: [u8; 4] = [0; 4];
 
 /// How the moving picture's samples, one per pixel, are filtered for display (the samples and
