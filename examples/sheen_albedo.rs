@@ -1,15 +1,15 @@
-//! Writes `src/render/sheen_albedo.rs`: the directional albedo of `KHR_materials_sheen`'s
+//! Writes `src/render/bsdf/sheen_albedo.rs`: the directional albedo of `KHR_materials_sheen`'s
 //! Charlie sheen (colour 1) over roughness and the cosine of the view, integrated numerically
-//! by `tracery::render::sheen::integrate_albedo` (the midpoint rule, 512 cosines by 256
+//! by `tracery::render::bsdf::sheen::integrate_albedo` (the midpoint rule, 512 cosines by 256
 //! angles over half the circle about the normal). The renderer reads it to dim the lobes under a sheen; a test in
-//! `src/render/sheen.rs` integrates entries again and compares.
+//! `src/render/bsdf/sheen.rs` integrates entries again and compares.
 //!
 //! `cargo run --release --example sheen_albedo`
 use anyhow::Result;
 use rayon::prelude::*;
 use std::fmt::Write;
-use tracery::render::sheen::{integrate_albedo, table_cosine, table_roughness};
-use tracery::render::sheen_albedo::{COSINES, ROUGHNESSES};
+use tracery::render::bsdf::sheen::{integrate_albedo, table_cosine, table_roughness};
+use tracery::render::bsdf::sheen_albedo::{COSINES, ROUGHNESSES};
 
 fn main() -> Result<()> {
     let rows: Vec<Vec<f32>> = (0..ROUGHNESSES)
@@ -46,7 +46,8 @@ fn main() -> Result<()> {
         out += "],\n";
     }
     out += "];\n";
-    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("src/render/sheen_albedo.rs");
+    let path =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("src/render/bsdf/sheen_albedo.rs");
     // Written only when the table changed: rewriting the same bytes would make cargo rebuild
     // the crate (and everything built on it) for nothing.
     if std::fs::read_to_string(&path).ok().as_deref() == Some(out.as_str()) {

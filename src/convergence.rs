@@ -360,9 +360,34 @@ pub fn run(
         }
     }
 
+    let (means, denoised, fits, target) = summarise(&points, &levels, config);
+    Ok(Report {
+        points,
+        means,
+        fits,
+        denoised,
+        target_rmse: target,
+        reference_seconds,
+        peers: Vec::new(),
+    })
+}
+
+/// The renders' means per sampler and sample count (seconds, RMSE, relMSE; the denoised ones
+/// apart, by sample count), each sampler's fits, and the target error the fits are read at.
+#[allow(clippy::type_complexity)]
+fn summarise(
+    points: &[Point],
+    levels: &[u32],
+    config: &ConvergenceConfig,
+) -> (
+    Vec<(SamplerKind, u32, f64, f64, f64)>,
+    Vec<(u32, f64, f64, f64)>,
+    Vec<Fit>,
+    f64,
+) {
     let mut means = Vec::new();
     for &sampler in &config.samplers {
-        for &spp in &levels {
+        for &spp in levels {
             let p: Vec<&Point> = points
                 .iter()
                 .filter(|p| p.sampler == sampler && p.spp == spp && !p.denoised)
@@ -421,15 +446,7 @@ pub fn run(
             }
         })
         .collect();
-    Ok(Report {
-        points,
-        means,
-        fits,
-        denoised,
-        target_rmse: target,
-        reference_seconds,
-        peers: Vec::new(),
-    })
+    (means, denoised, fits, target)
 }
 
 /// RMSE and relMSE of `img` against `reference` over all pixels and channels.

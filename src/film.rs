@@ -2,6 +2,8 @@
 
 use glam::Vec3;
 
+use crate::color::{srgb8_lookup, srgb8_lut};
+
 /// Accumulated radiance of an image.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Film {
@@ -132,66 +134,14 @@ pub fn encode_rgba8(sums: &[Vec3], k: f32, out: &mut [u8]) {
 /// Tone maps `v * k` and encodes it as sRGB RGBA8 (opaque): one pixel of [`encode_rgba8`].
 #[inline]
 pub fn encode_pixel(v: Vec3, k: f32) -> [u8; 4] {
-    let lut = srgb_lut();
+    let lut = srgb8_lut();
     let c = tone_map(v * k);
     [
-        lut_lookup(lut, c.x),
-        lut_lookup(lut, c.y),
-        lut_lookup(lut, c.z),
+        srgb8_lookup(lut, c.x),
+        srgb8_lookup(lut, c.y),
+        srgb8_lookup(lut, c.z),
         255,
     ]
-}
-
-/// Entries of the [`srgb8_fast`] table over `[0, 1]`.
-const SRGB_LUT_SIZE: usize = 8192;
-
-/// [`srgb8`] by table lookup: never more than one level off the exact value (a test checks).
-#[inline]
-pub fn srgb8_fast(x: f32) -> u8 {
-    lut_lookup(srgb_lut(), x)
-}
-
-/// The [`srgb8_fast`] table, built on first use.
-fn srgb_lut() -> &'static [u8] {
-    static LUT: std::sync::OnceLock<Vec<u8>> = std::sync::OnceLock::new();
-    LUT.get_or_init(|| {
-        (0..SRGB_LUT_SIZE)
-            .map(|i| srgb8(i as f32 / (SRGB_LUT_SIZE - 1) as f32))
-            .collect()
-    })
-}
-
-#[inline(always)]
-fn lut_lookup(lut: &[u8], x: f32) -> u8 {
-    let x = if x.is_nan() { 0.0 } else { x.clamp(0.0, 1.0) };
-    lut[(x * (SRGB_LUT_SIZE - 1) as f32 + 0.5) as usize]
-}
-
-/// Linear `[0, 1]` to an 8-bit sRGB value.
-pub fn srgb8(x: f32) -> u8 {
-    let x = x.clamp(0.0, 1.0);
-    let s = if x <= 0.003_130_8 {
-        12.92 * x
-    } else {
-        1.055 * x.powf(1.0 / 2.4) - 0.055
-    };
-    (s * 255.0 + 0.5) as u8
-}
-
-/// The sRGB transfer function's inverse (IEC 61966-2-1): an encoded value in `[0, 1]` to
-/// linear.
-pub fn srgb_to_linear(c: f32) -> f32 {
-    if c <= 0.04045 {
-        c / 12.92
-    } else {
-        ((c + 0.055) / 1.055).powf(2.4)
-    }
-}
-
-/// [`srgb_to_linear`] of every sRGB-encoded byte, by byte.
-pub fn srgb8_table() -> &'static [f32; 256] {
-    static TABLE: std::sync::OnceLock<[f32; 256]> = std::sync::OnceLock::new();
-    TABLE.get_or_init(|| std::array::from_fn(|i| srgb_to_linear(i as f32 / 255.0)))
 }
 
 /// Root mean square difference of the colour channels (alpha left out) of two RGBA8 pictures

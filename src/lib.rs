@@ -33,12 +33,15 @@
 pub mod bench;
 pub mod bvh;
 pub mod camera;
+pub mod color;
 pub mod convergence;
+pub mod cpu;
 pub mod denoise;
 pub mod film;
 pub mod geometry;
 pub mod plot_font;
 pub mod render;
+pub mod rng;
 pub mod sampling;
 pub mod scene;
 #[cfg(feature = "viewer")]

@@ -9,7 +9,8 @@ use glam::Vec3;
 use tracery::bench::secondary::secondary_rays;
 use tracery::bench::{HitRecord, canonical_rays};
 use tracery::bvh::{BuildOptions, Bvh, SplitMethod};
-use tracery::scene::{Mesh, Scene, shapes};
+use tracery::geometry::shapes;
+use tracery::scene::{Mesh, Scene};
 
 /// Checks `random` random rays, every `canonical_step`-th canonical camera ray and at most
 /// `max_bounces` diffuse bounces from the canonical hits. Brute force costs a test of every
@@ -163,7 +164,7 @@ fn ties_in_t_go_to_the_lowest_index() {
 #[test]
 fn rays_aimed_at_vertices_and_edges_match_brute_force() {
     let tris = shapes::random_soup(4000, 0.3, 77);
-    let mut rng = tracery::sampling::SplitMix64::new(4);
+    let mut rng = tracery::rng::SplitMix64::new(4);
     let mut rays = Vec::new();
     for (k, t) in tris.iter().enumerate().take(4000) {
         for target in [t[k % 3], (t[0] + t[1]) * 0.5] {

@@ -5,7 +5,7 @@ mod common;
 use glam::Vec3;
 use tracery::bvh::{BuildOptions, Bvh, MAX_DEPTH};
 use tracery::geometry::Ray;
-use tracery::scene::shapes;
+use tracery::geometry::shapes;
 
 fn build_all(tris: &[[Vec3; 3]]) -> Vec<Bvh> {
     common::both_builders()

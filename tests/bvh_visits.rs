@@ -6,7 +6,7 @@ use glam::Vec3;
 use tracery::bench::canonical_rays;
 use tracery::bvh::{BuildOptions, Bvh, Visits};
 use tracery::geometry::Ray;
-use tracery::scene::shapes;
+use tracery::geometry::shapes;
 
 #[test]
 fn the_counted_walk_finds_the_hits_intersect_finds() {

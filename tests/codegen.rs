@@ -15,7 +15,7 @@ use std::process::Command;
 use glam::Vec3;
 use tracery::bvh::{BuildOptions, Bvh};
 use tracery::geometry::Ray;
-use tracery::scene::shapes;
+use tracery::geometry::shapes;
 
 /// Per function whose demangled name contains `part`: its instruction count and the
 /// instructions that name a 512-bit register.
@@ -78,9 +78,9 @@ fn the_avx512_kernels_single_ray_walks_use_no_512_bit_registers() {
     );
     let text = String::from_utf8_lossy(&out.stdout);
 
-    let walks = functions(&text, "kernel::x86::avx512::closest_inner");
-    let any_hit = functions(&text, "kernel::x86::avx512::each_hit_inner");
-    let packets = functions(&text, "kernel::x86::avx512::trace_packet_inner");
+    let walks = functions(&text, "kernel::avx512::closest_inner");
+    let any_hit = functions(&text, "kernel::avx512::each_hit_inner");
+    let packets = functions(&text, "kernel::avx512::trace_packet_inner");
     assert!(
         !walks.is_empty() && !any_hit.is_empty() && !packets.is_empty(),
         "the AVX-512 walks were not found in {} (closest {}, any hit {}, packets {})",

@@ -12,7 +12,8 @@ use tracery::bench::embree::Embree;
 use tracery::bench::{self, BenchConfig, CANONICAL_SIZE};
 use tracery::bvh::wide::Kernel;
 use tracery::bvh::{BruteForce, BuildOptions};
-use tracery::scene::{Mesh, Scene, shapes};
+use tracery::geometry::shapes;
+use tracery::scene::{Mesh, Scene};
 
 /// Embree's triangle test is not watertight (ours is): a ray through a shared edge or vertex
 /// can slip between two triangles, or name the other one of the two. At most this share of

@@ -2,7 +2,7 @@
 
 use glam::Vec3;
 use tracery::render::environment::{CubeMap, EnvironmentMap, LinearImage, face_uv};
-use tracery::sampling::SplitMix64;
+use tracery::rng::SplitMix64;
 use tracery::scene::Environment;
 
 fn face(n: u32, mut f: impl FnMut(u32, u32) -> Vec3) -> LinearImage {

@@ -4,10 +4,10 @@ mod common;
 
 use glam::{Vec3, Vec3A};
 use tracery::bvh::{BruteForce, BuildOptions, Bvh};
+use tracery::geometry::shapes;
 use tracery::geometry::{
     Aabb, PreparedRay, Ray, interpolation_error, intersect_triangle_t, offset_ray_origin,
 };
-use tracery::scene::shapes;
 
 fn unit_box() -> Aabb {
     Aabb::new(Vec3::ZERO, Vec3::ONE)
@@ -171,7 +171,7 @@ fn rays_from_inside_a_closed_icosphere_never_escape() {
     let sphere = shapes::icosphere(3);
     let bvh = Bvh::build(&sphere, &BuildOptions::sah());
     let rays = common::random_rays(&sphere, 1_000_000, 99);
-    let mut rng = tracery::sampling::SplitMix64::new(1);
+    let mut rng = tracery::rng::SplitMix64::new(1);
     for r in &rays {
         let o = Vec3::new(
             rng.next_f32() - 0.5,

@@ -2665,7 +2665,7 @@ fn malformed_specular_and_ior_are_warnings_and_defaults() {
 
 /// `KHR_materials_sheen` (the fibres of cloth): a black base with a sheen, seen along its
 /// normal and lit from low over it, shows `sheenColor D V cos` of the light
-/// ([`tracery::render::sheen::brdf`], itself checked against the extension's formulas), for
+/// ([`tracery::render::bsdf::sheen::brdf`], itself checked against the extension's formulas), for
 /// the colour and roughness factors and for their textures (the colour's sRGB decoded, the
 /// roughness's alpha); a white diffuse base under a white sheen, lit and seen along its
 /// normal (where the fibres reflect nothing), is dimmed by the sheen's albedo there, `1 -
@@ -2673,7 +2673,7 @@ fn malformed_specular_and_ior_are_warnings_and_defaults() {
 /// texture read as linear, or the base left undimmed (checked).
 #[test]
 fn a_sheen_reflects_at_grazing_and_dims_the_base() {
-    use tracery::render::sheen::{albedo, brdf};
+    use tracery::render::bsdf::sheen::{albedo, brdf};
     let dir = tempfile::tempdir().unwrap();
     // No GGX lobe (specular factor 0): the base is its diffuse colour alone.
     let material = |base: f32, sheen: Value| {

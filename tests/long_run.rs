@@ -11,7 +11,8 @@ use std::path::PathBuf;
 
 use bevy::prelude::*;
 use tracery::bvh::{BuildOptions, SplitMethod};
-use tracery::sampling::{SamplerKind, SplitMix64};
+use tracery::rng::SplitMix64;
+use tracery::sampling::SamplerKind;
 use tracery::scene::Scene;
 use tracery::viewer::CorePlugins;
 use tracery::viewer::bvh::{BvhSettings, SceneBvh};

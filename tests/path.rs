@@ -5,9 +5,10 @@
 
 use glam::{Affine3A, Vec3};
 use tracery::bvh::{BuildOptions, Bvh};
+use tracery::geometry::shapes;
 use tracery::render::{Integrator, RenderSettings, render};
 use tracery::sampling::SamplerKind;
-use tracery::scene::{Camera, Environment, Light, Material, Mesh, Scene, shapes};
+use tracery::scene::{Camera, Environment, Light, Material, Mesh, Scene};
 
 fn scene(parts: Vec<(Vec<[Vec3; 3]>, Material)>, lights: Vec<Light>, camera: Camera) -> Scene {
     let mut mesh = Mesh::default();

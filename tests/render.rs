@@ -75,7 +75,7 @@ fn empty_images_and_zero_samples_are_rejected() {
 
 #[test]
 fn fast_srgb_encoding_is_within_one_level_of_the_exact_curve() {
-    use tracery::film::{srgb8, srgb8_fast};
+    use tracery::color::{srgb8, srgb8_fast};
     let mut worst = 0;
     for i in 0..=200_000 {
         let x = i as f32 / 200_000.0;

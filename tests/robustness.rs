@@ -10,9 +10,11 @@ use glam::{Affine3A, Vec3};
 use tracery::bvh::{BruteForce, BuildOptions, Bvh};
 use tracery::camera::CameraRays;
 use tracery::geometry::Ray;
+use tracery::geometry::shapes;
 use tracery::render::{EnvironmentMap, RayCounts, RenderPlan, RenderSettings, Tracer, render};
-use tracery::sampling::{PathSampler, PixelSampler, SamplerKind, SplitMix64};
-use tracery::scene::{Camera, Environment, Light, Material, Mesh, Scene, shapes};
+use tracery::rng::SplitMix64;
+use tracery::sampling::{PathSampler, PixelSampler, SamplerKind};
+use tracery::scene::{Camera, Environment, Light, Material, Mesh, Scene};
 
 fn tri(a: [f32; 3], b: [f32; 3], c: [f32; 3]) -> [Vec3; 3] {
     [Vec3::from(a), Vec3::from(b), Vec3::from(c)]
@@ -719,7 +721,7 @@ fn a_zero_or_nan_ray_direction_gives_the_fallback_colour() {
                 let l = tracer.radiance(&Ray::new(origin, dir), &mut sampler, &mut counts);
                 assert_eq!(
                     l,
-                    tracery::render::shade::FALLBACK,
+                    tracery::render::tracer::FALLBACK,
                     "dir {dir}, origin {origin}"
                 );
             }

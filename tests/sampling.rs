@@ -125,7 +125,8 @@ fn thin_lens_rays_meet_on_the_focus_plane() {
 
 #[test]
 fn the_byte_table_sobol_dimension_equals_the_bitwise_one() {
-    use tracery::sampling::{SplitMix64, sobol_dim1, sobol_dim1_bitwise};
+    use tracery::rng::SplitMix64;
+    use tracery::sampling::{sobol_dim1, sobol_dim1_bitwise};
     let mut rng = SplitMix64::new(3);
     let edge = [0u32, 1, 2, 255, 256, 0xffff, 0x1_0000, u32::MAX, 1 << 31];
     for i in edge
@@ -143,7 +144,8 @@ fn the_byte_table_sobol_dimension_equals_the_bitwise_one() {
 /// seeds, pixels, sample indices (edges included, and through `with_index`) and dimensions.
 #[test]
 fn sobol_points_equal_the_straightforward_formula() {
-    use tracery::sampling::{SplitMix64, mix64, nested_uniform_scramble, sobol_dim1_bitwise};
+    use tracery::rng::{SplitMix64, mix64};
+    use tracery::sampling::{nested_uniform_scramble, sobol_dim1_bitwise};
     let unit = |x: u32| (x >> 8) as f32 * (1.0 / (1u32 << 24) as f32);
     let reference = |seed: u64, pixel: u64, index: u32, d: u32| {
         let s = mix64(seed ^ mix64(pixel.wrapping_add(0x5851_F42D_4C95_7F2D)));

@@ -4,12 +4,13 @@
 use glam::{Affine3A, Vec3};
 use tracery::bvh::{BuildOptions, Bvh};
 use tracery::geometry::Ray;
+use tracery::geometry::shapes;
 use tracery::render::{
-    EnvironmentMap, RayCounts, RenderPlan, RenderSettings, Tracer, render_with_plan,
-    shade::beer_lambert, sky,
+    EnvironmentMap, RayCounts, RenderPlan, RenderSettings, Tracer, render_with_plan, sky,
+    surface::beer_lambert,
 };
 use tracery::sampling::{PathSampler, PixelSampler, SamplerKind};
-use tracery::scene::{Camera, Environment, Light, Material, Mesh, Scene, shapes};
+use tracery::scene::{Camera, Environment, Light, Material, Mesh, Scene};
 
 /// A scene from (triangles, material) parts.
 fn scene(parts: Vec<(Vec<[Vec3; 3]>, Material)>, lights: Vec<Light>, env: Environment) -> Scene {

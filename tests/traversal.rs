@@ -5,7 +5,7 @@ mod common;
 use glam::Vec3;
 use tracery::bvh::{BruteForce, Bvh, RayTile, Visit};
 use tracery::geometry::Ray;
-use tracery::scene::shapes;
+use tracery::geometry::shapes;
 
 #[test]
 fn occluded_agrees_with_brute_force() {
@@ -120,7 +120,7 @@ fn camera_tiles(tris: &[[Vec3; 3]], size: u32, lens: f32) -> Vec<Vec<Ray>> {
     let mut camera = Camera::canonical(&Mesh::from_triangles(tris.to_vec(), 0).bounds());
     camera.lens_radius = lens;
     let cam = CameraRays::new(&camera, size, size);
-    let mut rng = tracery::sampling::SplitMix64::new(9);
+    let mut rng = tracery::rng::SplitMix64::new(9);
     let mut tiles = Vec::new();
     for ty in (0..size).step_by(8) {
         for tx in (0..size).step_by(8) {

@@ -343,6 +343,54 @@ pub fn run(
     }
     let tris = &finite[..];
 
+    let builders = builders(tris, config);
+    // Builds, interleaved, with each thread count. A peer's build time is its builder call
+    // (plus putting its triangles in leaf order for obvhs; for Embree its scene's build, not
+    // the device's creation); ours includes the 8-wide layout with its triangle blocks (the
+    // tree's one copy of the triangles). Each engine is dropped as soon as its build is timed: Embree builds on
+    // as many threads as the live device asking for the most (`getMaxNumThreads` in its
+    // `device.cpp`), so a two-thread device kept alive would make the next one-thread build
+    // run on two threads.
+    let pools: Vec<(usize, rayon::ThreadPool)> =
+        config.threads.iter().map(|&t| (t, pool(t))).collect();
+    let (build_ms, stats) = time_builds(mesh_name, &builders, &pools, config.repeat, progress)?;
+    let entries = engines_to_trace(mesh_name, &builders, &pools, build_ms, stats, progress)?;
+    let one = pools.iter().position(|(t, _)| *t == 1);
+    let sets = RaySets::new(
+        mesh_name, tris, rays, width, &entries, &pools, one, progress,
+    );
+    let timings = Timings::measure(
+        mesh_name,
+        &entries,
+        &pools,
+        one,
+        rays,
+        width,
+        &sets,
+        config.repeat,
+        progress,
+    );
+    let (results, reference) = results(
+        mesh_name,
+        triangles,
+        finite.len(),
+        &ids,
+        rays,
+        &entries,
+        &pools,
+        one,
+        &sets,
+        timings,
+    );
+    Ok(MeshBench {
+        results,
+        sah_hits: reference,
+        excluded,
+    })
+}
+
+/// The builders of every engine `config` asks for, over `tris`.
+fn builders<'a>(tris: &'a [[Vec3; 3]], config: &BenchConfig) -> Vec<(String, Builder<'a>)> {
     let isa = config.isa;
     let mut builders: Vec<(String, Builder)> = Vec::new();
     for (name, options) in &config.ours {
@@ -398,19 +446,22 @@ pub fn run(
             Box::new(move |_| Ok((Box::new(obvhs::Cwbvh::build(tris)) as Box<dyn Engine>, None))),
         ));
     }
+    builders
+}
 
-    // Builds, interleaved, with each thread count. A peer's build time is its builder call
-    // (plus putting its triangles in leaf order for obvhs; for Embree its scene's build, not
-    // the device's creation); ours includes the 8-wide layout with its triangle blocks (the
-    // tree's one copy of the triangles). Each engine is dropped as soon as its build is timed: Embree builds on
-    // as many threads as the live device asking for the most (`getMaxNumThreads` in its
-    // `device.cpp`), so a two-thread device kept alive would make the next one-thread build
-    // run on two threads.
-    let pools: Vec<(usize, rayon::ThreadPool)> =
-        config.threads.iter().map(|&t| (t, pool(t))).collect();
+/// Builds every engine on every pool, `repeat` rounds interleaved, each engine dropped as soon
+/// as its build is timed: each engine's best build time per pool, and its stats (ours only).
+#[allow(clippy::type_complexity)]
+fn time_builds(
+    mesh_name: &str,
+    builders: &[(String, Builder)],
+    pools: &[(usize, rayon::ThreadPool)],
+    repeat: usize,
+    progress: &mut dyn FnMut(&str),
+) -> Result<(Vec<Vec<f64>>, Vec<Option<BvhStats>>)> {
     let mut build_ms = vec![vec![f64::INFINITY; pools.len()]; builders.len()];
     let mut stats = vec![None; builders.len()];
-    for round in 0..config.repeat.max(1) {
+    for round in 0..repeat.max(1) {
         for (k, (name, build)) in builders.iter().enumerate() {
             for (p, (threads, pool)) in pools.iter().enumerate() {
                 progress(&format!(
@@ -428,8 +479,19 @@ pub fn run(
             }
         }
     }
-    // The engines to trace with, built once more (untimed) with the most threads; tracing
-    // runs on the caller's threads, whatever the build used.
+    Ok((build_ms, stats))
+}
+
+/// The engines to trace with, built once more (untimed) with the most threads; tracing runs
+/// on the caller's threads, whatever the build used.
+fn engines_to_trace(
+    mesh_name: &str,
+    builders: &[(String, Builder)],
+    pools: &[(usize, rayon::ThreadPool)],
+    mut build_ms: Vec<Vec<f64>>,
+    stats: Vec<Option<BvhStats>>,
+    progress: &mut dyn FnMut(&str),
+) -> Result<Vec<Entry>> {
     let mut entries: Vec<Entry> = Vec::with_capacity(builders.len());
     for (k, (name, build)) in builders.iter().enumerate() {
         let (threads, pool) = pools.last().expect("at least one thread count");
@@ -442,97 +504,197 @@ pub fn run(
             engine,
         });
     }
+    Ok(entries)
+}
 
-    // Traces, interleaved over engines and thread counts.
-    let n = entries.len() * pools.len();
-    let mut closest = vec![Duration::MAX; n];
-    let mut closest_rounds = vec![Vec::with_capacity(config.repeat.max(1)); n];
-    let mut occluded = vec![Duration::MAX; n];
-    // Written in place each round: allocating (and faulting in) 8 MB of fresh records inside
-    // the timed call cost every engine the same 2-3 ms, which pulled every ratio towards 1.
-    let mut hits = vec![vec![HitRecord::MISS; rays.len()]; n];
-    // The rays the first engine hits and those it misses, each in image order, for the
-    // one-thread single-ray rates apart (`SplitRates`).
-    // The secondary rays are made from the same hits (`SecondaryRates`).
-    let one = pools.iter().position(|(t, _)| *t == 1);
-    let (hit_rays, miss_rays, second): (Vec<Ray>, Vec<Ray>, secondary::SecondaryRays) = match (
-        one,
-        entries.first(),
-    ) {
-        (Some(p), Some(first)) => {
-            progress(&format!(
-                "{mesh_name}: splitting the rays into hits and misses, and making secondary rays"
-            ));
-            let mut first_hits = vec![HitRecord::MISS; rays.len()];
-            pools[p]
-                .1
-                .install(|| engines::trace_closest(&*first.engine, rays, width, &mut first_hits));
-            let bounds = Aabb::of_finite_points(tris.iter().flatten().copied());
-            let second = secondary::secondary_rays(tris, rays, &first_hits, &bounds);
-            let (h, m): (Vec<_>, Vec<_>) = rays
-                .iter()
-                .zip(&first_hits)
-                .partition(|(_, h)| h.prim != HitRecord::MISS.prim);
-            (
-                h.into_iter().map(|(r, _)| *r).collect(),
-                m.into_iter().map(|(r, _)| *r).collect(),
-                second,
-            )
-        }
-        _ => Default::default(),
-    };
-    // Per engine: best times of closest hit, closest miss, occluded hit, occluded miss.
-    let mut split = vec![[Duration::MAX; 4]; entries.len()];
-    let mut split_out = vec![HitRecord::MISS; hit_rays.len().max(miss_rays.len())];
-    // Per engine: best times of the bounce rays' closest hits and the shadow rays' occlusion,
-    // the bounce rays' hits and the shadow rays blocked.
-    let mut second_times = vec![[Duration::MAX; 2]; entries.len()];
-    let mut second_hits = vec![Vec::new(); entries.len()];
-    let mut second_blocked = vec![0usize; entries.len()];
-    for round in 0..config.repeat.max(1) {
-        progress(&format!("{mesh_name}: tracing, round {}", round + 1));
-        for (e, entry) in entries.iter().enumerate() {
-            for (p, (_, pool)) in pools.iter().enumerate() {
-                let k = e * pools.len() + p;
-                let engine = &*entry.engine;
-                let start = Instant::now();
-                pool.install(|| engines::trace_closest(engine, rays, width, &mut hits[k]));
-                let took = start.elapsed();
-                closest[k] = closest[k].min(took);
-                closest_rounds[k].push(took);
-                let start = Instant::now();
-                pool.install(|| engines::trace_occluded(engine, rays, width));
-                occluded[k] = occluded[k].min(start.elapsed());
+/// The rays traced besides the canonical ones, made from the first engine's hits with one
+/// thread: the canonical rays that hit and those that miss, each in image order (for the
+/// single-ray rates apart, `SplitRates`), and the secondary rays (`SecondaryRates`). Empty
+/// without a one-thread pool.
+struct RaySets {
+    hits: Vec<Ray>,
+    misses: Vec<Ray>,
+    second: secondary::SecondaryRays,
+}
+
+impl RaySets {
+    #[allow(clippy::too_many_arguments)]
+    fn new(
+        mesh_name: &str,
+        tris: &[[Vec3; 3]],
+        rays: &[Ray],
+        width: usize,
+        entries: &[Entry],
+        pools: &[(usize, rayon::ThreadPool)],
+        one: Option<usize>,
+        progress: &mut dyn FnMut(&str),
+    ) -> RaySets {
+        let (hits, misses, second): (Vec<Ray>, Vec<Ray>, secondary::SecondaryRays) = match (
+            one,
+            entries.first(),
+        ) {
+            (Some(p), Some(first)) => {
+                progress(&format!(
+                    "{mesh_name}: splitting the rays into hits and misses, and making secondary rays"
+                ));
+                let mut first_hits = vec![HitRecord::MISS; rays.len()];
+                pools[p].1.install(|| {
+                    engines::trace_closest(&*first.engine, rays, width, &mut first_hits)
+                });
+                let bounds = Aabb::of_finite_points(tris.iter().flatten().copied());
+                let second = secondary::secondary_rays(tris, rays, &first_hits, &bounds);
+                let (h, m): (Vec<_>, Vec<_>) = rays
+                    .iter()
+                    .zip(&first_hits)
+                    .partition(|(_, h)| h.prim != HitRecord::MISS.prim);
+                (
+                    h.into_iter().map(|(r, _)| *r).collect(),
+                    m.into_iter().map(|(r, _)| *r).collect(),
+                    second,
+                )
             }
-            if let Some(p) = one
-                && entry.engine.tile().is_none()
-            {
-                let (engine, pool) = (&*entry.engine, &pools[p].1);
-                for (i, set) in [&hit_rays, &miss_rays].into_iter().enumerate() {
-                    let out = &mut split_out[..set.len()];
-                    let start = Instant::now();
-                    pool.install(|| engines::trace_closest(engine, set, width, out));
-                    split[e][i] = split[e][i].min(start.elapsed());
-                    let start = Instant::now();
-                    pool.install(|| engines::trace_occluded(engine, set, width));
-                    split[e][2 + i] = split[e][2 + i].min(start.elapsed());
-                }
-                if !second.bounce.is_empty() {
-                    let out = &mut second_hits[e];
-                    out.resize(second.bounce.len(), HitRecord::MISS);
-                    let start = Instant::now();
-                    pool.install(|| engines::trace_closest_incoherent(engine, &second.bounce, out));
-                    second_times[e][0] = second_times[e][0].min(start.elapsed());
-                    let start = Instant::now();
-                    let blocked =
-                        pool.install(|| engines::trace_occluded(engine, &second.shadow, width));
-                    second_times[e][1] = second_times[e][1].min(start.elapsed());
-                    second_blocked[e] = blocked;
-                }
-            }
+            _ => Default::default(),
+        };
+        RaySets {
+            hits,
+            misses,
+            second,
         }
     }
+}
 
+/// What the tracing rounds measured, per engine and pool (`e * pools + p`) or per engine.
+struct Timings {
+    /// Best and every round's time of the canonical rays' closest hits.
+    closest: Vec<Duration>,
+    closest_rounds: Vec<Vec<Duration>>,
+    /// Best time of their occlusion.
+    occluded: Vec<Duration>,
+    /// Their closest hits, written in place each round.
+    hits: Vec<Vec<HitRecord>>,
+    /// Per engine: best times of closest hit, closest miss, occluded hit, occluded miss.
+    split: Vec<[Duration; 4]>,
+    /// Per engine: best times of the bounce rays' closest hits and the shadow rays'
+    /// occlusion, the bounce rays' hits and the shadow rays blocked.
+    second_times: Vec<[Duration; 2]>,
+    second_hits: Vec<Vec<HitRecord>>,
+    second_blocked: Vec<usize>,
+}
+
+impl Timings {
+    /// Traces, interleaved over engines and thread counts, `repeat` rounds.
+    #[allow(clippy::too_many_arguments)]
+    fn measure(
+        mesh_name: &str,
+        entries: &[Entry],
+        pools: &[(usize, rayon::ThreadPool)],
+        one: Option<usize>,
+        rays: &[Ray],
+        width: usize,
+        sets: &RaySets,
+        repeat: usize,
+        progress: &mut dyn FnMut(&str),
+    ) -> Timings {
+        let (hit_rays, miss_rays, second) = (&sets.hits, &sets.misses, &sets.second);
+        let n = entries.len() * pools.len();
+        let mut closest = vec![Duration::MAX; n];
+        let mut closest_rounds = vec![Vec::with_capacity(repeat.max(1)); n];
+        let mut occluded = vec![Duration::MAX; n];
+        // Written in place each round: allocating (and faulting in) 8 MB of fresh records inside
+        // the timed call cost every engine the same 2-3 ms, which pulled every ratio towards 1.
+        let mut hits = vec![vec![HitRecord::MISS; rays.len()]; n];
+        // Per engine: best times of closest hit, closest miss, occluded hit, occluded miss.
+        let mut split = vec![[Duration::MAX; 4]; entries.len()];
+        let mut split_out = vec![HitRecord::MISS; hit_rays.len().max(miss_rays.len())];
+        // Per engine: best times of the bounce rays' closest hits and the shadow rays' occlusion,
+        // the bounce rays' hits and the shadow rays blocked.
+        let mut second_times = vec![[Duration::MAX; 2]; entries.len()];
+        let mut second_hits = vec![Vec::new(); entries.len()];
+        let mut second_blocked = vec![0usize; entries.len()];
+        for round in 0..repeat.max(1) {
+            progress(&format!("{mesh_name}: tracing, round {}", round + 1));
+            for (e, entry) in entries.iter().enumerate() {
+                for (p, (_, pool)) in pools.iter().enumerate() {
+                    let k = e * pools.len() + p;
+                    let engine = &*entry.engine;
+                    let start = Instant::now();
+                    pool.install(|| engines::trace_closest(engine, rays, width, &mut hits[k]));
+                    let took = start.elapsed();
+                    closest[k] = closest[k].min(took);
+                    closest_rounds[k].push(took);
+                    let start = Instant::now();
+                    pool.install(|| engines::trace_occluded(engine, rays, width));
+                    occluded[k] = occluded[k].min(start.elapsed());
+                }
+                if let Some(p) = one
+                    && entry.engine.tile().is_none()
+                {
+                    let (engine, pool) = (&*entry.engine, &pools[p].1);
+                    for (i, set) in [hit_rays, miss_rays].into_iter().enumerate() {
+                        let out = &mut split_out[..set.len()];
+                        let start = Instant::now();
+                        pool.install(|| engines::trace_closest(engine, set, width, out));
+                        split[e][i] = split[e][i].min(start.elapsed());
+                        let start = Instant::now();
+                        pool.install(|| engines::trace_occluded(engine, set, width));
+                        split[e][2 + i] = split[e][2 + i].min(start.elapsed());
+                    }
+                    if !second.bounce.is_empty() {
+                        let out = &mut second_hits[e];
+                        out.resize(second.bounce.len(), HitRecord::MISS);
+                        let start = Instant::now();
+                        pool.install(|| {
+                            engines::trace_closest_incoherent(engine, &second.bounce, out)
+                        });
+                        second_times[e][0] = second_times[e][0].min(start.elapsed());
+                        let start = Instant::now();
+                        let blocked =
+                            pool.install(|| engines::trace_occluded(engine, &second.shadow, width));
+                        second_times[e][1] = second_times[e][1].min(start.elapsed());
+                        second_blocked[e] = blocked;
+                    }
+                }
+            }
+        }
+        Timings {
+            closest,
+            closest_rounds,
+            occluded,
+            hits,
+            split,
+            second_times,
+            second_hits,
+            second_blocked,
+        }
+    }
+}
+
+/// One row per engine and pool, the hits naming triangles of the caller's `triangles` (the
+/// finite ones had `ids` there), and the first engine's hits (the reference of agreement).
+#[allow(clippy::too_many_arguments)]
+fn results(
+    mesh_name: &str,
+    triangles: &[[Vec3; 3]],
+    finite: usize,
+    ids: &[u32],
+    rays: &[Ray],
+    entries: &[Entry],
+    pools: &[(usize, rayon::ThreadPool)],
+    one: Option<usize>,
+    sets: &RaySets,
+    timings: Timings,
+) -> (Vec<EngineResult>, Vec<HitRecord>) {
+    let Timings {
+        closest,
+        mut closest_rounds,
+        occluded,
+        hits,
+        split,
+        second_times,
+        second_hits,
+        second_blocked,
+    } = timings;
+    let (hit_rays, miss_rays, second) = (&sets.hits, &sets.misses, &sets.second);
     // Hits name triangles of the caller's list.
     let map_back = |h: &[HitRecord]| -> Vec<HitRecord> {
         h.iter()
@@ -556,7 +718,7 @@ pub fn run(
             results.push(EngineResult {
                 engine: entry.name.clone(),
                 mesh: mesh_name.to_string(),
-                triangles: finite.len(),
+                triangles: finite,
                 threads: *threads,
                 build_ms: entry.build_ms[p],
                 closest_mrays: rays.len() as f64 / closest[k].as_secs_f64() / 1e6,
@@ -599,11 +761,7 @@ pub fn run(
             });
         }
     }
-    Ok(MeshBench {
-        results,
-        sah_hits: reference,
-        excluded,
-    })
+    (results, reference)
 }
 
 #[cfg(test)]

@@ -21,8 +21,8 @@ use super::HitRecord;
 use crate::geometry::{
     Aabb, PreparedRay, Ray, interpolation_error, intersect_triangle, offset_ray_origin,
 };
-use crate::render::bsdf::cosine_direction;
-use crate::sampling::{SplitMix64, mix64};
+use crate::rng::{SplitMix64, mix64};
+use crate::sampling::cosine_direction;
 use crate::scene::face_normal;
 
 /// Seed of the bounce directions (each ray's stream is this mixed with its index).

@@ -17,6 +17,7 @@
 mod build;
 mod reference;
 mod stats;
+mod tile;
 mod traverse;
 pub mod wide;
 
@@ -24,8 +25,8 @@ use glam::{Vec3, Vec3A};
 
 pub use reference::BruteForce;
 pub use stats::{BuildPhases, BvhStats};
+pub use tile::{PACKET, RayTile};
 pub use traverse::{Hit, Visit};
-pub use wide::packet::RayTile;
 pub use wide::traverse::Visits;
 
 use crate::geometry::Aabb;

@@ -195,7 +195,7 @@ impl TreeCounts {
 mod tests {
     use super::*;
     use crate::bvh::BuildOptions;
-    use crate::scene::shapes;
+    use crate::geometry::shapes;
 
     /// The statistics the builder counts as it goes are those a walk over the finished tree
     /// finds (the SAH cost up to the order of the sums), for both builders, on one thread and

@@ -4,8 +4,9 @@
 
 use glam::{Vec3, Vec3A};
 
+use super::tile::{PACKET, RayTile};
 use super::wide::kernel;
-use super::wide::packet::{Bests, PACKET, RayTile};
+use super::wide::packet::Bests;
 use super::wide::traverse::{Best as Best8, Visits};
 use super::{Bvh, BvhNode, MAX_DEPTH};
 use crate::geometry::{PreparedRay, Ray, intersect_triangle, intersect_triangle_t};
@@ -380,10 +381,10 @@ mod tests {
     use glam::Vec3;
 
     use crate::bvh::wide::Kernel;
-    use crate::bvh::wide::kernel::take_denormal_flag;
     use crate::bvh::{BuildOptions, Bvh, RayTile};
+    use crate::cpu::take_denormal_flag;
     use crate::geometry::Ray;
-    use crate::scene::shapes;
+    use crate::geometry::shapes;
 
     /// Tracing takes no denormal operand (a microcode assist per instruction on Intel CPUs; see
     /// [`take_denormal_flag`]) with any kernel this CPU runs: closest hits, occlusion and 8x8

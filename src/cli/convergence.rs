@@ -144,6 +144,15 @@ pub fn run(a: ConvergenceArgs) -> Result<()> {
             report.points.len()
         ),
     }
+    print_tables(&report);
+    println!("wrote {} and {}", csv.display(), png.display());
+    Ok(())
+}
+
+/// The report's Markdown tables: each sampler's, the denoised curve's and each peer's slope
+/// and time to the target error, then the comparison lines, then (with `--denoise`) the
+/// rendered and denoised errors per sample count.
+fn print_tables(report: &convergence::Report) {
     let target = report.target_rmse;
     println!(
         "| renderer | RMSE slope per spp | seconds to RMSE {} (measured) | (fitted) |",
@@ -213,6 +222,12 @@ pub fn run(a: ConvergenceArgs) -> Result<()> {
             }
         }
     }
+    print_denoised(report);
+}
+
+/// Per sample count, the first sampler's mean time and relative RMSE (the square root of
+/// relMSE) as rendered and denoised (nothing without denoised renders).
+fn print_denoised(report: &convergence::Report) {
     if !report.denoised.is_empty() {
         // Per sample count, the first sampler's mean time and relative RMSE (the square root
         // of relMSE) as rendered and denoised.
@@ -236,6 +251,4 @@ pub fn run(a: ConvergenceArgs) -> Result<()> {
             }
         }
     }
-    println!("wrote {} and {}", csv.display(), png.display());
-    Ok(())
 }

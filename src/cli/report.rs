@@ -265,7 +265,7 @@ fn scaling(
         let n = ((generated as f64 / 2.0).sqrt()).round() as u32;
         inputs.push((
             format!("terrain {n}x{n}"),
-            tracery::scene::shapes::terrain(n),
+            tracery::geometry::shapes::terrain(n),
         ));
     }
     let embree = BenchConfig::embree_available();

@@ -11,6 +11,7 @@
 
 mod aabb;
 mod ray;
+pub mod shapes;
 mod triangle;
 
 pub use aabb::Aabb;

@@ -21,10 +21,10 @@ use anyhow::Context;
 use glam::Vec3;
 use rayon::prelude::*;
 
-use super::shade::{reflect, transmit};
+use super::surface::{reflect, transmit};
 use super::{BAND, SampleRange, TILE_WIDTH, Tracer, camera_ray};
 use crate::bvh::Hit;
-use crate::bvh::wide::packet::PACKET;
+use crate::bvh::PACKET;
 use crate::camera::CameraRays;
 use crate::film::Film;
 use crate::geometry::{Ray, offset_ray_origin};

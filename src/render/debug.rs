@@ -7,7 +7,8 @@ use std::collections::HashMap;
 use glam::Vec3;
 
 use super::RayCounts;
-use super::shade::{Tracer, reflect, transmit};
+use super::Tracer;
+use super::surface::{reflect, transmit};
 use crate::bvh::{Bvh, Visit};
 use crate::geometry::{Ray, offset_ray_origin};
 use crate::scene::Light;

@@ -6,7 +6,7 @@ use std::path::Path;
 use anyhow::{Context, Result, bail};
 use glam::{Quat, Vec3};
 
-use crate::film::srgb_to_linear;
+use crate::color::srgb_to_linear;
 use crate::scene::Environment;
 
 /// An environment ready to sample: images loaded and converted to linear RGB.

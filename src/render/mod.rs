@@ -1,4 +1,5 @@
-//! Rendering on all cores: camera rays, shading ([`shade`]), the environment, and the
+//! Rendering on all cores: camera rays, the tracer ([`tracer`]) with its integrators, surfaces,
+//! lights and lobes, the environment, and the
 //! [`RenderPlan`] that leaves out what a scene does not need.
 //!
 //! Every pixel draws its samples from its own random stream, seeded from the pixel index and
@@ -10,19 +11,19 @@ pub mod cache;
 pub mod debug;
 pub mod environment;
 pub mod heatmap;
-pub mod path;
+pub mod integrator;
+pub mod light;
 pub mod plan;
 pub mod progressive;
 pub mod resample;
-pub mod shade;
-pub mod sheen;
-pub mod sheen_albedo;
+pub mod surface;
+pub mod tracer;
 
 pub use crate::scene::Integrator;
 pub use environment::{CubeMap, EnvironmentMap, LinearImage, sky};
 pub use plan::{Explain, RenderPlan};
 pub use progressive::Progressive;
-pub use shade::Tracer;
+pub use tracer::Tracer;
 
 use std::sync::atomic::{AtomicUsize, Ordering};
 
@@ -225,7 +226,7 @@ pub struct SampleRange {
 /// Rows traced together: camera rays go in tiles of [`TILE_WIDTH`] x `BAND` pixels.
 pub const BAND: u32 = 8;
 /// Columns of a camera-ray tile (a tile is one packet: `TILE_WIDTH * BAND` =
-/// [`crate::bvh::wide::packet::PACKET`] rays).
+/// [`crate::bvh::PACKET`] rays).
 pub const TILE_WIDTH: u32 = 8;
 
 /// Adds the samples `samples` of every pixel of the rows from `y0` held in `rows` (whole rows
@@ -261,7 +262,7 @@ pub fn trace_rows_until(
     rows: &mut [Vec3],
     cancel: &(dyn Fn() -> bool + Sync),
 ) -> Option<(RayCounts, u64)> {
-    use crate::bvh::wide::packet::PACKET;
+    use crate::bvh::PACKET;
     let w = cam.width as usize;
     if w == 0 {
         return Some((RayCounts::default(), 0));
@@ -283,7 +284,7 @@ pub fn trace_rows_until(
             }
             // Denormals flushed for the tile's camera rays and shading (the thin lens' disk
             // sample took them too); see `Tracer::radiance_from_hit`.
-            let (rays, rejected) = crate::bvh::wide::kernel::with_denormals_flushed(|| {
+            let (rays, rejected) = crate::cpu::with_denormals_flushed(|| {
                 trace_tile(
                     tracer,
                     cam,
@@ -339,10 +340,10 @@ fn trace_tile(
     samples: &SampleRange,
     corner: (usize, usize),
     size: (usize, usize),
-    sums: &mut [Vec3; crate::bvh::wide::packet::PACKET],
+    sums: &mut [Vec3; crate::bvh::PACKET],
     cancel: &(dyn Fn() -> bool + Sync),
 ) -> Option<(RayCounts, u64)> {
-    use crate::bvh::wide::packet::PACKET;
+    use crate::bvh::PACKET;
     let ((x0, y0), (tw, height)) = (corner, size);
     let w = cam.width as u64;
     let n = tw * height;
@@ -393,8 +394,8 @@ fn trace_tile(
 #[cfg(all(test, target_arch = "x86_64"))]
 mod tests {
     use super::*;
-    use crate::bvh::wide::kernel::{take_denormal_flag, with_denormals_flushed};
     use crate::bvh::{BuildOptions, Bvh};
+    use crate::cpu::{take_denormal_flag, with_denormals_flushed};
     use crate::scene::Scene;
 
     /// Inside `with_denormals_flushed` a denormal reads and is written as zero; outside it

@@ -117,7 +117,7 @@ impl fmt::Display for Explain<'_> {
                 s.max_depth
             )?,
         }
-        let set = super::path::LightSet::new(scene);
+        let set = super::light::LightSet::new(scene);
         if set.sampled_triangles() > 0 {
             writeln!(
                 f,
@@ -213,7 +213,7 @@ impl fmt::Display for Explain<'_> {
                 Light::Point { .. } => writeln!(f, "  light {i}              point: 1 shadow ray")?,
                 Light::Rect { samples, .. } => {
                     let shown = if p.integrator == Integrator::Path
-                        && super::path::LightSet::new(scene).is_visible(i)
+                        && super::light::LightSet::new(scene).is_visible(i)
                     {
                         " (its emissive triangles are found by bounces: MIS)"
                     } else {

@@ -166,7 +166,7 @@ pub fn check_mesh(triangles: &[[Vec3; 3]]) -> MeshReport {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::scene::shapes;
+    use crate::geometry::shapes;
 
     #[test]
     fn a_closed_icosphere_is_clean_and_closed() {

@@ -74,10 +74,12 @@ use glam::{DAffine3, DQuat, DVec3, EulerRot, Vec3};
 use serde::Deserialize;
 use toml::Spanned;
 
+use super::format::{self, Format, MeshFile};
 use super::{
     Camera, Environment, Integrator, Light, Material, Mesh, NormalRule, Scene, Texture, line_of,
-    name_of, obj, ply, read_file, shapes,
+    name_of, read_file,
 };
+use crate::geometry::shapes;
 
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -248,26 +250,51 @@ pub(super) fn load_embedded_cornell_box() -> Scene {
     .expect("the built-in Cornell box scene is valid (checked by a test)")
 }
 
-/// Parses scene text named `path`. `check_files` verifies environment images exist.
-pub fn parse(path: &Path, text: &str, read: ReadFn, check_files: bool) -> Result<Scene> {
-    let at = |pos: usize, msg: String| anyhow!("{}:{}: {msg}", path.display(), line_of(text, pos));
-    let def: SceneDef = toml::from_str(text).map_err(|e| match e.span() {
-        Some(span) => at(span.start, e.message().to_string()),
-        None => anyhow!("{}: {}", path.display(), e.message()),
-    })?;
-    let dir = path.parent().unwrap_or(Path::new("")).to_path_buf();
-    let resolve = |p: &str| -> PathBuf { dir.join(p) };
+/// What the parse of one scene file reads from: the file's name and text (for messages), its
+/// folder (paths in it are relative to it), how files are read, and whether environment images
+/// must exist.
+struct Ctx<'a> {
+    path: &'a Path,
+    text: &'a str,
+    dir: PathBuf,
+    read: ReadFn<'a>,
+    check_files: bool,
+}
 
-    let mut materials: Vec<Material> = Vec::new();
-    let mut by_name: BTreeMap<String, u32> = BTreeMap::new();
-    for (name, m) in &def.materials {
-        by_name.insert(name.clone(), materials.len() as u32);
+impl Ctx<'_> {
+    /// An error at byte `pos` of the file: `file:line: msg`.
+    fn at(&self, pos: usize, msg: String) -> anyhow::Error {
+        anyhow!("{}:{}: {msg}", self.path.display(), line_of(self.text, pos))
+    }
+
+    /// A path the file names, relative to its folder.
+    fn resolve(&self, p: &str) -> PathBuf {
+        self.dir.join(p)
+    }
+
+    /// The `[materials]` tables in order, and each one's index by name.
+    fn materials(
+        &self,
+        defs: &BTreeMap<String, MaterialDef>,
+    ) -> Result<(Vec<Material>, BTreeMap<String, u32>)> {
+        let mut materials = Vec::new();
+        let mut by_name = BTreeMap::new();
+        for (name, m) in defs {
+            by_name.insert(name.clone(), materials.len() as u32);
+            materials.push(self.material(name, m)?);
+        }
+        Ok((materials, by_name))
+    }
+
+    /// The material `name`: its fields checked (the metallic-roughness model or Blinn-Phong,
+    /// not both), its normal or height map read.
+    fn material(&self, name: &str, m: &MaterialDef) -> Result<Material> {
         let mut mat = material_from_def(name, m);
         let (metallic, roughness) = (&m.metallic, &m.roughness);
         if let Some(sr) = &m.sheen_roughness
             && m.sheen.is_none()
         {
-            return Err(at(
+            return Err(self.at(
                 sr.span().start,
                 format!("material `{name}`: `sheen_roughness` without `sheen` (its colour)"),
             ));
@@ -287,26 +314,26 @@ pub fn parse(path: &Path, text: &str, read: ReadFn, check_files: bool) -> Result
                 if let Some(value) = value
                     && !(0.0..=1.0).contains(value.get_ref())
                 {
-                    return Err(at(
+                    return Err(self.at(
                         value.span().start,
                         format!("{key} {} is not in [0, 1]", value.get_ref()),
                     ));
                 }
             }
             if m.specular.is_some() || m.shininess.is_some() || m.mirror.is_some() {
-                return Err(at(
+                return Err(self.at(
                     first,
                     format!(
                         "material `{name}`: `metallic`, `roughness` and `sheen` (glTF's \
-                         metallic-roughness model) cannot be combined with `specular`, \
-                         `shininess` or `mirror` (Blinn-Phong and a mirror)"
+                     metallic-roughness model) cannot be combined with `specular`, \
+                     `shininess` or `mirror` (Blinn-Phong and a mirror)"
                     ),
                 ));
             }
             if let Some(sheen) = &m.sheen
                 && !sheen.get_ref().iter().all(|c| c.is_finite() && *c >= 0.0)
             {
-                return Err(at(
+                return Err(self.at(
                     sheen.span().start,
                     format!(
                         "sheen {:?} is not a colour (three finite numbers, at least 0)",
@@ -344,7 +371,7 @@ pub fn parse(path: &Path, text: &str, read: ReadFn, check_files: bool) -> Result
             mat.pbr = Some(pbr);
         }
         if let (Some(_), Some(height)) = (&m.normal_map, &m.height_map) {
-            return Err(at(
+            return Err(self.at(
                 height.span().start,
                 "a material takes a normal_map or a height_map, not both".into(),
             ));
@@ -355,7 +382,7 @@ pub fn parse(path: &Path, text: &str, read: ReadFn, check_files: bool) -> Result
         ] {
             if let Some(scale) = scale {
                 if !scale.get_ref().is_finite() {
-                    return Err(at(
+                    return Err(self.at(
                         scale.span().start,
                         format!("{key} {} is not a finite number", scale.get_ref()),
                     ));
@@ -368,40 +395,106 @@ pub fn parse(path: &Path, text: &str, read: ReadFn, check_files: bool) -> Result
             ("height_map", &m.height_map, &mut mat.height_map),
         ] {
             if let Some(map) = map {
-                let file = resolve(map.get_ref());
-                let texture = read(&file)
+                let file = self.resolve(map.get_ref());
+                let texture = (self.read)(&file)
                     .and_then(|bytes| Texture::decode(&file.display().to_string(), &bytes, false))
-                    .map_err(|e| at(map.span().start, format!("{key}: {e:#}")))?;
+                    .map_err(|e| self.at(map.span().start, format!("{key}: {e:#}")))?;
                 *slot = Some(std::sync::Arc::new(texture));
             }
         }
-        materials.push(mat);
+        Ok(mat)
     }
 
-    let mut mesh = Mesh::default();
-    let mut warnings = Vec::new();
-    for m in &def.meshes {
-        let span = m.span();
-        let m = m.get_ref();
-        let override_id = match &m.material {
-            Some(name) => Some(*by_name.get(name.get_ref()).ok_or_else(|| {
-                at(
-                    name.span().start,
-                    format!(
-                        "unknown material `{}` (defined: {})",
-                        name.get_ref(),
-                        by_name.keys().cloned().collect::<Vec<_>>().join(", ")
-                    ),
-                )
-            })?),
-            None => None,
-        };
-        let (mut part, part_materials) = match (&m.path, m.shape) {
+    /// The `[[meshes]]` entries, each placed by its transform, as one mesh; the materials of
+    /// mesh files appended to `materials` (an entry with `material` uses that one instead).
+    /// Returns the mesh and the warnings of its files.
+    fn meshes(
+        &self,
+        defs: &[Spanned<MeshDef>],
+        materials: &mut Vec<Material>,
+        by_name: &BTreeMap<String, u32>,
+    ) -> Result<(Mesh, Vec<String>)> {
+        let mut mesh = Mesh::default();
+        let mut warnings = Vec::new();
+        for m in defs {
+            let span = m.span();
+            let m = m.get_ref();
+            let override_id = match &m.material {
+                Some(name) => Some(*by_name.get(name.get_ref()).ok_or_else(|| {
+                    self.at(
+                        name.span().start,
+                        format!(
+                            "unknown material `{}` (defined: {})",
+                            name.get_ref(),
+                            by_name.keys().cloned().collect::<Vec<_>>().join(", ")
+                        ),
+                    )
+                })?),
+                None => None,
+            };
+            let (mut part, part_materials) = self.mesh_part(m, &span, &mut warnings)?;
+            if let Some(id) = override_id
+                && materials[id as usize].has_height_map()
+                && part.uvs.is_empty()
+            {
+                warnings.push(format!(
+                "{}:{}: material `{}` has a height map, but the mesh has no texture coordinates: not applied",
+                self.path.display(),
+                line_of(self.text, span.start),
+                materials[id as usize].name
+            ));
+            }
+            if let Some(id) = override_id
+                && materials[id as usize].has_normal_map()
+            {
+                // The mesh's own tangents were made for its own materials: MikkTSpace's for the
+                // whole mesh, in its own frame (turned with it below).
+                if part.uvs.is_empty() {
+                    warnings.push(format!(
+                    "{}:{}: material `{}` has a normal map, but the mesh has no texture coordinates: not applied",
+                    self.path.display(),
+                    line_of(self.text, span.start),
+                    materials[id as usize].name
+                ));
+                    part.tangents = Vec::new();
+                } else {
+                    part.tangents = super::tangents::mikktspace(
+                        &part.triangles,
+                        &part.normals,
+                        &part.uvs,
+                        |_| true,
+                    );
+                }
+            }
+            part.transform(&transform_of(m));
+            match override_id {
+                Some(id) => {
+                    part.material_ids.iter_mut().for_each(|x| *x = id);
+                    mesh.append(part, 0);
+                }
+                None => {
+                    let offset = materials.len() as u32;
+                    materials.extend(part_materials);
+                    mesh.append(part, offset);
+                }
+            }
+        }
+        Ok((mesh, warnings))
+    }
+
+    /// One mesh entry's triangles, as its file or shape gives them, and their materials.
+    fn mesh_part(
+        &self,
+        m: &MeshDef,
+        span: &std::ops::Range<usize>,
+        warnings: &mut Vec<String>,
+    ) -> Result<(Mesh, Vec<Material>)> {
+        Ok(match (&m.path, m.shape) {
             (Some(p), None) => {
-                let file = resolve(p.get_ref());
+                let file = self.resolve(p.get_ref());
                 let rule = match &m.crease_angle {
                     Some(a) if !(0.0..=180.0).contains(a.get_ref()) => {
-                        return Err(at(
+                        return Err(self.at(
                             a.span().start,
                             format!("crease_angle {} is not in 0..=180 degrees", a.get_ref()),
                         ));
@@ -409,18 +502,19 @@ pub fn parse(path: &Path, text: &str, read: ReadFn, check_files: bool) -> Result
                     Some(a) => Some(NormalRule::Crease(*a.get_ref())),
                     None => None,
                 };
-                let loaded = load_mesh_file(&file, read, rule)
-                    .map_err(|e| at(p.span().start, format!("mesh `{}`: {e:#}", p.get_ref())))?;
-                warnings.extend(loaded.2);
-                (loaded.0, loaded.1)
+                let loaded = load_mesh_file(&file, self.read, rule).map_err(|e| {
+                    self.at(p.span().start, format!("mesh `{}`: {e:#}", p.get_ref()))
+                })?;
+                warnings.extend(loaded.warnings);
+                (loaded.mesh, loaded.materials)
             }
             (None, Some(shape)) => {
                 if let Some(a) = &m.crease_angle {
-                    return Err(at(
-                        a.span().start,
-                        "crease_angle applies to mesh files; generated shapes have their own normals"
-                            .into(),
-                    ));
+                    return Err(self.at(
+                    a.span().start,
+                    "crease_angle applies to mesh files; generated shapes have their own normals"
+                        .into(),
+                ));
                 }
                 let tris = match shape {
                     ShapeDef::Sphere => shapes::icosphere(m.subdivisions.unwrap_or(3).min(7)),
@@ -428,62 +522,98 @@ pub fn parse(path: &Path, text: &str, read: ReadFn, check_files: bool) -> Result
                     ShapeDef::Quad => shapes::quad(),
                 };
                 let part = match shape {
-                    ShapeDef::Sphere => shapes::smooth_sphere(tris),
+                    ShapeDef::Sphere => Mesh::smooth_sphere(tris),
                     _ => Mesh::from_triangles(tris, 0),
                 };
                 (part, vec![Material::default()])
             }
             _ => {
-                return Err(at(
+                return Err(self.at(
                     span.start,
                     "a mesh needs exactly one of `path` or `shape`".into(),
                 ));
             }
-        };
-        if let Some(id) = override_id
-            && materials[id as usize].has_height_map()
-            && part.uvs.is_empty()
-        {
-            warnings.push(format!(
-                "{}:{}: material `{}` has a height map, but the mesh has no texture coordinates: not applied",
-                path.display(),
-                line_of(text, span.start),
-                materials[id as usize].name
-            ));
-        }
-        if let Some(id) = override_id
-            && materials[id as usize].has_normal_map()
-        {
-            // The mesh's own tangents were made for its own materials: MikkTSpace's for the
-            // whole mesh, in its own frame (turned with it below).
-            if part.uvs.is_empty() {
-                warnings.push(format!(
-                    "{}:{}: material `{}` has a normal map, but the mesh has no texture coordinates: not applied",
-                    path.display(),
-                    line_of(text, span.start),
-                    materials[id as usize].name
-                ));
-                part.tangents = Vec::new();
-            } else {
-                part.tangents =
-                    super::tangents::mikktspace(&part.triangles, &part.normals, &part.uvs, |_| {
-                        true
-                    });
-            }
-        }
-        part.transform(&transform_of(m));
-        match override_id {
-            Some(id) => {
-                part.material_ids.iter_mut().for_each(|x| *x = id);
-                mesh.append(part, 0);
-            }
-            None => {
-                let offset = materials.len() as u32;
-                materials.extend(part_materials);
-                mesh.append(part, offset);
-            }
-        }
+        })
     }
+
+    /// The `[environment]` table, its image files checked when asked.
+    fn environment(&self, environment: &Option<Spanned<EnvDef>>) -> Result<Environment> {
+        Ok(match environment {
+            // No [environment] table: the procedural sky, which needs no files.
+            None => Environment::Sky {
+                intensity: 1.0,
+                rotation_deg: 0.0,
+            },
+            Some(e) => {
+                let pos = e.span().start;
+                let check = |p: PathBuf| -> Result<PathBuf> {
+                    if self.check_files && !p.is_file() {
+                        return Err(
+                            self.at(pos, format!("environment image {} not found", p.display()))
+                        );
+                    }
+                    Ok(p)
+                };
+                match e.get_ref() {
+                    EnvDef::None => Environment::None,
+                    EnvDef::Color { color } => Environment::Color(Vec3::from(*color)),
+                    EnvDef::Sky {
+                        intensity,
+                        rotation,
+                    } => Environment::Sky {
+                        intensity: intensity.unwrap_or(1.0),
+                        rotation_deg: rotation.unwrap_or(0.0),
+                    },
+                    EnvDef::Cubemap {
+                        faces,
+                        intensity,
+                        rotation,
+                    } => {
+                        let mut out: [PathBuf; 6] = Default::default();
+                        for (o, f) in out.iter_mut().zip(faces) {
+                            *o = check(self.resolve(f))?;
+                        }
+                        Environment::CubeMap {
+                            faces: out,
+                            intensity: intensity.unwrap_or(1.0),
+                            rotation_deg: rotation.unwrap_or(0.0),
+                        }
+                    }
+                    EnvDef::Equirect {
+                        path: p,
+                        intensity,
+                        rotation,
+                    } => Environment::Equirect {
+                        path: check(self.resolve(p))?,
+                        intensity: intensity.unwrap_or(1.0),
+                        rotation_deg: rotation.unwrap_or(0.0),
+                    },
+                }
+            }
+        })
+    }
+}
+
+/// Parses scene text named `path`. `check_files` verifies environment images exist.
+pub fn parse(path: &Path, text: &str, read: ReadFn, check_files: bool) -> Result<Scene> {
+    let def: SceneDef = toml::from_str(text).map_err(|e| match e.span() {
+        Some(span) => anyhow!(
+            "{}:{}: {}",
+            path.display(),
+            line_of(text, span.start),
+            e.message()
+        ),
+        None => anyhow!("{}: {}", path.display(), e.message()),
+    })?;
+    let ctx = Ctx {
+        path,
+        text,
+        dir: path.parent().unwrap_or(Path::new("")).to_path_buf(),
+        read,
+        check_files,
+    };
+    let (mut materials, by_name) = ctx.materials(&def.materials)?;
+    let (mut mesh, warnings) = ctx.meshes(&def.meshes, &mut materials, &by_name)?;
     if materials.is_empty() {
         materials.push(Material::default());
     }
@@ -497,7 +627,7 @@ pub fn parse(path: &Path, text: &str, read: ReadFn, check_files: bool) -> Result
     let lights = def
         .lights
         .iter()
-        .map(|l| light_from_def(l.get_ref(), origin).map_err(|e| at(l.span().start, e)))
+        .map(|l| light_from_def(l.get_ref(), origin).map_err(|e| ctx.at(l.span().start, e)))
         .collect::<Result<Vec<_>>>()?;
 
     let bounds = mesh.bounds();
@@ -517,60 +647,7 @@ pub fn parse(path: &Path, text: &str, read: ReadFn, check_files: bool) -> Result
         None => Camera::canonical(&bounds),
     };
 
-    let environment = match &def.environment {
-        // No [environment] table: the procedural sky, which needs no files.
-        None => Environment::Sky {
-            intensity: 1.0,
-            rotation_deg: 0.0,
-        },
-        Some(e) => {
-            let pos = e.span().start;
-            let check = |p: PathBuf| -> Result<PathBuf> {
-                if check_files && !p.is_file() {
-                    return Err(at(
-                        pos,
-                        format!("environment image {} not found", p.display()),
-                    ));
-                }
-                Ok(p)
-            };
-            match e.get_ref() {
-                EnvDef::None => Environment::None,
-                EnvDef::Color { color } => Environment::Color(Vec3::from(*color)),
-                EnvDef::Sky {
-                    intensity,
-                    rotation,
-                } => Environment::Sky {
-                    intensity: intensity.unwrap_or(1.0),
-                    rotation_deg: rotation.unwrap_or(0.0),
-                },
-                EnvDef::Cubemap {
-                    faces,
-                    intensity,
-                    rotation,
-                } => {
-                    let mut out: [PathBuf; 6] = Default::default();
-                    for (o, f) in out.iter_mut().zip(faces) {
-                        *o = check(resolve(f))?;
-                    }
-                    Environment::CubeMap {
-                        faces: out,
-                        intensity: intensity.unwrap_or(1.0),
-                        rotation_deg: rotation.unwrap_or(0.0),
-                    }
-                }
-                EnvDef::Equirect {
-                    path: p,
-                    intensity,
-                    rotation,
-                } => Environment::Equirect {
-                    path: check(resolve(p))?,
-                    intensity: intensity.unwrap_or(1.0),
-                    rotation_deg: rotation.unwrap_or(0.0),
-                },
-            }
-        }
-    };
+    let environment = ctx.environment(&def.environment)?;
 
     Ok(Scene {
         name: name_of(path),
@@ -587,36 +664,13 @@ pub fn parse(path: &Path, text: &str, read: ReadFn, check_files: bool) -> Result
     })
 }
 
-/// Loads an OBJ, PLY or glTF through `read`: mesh, its materials, warnings (a glTF's own
-/// camera and lights are not used: the scene file gives them).
-fn load_mesh_file(
-    file: &Path,
-    read: ReadFn,
-    rule: Option<NormalRule>,
-) -> Result<(Mesh, Vec<Material>, Vec<String>)> {
-    let ext = file
-        .extension()
-        .and_then(|e| e.to_str())
-        .map(|e| e.to_ascii_lowercase());
-    let bytes = read(file)?;
-    match ext.as_deref() {
-        Some("obj") => {
-            let dir = file.parent().unwrap_or(Path::new("")).to_path_buf();
-            let d = obj::load_from(file, &bytes, &|m: &Path| read(&dir.join(m)), rule)?;
-            Ok((d.mesh, d.materials, d.warnings))
-        }
-        Some("ply") => Ok((
-            ply::load_from(file, &bytes, rule)?,
-            vec![Material::default()],
-            Vec::new(),
-        )),
-        Some("gltf" | "glb") => {
-            let dir = file.parent().unwrap_or(Path::new("")).to_path_buf();
-            let d = super::gltf::load_from(file, &bytes, &|p: &Path| read(&dir.join(p)), rule)?;
-            Ok((d.mesh, d.materials, d.warnings))
-        }
-        _ => bail!("unknown mesh type (expected .obj, .ply, .gltf or .glb)"),
+/// Loads an OBJ, PLY or glTF through `read` (a glTF's own camera and lights are not used: the
+/// scene file gives them).
+fn load_mesh_file(file: &Path, read: ReadFn, rule: Option<NormalRule>) -> Result<MeshFile> {
+    if !Format::of(file).is_some_and(Format::is_mesh) {
+        bail!("unknown mesh type (expected {})", Format::expected(true));
     }
+    format::load_mesh(file, &read(file)?, read, rule)
 }
 
 /// The mesh entry's transform in f64 (a translation of 1e6 keeps its last digits).
@@ -645,15 +699,7 @@ fn material_from_def(name: &str, m: &MaterialDef) -> Material {
         ior: m.ior.unwrap_or(1.0),
         mirror: v(m.mirror, d.mirror),
         absorption: v(m.absorption, d.absorption),
-        illum: d.illum,
-        diffuse_map: None,
-        emission_map: None,
-        alpha_mode: super::AlphaMode::Opaque,
-        normal_map: None,
-        normal_scale: 1.0,
-        height_map: None,
-        height_scale: 1.0,
-        pbr: None,
+        ..d
     }
 }
 

@@ -20,8 +20,9 @@ use std::sync::Arc;
 use anyhow::{Result, anyhow};
 use glam::{Vec2, Vec3};
 
+use super::format::MeshFile;
 use super::normals::NormalRule;
-use super::{Material, Mesh, Texture, face_normal, read_file};
+use super::{Material, Mesh, Texture, face_normal};
 
 /// Images named by the MTL file, each decoded once (per colour encoding) however many
 /// materials use it.
@@ -111,17 +112,6 @@ impl TextureLine {
     }
 }
 
-/// What an OBJ load produced: triangles, materials, and warnings (a missing MTL file, say)
-/// that did not stop the load.
-pub struct ObjData {
-    /// The triangles, with material ids into `materials`.
-    pub mesh: Mesh,
-    /// The materials (at least one).
-    pub materials: Vec<Material>,
-    /// Problems worth telling the user that did not stop the load.
-    pub warnings: Vec<String>,
-}
-
 /// Checks what tobj 4.0 does not: a colour (`Ka`, `Kd`, `Ks`, `Ke`) with fewer than three
 /// values makes its MTL parser panic, so such a line is reported here first, with its number.
 fn check_mtl(text: &[u8]) -> Result<(), (usize, String)> {
@@ -137,12 +127,6 @@ fn check_mtl(text: &[u8]) -> Result<(), (usize, String)> {
         }
     }
     Ok(())
-}
-
-/// Loads an OBJ file; MTL files are looked up next to it.
-pub fn load(path: &Path) -> Result<ObjData> {
-    let bytes = read_file(path)?;
-    load_from(path, &bytes, &super::beside(path), None)
 }
 
 /// The smoothing group of every face with three or more corners, in file order: `s off` and
@@ -186,96 +170,18 @@ pub fn load_from(
     bytes: &[u8],
     read_mtl: &dyn Fn(&Path) -> Result<Vec<u8>>,
     rule: Option<NormalRule>,
-) -> Result<ObjData> {
-    let options = tobj::LoadOptions {
-        single_index: false,
-        triangulate: false,
-        ignore_points: true,
-        ignore_lines: true,
-    };
-    let mtl_error = std::cell::RefCell::new(None::<String>);
-    let result = tobj::load_obj_buf(&mut BufReader::new(bytes), &options, |mtl_path| {
-        let text = read_mtl(mtl_path).map_err(|e| {
-            *mtl_error.borrow_mut() = Some(format!("{e:#}"));
-            tobj::LoadError::OpenFileFailed
-        })?;
-        if let Err((line, why)) = check_mtl(&text) {
-            *mtl_error.borrow_mut() = Some(format!("{}:{line}: {why}", mtl_path.display()));
-            return Err(tobj::LoadError::MaterialParseError);
-        }
-        tobj::load_mtl_buf(&mut BufReader::new(&text[..])).inspect_err(|e| {
-            *mtl_error.borrow_mut() = Some(format!("{}: {e}", mtl_path.display()));
-        })
-    });
-    let (models, materials) = match result {
-        Ok(r) => r,
-        Err(e) => {
-            let text = String::from_utf8_lossy(bytes);
-            return Err(match locate_error(&text, e) {
-                Some((line, why)) => anyhow!("{}:{line}: {e}: {why}", path.display()),
-                None => anyhow!("{}: {e}", path.display()),
-            });
-        }
-    };
-
+) -> Result<MeshFile> {
+    let (models, materials, mtl_error) = parse(path, bytes, read_mtl)?;
     let mut warnings = Vec::new();
-    let mut mats: Vec<Material> = match materials {
+    let mut mats = match materials {
         Ok(m) => {
             let mut cache = TextureCache::default();
             m.iter()
-                .map(|tm| {
-                    let mut mat = convert_material(tm);
-                    if let Some(spec) = &tm.diffuse_texture {
-                        match cache.get(spec, true, read_mtl) {
-                            Ok(t) => mat.diffuse_map = Some(t),
-                            Err(e) => warnings.push(format!(
-                                "{}: material {}: map_Kd not used ({e:#})",
-                                path.display(),
-                                tm.name
-                            )),
-                        }
-                    }
-                    // `norm` is a normal map by name; `map_Bump` and `bump` are one when
-                    // their image has colour (exporters write normal maps there too).
-                    let normal = match tm.unknown_param.get("norm") {
-                        Some(spec) => Some(("norm", spec)),
-                        None => tm.normal_texture.as_ref().map(|spec| ("map_Bump", spec)),
-                    };
-                    if let Some((key, spec)) = normal {
-                        let say = |why: String| {
-                            format!(
-                                "{}: material {}: {key} not used ({why})",
-                                path.display(),
-                                tm.name
-                            )
-                        };
-                        let line = TextureLine::parse(spec);
-                        if let Some(c) = line.channel.as_deref().filter(|&c| c != "l") {
-                            warnings.push(format!(
-                                "{}: material {}: {key}'s -imfchan {c} is not read (a height map's value is its luminance, a normal map's its RGB)",
-                                path.display(),
-                                tm.name
-                            ));
-                        }
-                        match (cache.get(spec, false, read_mtl), line.bump_multiplier()) {
-                            (Err(e), _) => warnings.push(say(format!("{e:#}"))),
-                            (Ok(_), None) => warnings.push(say("its -bm is not a number".into())),
-                            (Ok(t), Some(scale)) if key != "norm" && t.is_grey() => {
-                                mat.height_map = Some(t);
-                                mat.height_scale = scale;
-                            }
-                            (Ok(t), Some(scale)) => {
-                                mat.normal_map = Some(t);
-                                mat.normal_scale = scale;
-                            }
-                        }
-                    }
-                    mat
-                })
+                .map(|tm| material(path, tm, &mut cache, read_mtl, &mut warnings))
                 .collect()
         }
         Err(e) => {
-            let why = mtl_error.borrow().clone().unwrap_or_else(|| e.to_string());
+            let why = mtl_error.unwrap_or_else(|| e.to_string());
             warnings.push(format!(
                 "{}: materials not loaded ({why}); using the default material",
                 path.display()
@@ -285,26 +191,7 @@ pub fn load_from(
     };
     let default_id = mats.len() as u32;
     let mut need_default = false;
-
-    let mut groups = smoothing_groups(&String::from_utf8_lossy(bytes));
-    let face_count: usize = models
-        .iter()
-        .map(|m| match m.mesh.face_arities.len() {
-            0 => m.mesh.indices.len() / 3,
-            n => n,
-        })
-        .sum();
-    if groups.len() != face_count {
-        if groups.iter().any(|&g| g != 0) {
-            warnings.push(format!(
-                "{}: smoothing groups ignored ({} faces read, {} found by tobj); faces are flat",
-                path.display(),
-                groups.len(),
-                face_count
-            ));
-        }
-        groups = vec![0; face_count];
-    }
+    let groups = face_groups(path, bytes, &models, &mut warnings);
     let mut next_face = 0usize;
 
     // Positions are read in f64 and placed about one origin for the whole file (see
@@ -335,76 +222,14 @@ pub fn load_from(
         let count = m.positions.len() / 3;
         let positions = &local[first_position..first_position + count];
         first_position += count;
-        let normals: Vec<Vec3> = m
-            .normals
-            .chunks_exact(3)
-            .map(|n| Vec3::new(n[0] as f32, n[1] as f32, n[2] as f32))
-            .collect();
-        let has_normals = !m.normal_indices.is_empty() && m.normal_indices.len() == m.indices.len();
-
-        // Fan-triangulate every face: (0, k, k + 1).
-        let mut faces: Vec<[usize; 3]> = Vec::new(); // corners as offsets into m.indices
-        let mut face_groups: Vec<u32> = Vec::new(); // the smoothing group of each triangle
-        let mut offset = 0usize;
-        let arities: Box<dyn Iterator<Item = usize>> = if m.face_arities.is_empty() {
-            Box::new(std::iter::repeat_n(3, m.indices.len() / 3))
-        } else {
-            Box::new(m.face_arities.iter().map(|&a| a as usize))
-        };
-        for arity in arities {
-            let group = groups.get(next_face).copied().unwrap_or(0);
-            next_face += 1;
-            for k in 1..arity.saturating_sub(1) {
-                faces.push([offset, offset + k, offset + k + 1]);
-                face_groups.push(group);
-            }
-            offset += arity;
-        }
-
-        // Texture coordinates, `v` flipped: OBJ counts it from the image's bottom row.
-        let has_uvs = !m.texcoords.is_empty() && m.texcoord_indices.len() == m.indices.len();
-        let uvs: Option<Vec<[Vec2; 3]>> = has_uvs.then(|| {
-            faces
-                .iter()
-                .map(|f| {
-                    f.map(|c| {
-                        let i = m.texcoord_indices[c] as usize;
-                        match m.texcoords.get(2 * i..2 * i + 2) {
-                            Some(t) => Vec2::new(t[0] as f32, 1.0 - t[1] as f32),
-                            None => Vec2::ZERO,
-                        }
-                    })
-                })
-                .collect()
-        });
-        let before = mesh.triangles.len();
-
-        if has_normals {
-            for f in &faces {
-                let tri = f.map(|c| positions[m.indices[c] as usize]);
-                let fallback = face_normal(&tri);
-                let n = f.map(|c| {
-                    normals
-                        .get(m.normal_indices[c] as usize)
-                        .and_then(|n| n.try_normalize())
-                        .unwrap_or(fallback)
-                });
-                mesh.triangles.push(tri);
-                mesh.normals.push(n);
-                mesh.material_ids.push(material);
-            }
-        } else {
-            let idx: Vec<[u32; 3]> = faces.iter().map(|f| f.map(|c| m.indices[c])).collect();
-            let rule = rule.unwrap_or(NormalRule::Groups);
-            mesh.append(
-                Mesh::from_indexed(positions, &idx, material, rule, &face_groups),
-                0,
-            );
-        }
-        if let Some(uvs) = uvs {
-            mesh.uvs.resize(before, [Vec2::ZERO; 3]);
-            mesh.uvs.extend(uvs);
-        }
+        append_model(
+            &mut mesh,
+            m,
+            positions,
+            material,
+            (&groups, &mut next_face),
+            rule,
+        );
     }
     if !mesh.uvs.is_empty() {
         mesh.uvs.resize(mesh.triangles.len(), [Vec2::ZERO; 3]);
@@ -438,11 +263,226 @@ pub fn load_from(
             super::tangents::mikktspace(&mesh.triangles, &mesh.normals, &mesh.uvs, mapped);
     }
     mesh.origin = origin;
-    Ok(ObjData {
-        mesh,
-        materials: mats,
-        warnings,
-    })
+    Ok(MeshFile::of_mesh(mesh, mats, warnings))
+}
+
+/// The OBJ text parsed by tobj, with its MTL files read through `read_mtl` and checked first:
+/// the models, the materials (or why they could not be read, and the message of the file that
+/// failed). An OBJ tobj cannot read is an error naming the file and, where it can be found,
+/// the line.
+#[allow(clippy::type_complexity)]
+fn parse(
+    path: &Path,
+    bytes: &[u8],
+    read_mtl: &dyn Fn(&Path) -> Result<Vec<u8>>,
+) -> Result<(
+    Vec<tobj::Model>,
+    std::result::Result<Vec<tobj::Material>, tobj::LoadError>,
+    Option<String>,
+)> {
+    let options = tobj::LoadOptions {
+        single_index: false,
+        triangulate: false,
+        ignore_points: true,
+        ignore_lines: true,
+    };
+    let mtl_error = std::cell::RefCell::new(None::<String>);
+    let result = tobj::load_obj_buf(&mut BufReader::new(bytes), &options, |mtl_path| {
+        let text = read_mtl(mtl_path).map_err(|e| {
+            *mtl_error.borrow_mut() = Some(format!("{e:#}"));
+            tobj::LoadError::OpenFileFailed
+        })?;
+        if let Err((line, why)) = check_mtl(&text) {
+            *mtl_error.borrow_mut() = Some(format!("{}:{line}: {why}", mtl_path.display()));
+            return Err(tobj::LoadError::MaterialParseError);
+        }
+        tobj::load_mtl_buf(&mut BufReader::new(&text[..])).inspect_err(|e| {
+            *mtl_error.borrow_mut() = Some(format!("{}: {e}", mtl_path.display()));
+        })
+    });
+    let (models, materials) = match result {
+        Ok(r) => r,
+        Err(e) => {
+            let text = String::from_utf8_lossy(bytes);
+            return Err(match locate_error(&text, e) {
+                Some((line, why)) => anyhow!("{}:{line}: {e}: {why}", path.display()),
+                None => anyhow!("{}: {e}", path.display()),
+            });
+        }
+    };
+    Ok((models, materials, mtl_error.into_inner()))
+}
+
+/// An MTL material as the renderer's, with its diffuse texture and its normal or height map
+/// read (a map that cannot be used is left out, with a warning).
+fn material(
+    path: &Path,
+    tm: &tobj::Material,
+    cache: &mut TextureCache,
+    read_mtl: &dyn Fn(&Path) -> Result<Vec<u8>>,
+    warnings: &mut Vec<String>,
+) -> Material {
+    let mut mat = convert_material(tm);
+    if let Some(spec) = &tm.diffuse_texture {
+        match cache.get(spec, true, read_mtl) {
+            Ok(t) => mat.diffuse_map = Some(t),
+            Err(e) => warnings.push(format!(
+                "{}: material {}: map_Kd not used ({e:#})",
+                path.display(),
+                tm.name
+            )),
+        }
+    }
+    // `norm` is a normal map by name; `map_Bump` and `bump` are one when
+    // their image has colour (exporters write normal maps there too).
+    let normal = match tm.unknown_param.get("norm") {
+        Some(spec) => Some(("norm", spec)),
+        None => tm.normal_texture.as_ref().map(|spec| ("map_Bump", spec)),
+    };
+    if let Some((key, spec)) = normal {
+        let say = |why: String| {
+            format!(
+                "{}: material {}: {key} not used ({why})",
+                path.display(),
+                tm.name
+            )
+        };
+        let line = TextureLine::parse(spec);
+        if let Some(c) = line.channel.as_deref().filter(|&c| c != "l") {
+            warnings.push(format!(
+                "{}: material {}: {key}'s -imfchan {c} is not read (a height map's value is its luminance, a normal map's its RGB)",
+                path.display(),
+                tm.name
+            ));
+        }
+        match (cache.get(spec, false, read_mtl), line.bump_multiplier()) {
+            (Err(e), _) => warnings.push(say(format!("{e:#}"))),
+            (Ok(_), None) => warnings.push(say("its -bm is not a number".into())),
+            (Ok(t), Some(scale)) if key != "norm" && t.is_grey() => {
+                mat.height_map = Some(t);
+                mat.height_scale = scale;
+            }
+            (Ok(t), Some(scale)) => {
+                mat.normal_map = Some(t);
+                mat.normal_scale = scale;
+            }
+        }
+    }
+    mat
+}
+
+/// The smoothing group of every face, or all 0 (flat) where the file's `s` lines do not match
+/// the faces tobj read (with a warning if any face had a group).
+fn face_groups(
+    path: &Path,
+    bytes: &[u8],
+    models: &[tobj::Model],
+    warnings: &mut Vec<String>,
+) -> Vec<u32> {
+    let mut groups = smoothing_groups(&String::from_utf8_lossy(bytes));
+    let face_count: usize = models
+        .iter()
+        .map(|m| match m.mesh.face_arities.len() {
+            0 => m.mesh.indices.len() / 3,
+            n => n,
+        })
+        .sum();
+    if groups.len() != face_count {
+        if groups.iter().any(|&g| g != 0) {
+            warnings.push(format!(
+                "{}: smoothing groups ignored ({} faces read, {} found by tobj); faces are flat",
+                path.display(),
+                groups.len(),
+                face_count
+            ));
+        }
+        groups = vec![0; face_count];
+    }
+    groups
+}
+
+/// Appends one model's faces to `mesh`, fan-triangulated, in `material`: with the file's
+/// normals where every corner has one, else normals by `rule` (the smoothing groups, read from
+/// `groups` at `next_face` onwards, by default); and its texture coordinates where it has
+/// them.
+fn append_model(
+    mesh: &mut Mesh,
+    m: &tobj::Mesh,
+    positions: &[Vec3],
+    material: u32,
+    (groups, next_face): (&[u32], &mut usize),
+    rule: Option<NormalRule>,
+) {
+    let normals: Vec<Vec3> = m
+        .normals
+        .chunks_exact(3)
+        .map(|n| Vec3::new(n[0] as f32, n[1] as f32, n[2] as f32))
+        .collect();
+    let has_normals = !m.normal_indices.is_empty() && m.normal_indices.len() == m.indices.len();
+
+    // Fan-triangulate every face: (0, k, k + 1).
+    let mut faces: Vec<[usize; 3]> = Vec::new(); // corners as offsets into m.indices
+    let mut face_groups: Vec<u32> = Vec::new(); // the smoothing group of each triangle
+    let mut offset = 0usize;
+    let arities: Box<dyn Iterator<Item = usize>> = if m.face_arities.is_empty() {
+        Box::new(std::iter::repeat_n(3, m.indices.len() / 3))
+    } else {
+        Box::new(m.face_arities.iter().map(|&a| a as usize))
+    };
+    for arity in arities {
+        let group = groups.get(*next_face).copied().unwrap_or(0);
+        *next_face += 1;
+        for k in 1..arity.saturating_sub(1) {
+            faces.push([offset, offset + k, offset + k + 1]);
+            face_groups.push(group);
+        }
+        offset += arity;
+    }
+
+    // Texture coordinates, `v` flipped: OBJ counts it from the image's bottom row.
+    let has_uvs = !m.texcoords.is_empty() && m.texcoord_indices.len() == m.indices.len();
+    let uvs: Option<Vec<[Vec2; 3]>> = has_uvs.then(|| {
+        faces
+            .iter()
+            .map(|f| {
+                f.map(|c| {
+                    let i = m.texcoord_indices[c] as usize;
+                    match m.texcoords.get(2 * i..2 * i + 2) {
+                        Some(t) => Vec2::new(t[0] as f32, 1.0 - t[1] as f32),
+                        None => Vec2::ZERO,
+                    }
+                })
+            })
+            .collect()
+    });
+    let before = mesh.triangles.len();
+
+    if has_normals {
+        for f in &faces {
+            let tri = f.map(|c| positions[m.indices[c] as usize]);
+            let fallback = face_normal(&tri);
+            let n = f.map(|c| {
+                normals
+                    .get(m.normal_indices[c] as usize)
+                    .and_then(|n| n.try_normalize())
+                    .unwrap_or(fallback)
+            });
+            mesh.triangles.push(tri);
+            mesh.normals.push(n);
+            mesh.material_ids.push(material);
+        }
+    } else {
+        let idx: Vec<[u32; 3]> = faces.iter().map(|f| f.map(|c| m.indices[c])).collect();
+        let rule = rule.unwrap_or(NormalRule::Groups);
+        mesh.append(
+            Mesh::from_indexed(positions, &idx, material, rule, &face_groups),
+            0,
+        );
+    }
+    if let Some(uvs) = uvs {
+        mesh.uvs.resize(before, [Vec2::ZERO; 3]);
+        mesh.uvs.extend(uvs);
+    }
 }
 
 fn convert_material(m: &tobj::Material) -> Material {
@@ -488,14 +528,7 @@ fn convert_material(m: &tobj::Material) -> Material {
         },
         absorption: Vec3::ZERO,
         illum,
-        diffuse_map: None,
-        emission_map: None,
-        alpha_mode: super::AlphaMode::Opaque,
-        normal_map: None,
-        normal_scale: 1.0,
-        height_map: None,
-        height_scale: 1.0,
-        pbr: None,
+        ..Material::default()
     }
 }
 

@@ -1,6 +1,6 @@
 //! glTF's metallic-roughness material model as the renderer's lobes: a Lambertian diffuse
 //! colour, a GGX microfacet lobe (the glTF 2.0 specification's BRDF, evaluated in
-//! [`crate::render::bsdf`]) and, for smooth metals, a mirror.
+//! the renderer's `render::bsdf`) and, for smooth metals, a mirror.
 //!
 //! [`lobes`] is the one mapping, used twice: by the glTF loader for a material's factors
 //! ([`super::gltf::convert_material`]), and at every shading point of a material whose
@@ -38,7 +38,7 @@ pub struct MetallicRoughness {
 }
 
 /// A sheen's parameters (glTF `KHR_materials_sheen`): the fibres of cloth over the material
-/// ([`crate::render::sheen`]).
+/// (evaluated in the renderer's `render::bsdf::sheen`).
 #[derive(Clone, Debug, PartialEq)]
 pub struct SheenLayer {
     /// `sheenColorFactor` (linear RGB, at least 0).
@@ -195,7 +195,7 @@ impl MetallicRoughness {
 /// What the renderer's shading reads of a material at one point.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Lobes {
-    /// Lambertian colour (under the dielectric's Fresnel, see [`crate::render::bsdf`]).
+    /// Lambertian colour (under the dielectric's Fresnel, see the renderer's `render::bsdf`).
     pub diffuse: Vec3,
     /// GGX lobe's reflectance at normal incidence (zero where the point is a mirror).
     pub f0: Vec3,

@@ -93,13 +93,6 @@ impl PropertyAccess for Face {
     }
 }
 
-/// Loads a PLY file.
-pub fn load(path: &Path) -> Result<Mesh> {
-    let bytes =
-        std::fs::read(path).map_err(|e| anyhow!("{}: cannot open file: {e}", path.display()))?;
-    load_from(path, &bytes, None)
-}
-
 /// Parses PLY data named `path` (for messages). Normals the file does not give follow `rule`,
 /// or a crease of [`DEFAULT_CREASE_DEG`] when it is `None`.
 pub fn load_from(path: &Path, data: &[u8], rule: Option<NormalRule>) -> Result<Mesh> {

@@ -132,7 +132,7 @@ impl Texture {
         let [r, g, b, a] = self.texels[y * self.width as usize + x];
         let alpha = a as f32 / 255.0;
         if self.srgb {
-            let t = crate::film::srgb8_table();
+            let t = crate::color::srgb8_table();
             Vec4::new(t[r as usize], t[g as usize], t[b as usize], alpha)
         } else {
             Vec4::new(r as f32, g as f32, b as f32, a as f32) / 255.0

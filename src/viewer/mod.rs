@@ -19,6 +19,7 @@ pub mod debug_ray;
 pub mod display;
 pub mod gizmos;
 pub mod inspector;
+mod orbit;
 pub mod pacing;
 pub mod panel_cache;
 pub mod scene;

@@ -8,7 +8,7 @@ use std::time::Instant;
 use bevy::prelude::*;
 
 use super::task::Background;
-use crate::scene::Scene;
+use crate::scene::{Format, Scene};
 
 /// Loads scenes on request ([`LoadScene`]) and keeps the current one ([`CurrentScene`]).
 pub struct ScenePlugin {
@@ -127,15 +127,10 @@ fn finish_loading(
 /// What the inspector's list offers: every file in `folder` (`assets/scenes`) the viewer can
 /// open (scene files, OBJ, PLY, glTF), sorted.
 pub fn scene_files(folder: &Path) -> Vec<PathBuf> {
-    const OPENS: [&str; 5] = ["toml", "obj", "ply", "gltf", "glb"];
     let mut files: Vec<PathBuf> = std::fs::read_dir(folder)
         .map(|d| {
             d.filter_map(|e| e.ok().map(|e| e.path()))
-                .filter(|p| {
-                    p.extension()
-                        .and_then(|x| x.to_str())
-                        .is_some_and(|x| OPENS.contains(&x.to_ascii_lowercase().as_str()))
-                })
+                .filter(|p| Format::of(p).is_some())
                 .collect()
         })
         .unwrap_or_default();

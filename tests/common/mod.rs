@@ -9,7 +9,7 @@ use glam::Vec3;
 use rayon::prelude::*;
 use tracery::bvh::{BruteForce, BuildOptions, Bvh, Hit};
 use tracery::geometry::{Aabb, Ray};
-use tracery::sampling::SplitMix64;
+use tracery::rng::SplitMix64;
 
 /// A fetched third-party asset, or `None` (with a note) when `scripts/fetch-assets` has not
 /// run. In CI (`CI` set) a missing asset fails the test instead.

@@ -731,7 +731,7 @@ mod tests {
     /// to share; nodes not laid out as the builder lays them out are refused.
     #[test]
     fn the_plan_made_on_the_pool_is_the_plan_made_in_order() {
-        let tris = crate::scene::shapes::icosphere(6);
+        let tris = crate::geometry::shapes::icosphere(6);
         let pool = rayon::ThreadPoolBuilder::new()
             .num_threads(2)
             .build()

@@ -183,9 +183,9 @@ enum Dispatch {
     #[cfg(target_arch = "x86_64")]
     Sse2,
     #[cfg(target_arch = "x86_64")]
-    Avx2(kernel::Avx2Cpu),
+    Avx2(crate::cpu::Avx2Cpu),
     #[cfg(target_arch = "x86_64")]
-    Avx512(kernel::Avx512Cpu),
+    Avx512(crate::cpu::Avx512Cpu),
 }
 
 impl WideBvh {
@@ -215,12 +215,12 @@ impl WideBvh {
             #[cfg(target_arch = "x86_64")]
             Kernel::Sse2 => Dispatch::Sse2,
             #[cfg(target_arch = "x86_64")]
-            Kernel::Avx2 => match kernel::Avx2Cpu::detect() {
+            Kernel::Avx2 => match crate::cpu::Avx2Cpu::detect() {
                 Some(cpu) => Dispatch::Avx2(cpu),
                 None => return Err("this CPU cannot run the avx2 kernel".into()),
             },
             #[cfg(target_arch = "x86_64")]
-            Kernel::Avx512 => match kernel::Avx512Cpu::detect() {
+            Kernel::Avx512 => match crate::cpu::Avx512Cpu::detect() {
                 Some(cpu) => Dispatch::Avx512(cpu),
                 None => return Err("this CPU cannot run the avx512 kernel".into()),
             },
@@ -343,7 +343,7 @@ impl WideBvh {
     #[inline]
     pub(crate) fn trace_packet<const ANY: bool>(
         &self,
-        tile: &packet::RayTile,
+        tile: &crate::bvh::RayTile,
         t_max: f32,
         bests: &mut packet::Bests,
     ) -> bool {

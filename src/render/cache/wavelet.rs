@@ -25,7 +25,7 @@ mod x86;
 mod x86 {
     pub(super) use super::{filter_row, link_row};
 }
-use crate::film::{srgb8_fast, srgb8_table};
+use crate::color::{srgb8_fast, srgb8_table};
 
 /// Passes of the filter: taps 1, 2 and 4 pixels apart, a footprint of up to 15 x 15 pixels.
 pub(super) const LEVELS: u32 = 3;

@@ -4,8 +4,9 @@
 //!
 //! - [`scalar`]: plain Rust, one lane at a time, calling the reference triangle test. It is the
 //!   readable specification and the fallback on any target.
-//! - `x86` (x86-64 only): SSE2, which every x86-64 CPU has, and AVX2 + FMA, chosen at run time,
-//!   the latter also compiled with AVX-512 enabled for CPUs that have it (32 vector registers).
+//! - x86-64 only, chosen at run time: [`sse2`], which every x86-64 CPU has; [`avx2`] (AVX2 +
+//!   FMA); [`avx512`], the AVX2 kernel compiled with AVX-512 enabled (32 vector registers) with
+//!   a sixteen-lane packet test of its own; what they share is in `x86`.
 //!   Their triangle tests, four, eight and sixteen lanes wide, are one generic function
 //!   (`floats::watertight`) over the three register widths.
 //!
@@ -24,16 +25,21 @@
 //!   bound overflowed f32, are handed to the scalar test (its f64 path and tie rule).
 
 #[cfg(target_arch = "x86_64")]
-mod floats;
+pub(crate) mod avx2;
 #[cfg(target_arch = "x86_64")]
-mod lanes16;
+pub(crate) mod avx512;
+#[cfg(target_arch = "x86_64")]
+mod floats;
 mod scalar;
+#[cfg(target_arch = "x86_64")]
+mod sse2;
 pub(crate) mod stack;
 #[cfg(target_arch = "x86_64")]
 mod x86;
 
-use super::packet::{Bests, Group, PACKET, Rays, Tris, rays_entering_scalar};
+use super::packet::{Bests, Group, Rays, Tris, rays_entering_scalar};
 use super::{BLOCK, TriBlock, WIDTH, WideNode};
+use crate::bvh::PACKET;
 use crate::geometry::{PreparedRay, Ray, gamma};
 use stack::Stack;
 
@@ -119,10 +125,10 @@ impl Kernel {
         #[cfg(target_arch = "x86_64")]
         {
             k.push(Kernel::Sse2);
-            if x86::Avx2Cpu::detect().is_some() {
+            if crate::cpu::Avx2Cpu::detect().is_some() {
                 k.push(Kernel::Avx2);
             }
-            if x86::Avx512Cpu::detect().is_some() {
+            if crate::cpu::Avx512Cpu::detect().is_some() {
                 k.push(Kernel::Avx512);
             }
         }
@@ -388,19 +394,8 @@ impl<const N: usize> LaneValues for [[f32; N]; 3] {
 }
 
 pub(crate) use scalar::Scalar;
-#[cfg(all(test, target_arch = "x86_64"))]
-pub(crate) use x86::take_denormal_flag;
 #[cfg(target_arch = "x86_64")]
-pub(crate) use x86::with_denormals_flushed;
-
-/// Runs `f` (elsewhere than on x86-64, as it is: the flush modes are x86's).
-#[cfg(not(target_arch = "x86_64"))]
-#[inline]
-pub(crate) fn with_denormals_flushed<R>(f: impl FnOnce() -> R) -> R {
-    f()
-}
-#[cfg(target_arch = "x86_64")]
-pub(crate) use x86::{Avx2Cpu, Avx512Cpu, Sse2, avx2, avx512};
+pub(crate) use sse2::Sse2;
 
 /// The constants of the distance error bound of [`crate::geometry::intersect_triangle`].
 pub(crate) const G2: f32 = gamma(2);

@@ -1,8 +1,7 @@
-//! Meshes made in code: shapes for scene files, and stress meshes for tests and benchmarks.
+//! Triangles made in code: the shapes scene files name, and stress meshes for tests and
+//! benchmarks.
 
 use glam::Vec3;
-
-use super::Mesh;
 
 /// A unit icosphere: an icosahedron whose faces are split in four `subdivisions` times and
 /// pushed onto the unit sphere (20 * 4^n triangles, outward winding).
@@ -58,21 +57,6 @@ pub fn icosphere(subdivisions: u32) -> Vec<[Vec3; 3]> {
             .collect();
     }
     tris
-}
-
-/// A sphere mesh with normals pointing out of the centre (smooth shading).
-pub fn smooth_sphere(tris: Vec<[Vec3; 3]>) -> Mesh {
-    let normals = tris.iter().map(|t| t.map(|p| p.normalize())).collect();
-    let material_ids = vec![0; tris.len()];
-    Mesh {
-        triangles: tris,
-        normals,
-        material_ids,
-        uvs: Vec::new(),
-        uvs1: Vec::new(),
-        tangents: Vec::new(),
-        origin: glam::DVec3::ZERO,
-    }
 }
 
 /// The cube `[-0.5, 0.5]^3`: 12 triangles, outward winding.
@@ -154,7 +138,7 @@ pub fn needles(count: u32, aspect: f32) -> Vec<[Vec3; 3]> {
 /// A deterministic soup of `count` random triangles in the unit cube (sizes up to `size`),
 /// from a small xorshift generator.
 pub fn random_soup(count: u32, size: f32, seed: u64) -> Vec<[Vec3; 3]> {
-    let mut rng = crate::sampling::SplitMix64::new(seed);
+    let mut rng = crate::rng::SplitMix64::new(seed);
     (0..count)
         .map(|_| {
             let c = Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32());

@@ -13,7 +13,7 @@
 //!
 //! The path tracer samples it with the diffuse lobe's cosine-weighted directions: the broad lobe
 //! of a cloth is covered by them, and a bounce's choice of lobe weighs it with the diffuse one
-//! ([`super::bsdf::Bsdf`]).
+//! ([`super::Bsdf`]).
 
 use std::f32::consts::PI;
 
@@ -95,7 +95,7 @@ impl Sheen {
         if !self.is_some() {
             return 0.0;
         }
-        super::bsdf::luminance(self.color) * albedo(co, self.roughness)
+        super::luminance(self.color) * albedo(co, self.roughness)
     }
 }
 

@@ -1,7 +1,8 @@
-//! The AVX-512 kernel's own parts: a packet's rays tested against a triangle sixteen at a
-//! time, and a packet's rays copied component by component sixteen at a time.
+//! The AVX-512 kernel: the AVX2 kernel's tests, with its own parts, a packet's rays tested
+//! against a triangle sixteen at a time and a packet's rays copied component by component
+//! sixteen at a time; and its entry points, compiled for AVX-512.
 //!
-//! The AVX-512 kernel is the AVX2 one compiled with AVX-512 enabled (see [`super::x86`]), but
+//! The AVX-512 kernel is the AVX2 one compiled with AVX-512 enabled (see [`super::avx2`]), but
 //! for two things. A packet's rays, six floats each, become its arrays of origins and
 //! directions by two-source lane permutations ([`Avx512::load_rays`]): five instructions per
 //! component for sixteen rays, where copying them one float at a time took six loads and six
@@ -10,7 +11,7 @@
 //! each triangle in one 512-bit register per value ([`triangle_rays16`]). A leaf is entered by
 //! about twelve rays of a tile, so most leaves need one group where eight lanes needed two.
 //!
-//! The test is [`super::x86`]'s eight-lane test lane for lane, with masks in place of
+//! The test is [`super::avx2`]'s eight-lane test lane for lane, with masks in place of
 //! movemasks: the same multiplications, subtractions and one division in the same order as
 //! [`crate::geometry::intersect_triangle`], so each lane's distance has the scalar bits.
 #![allow(
@@ -20,12 +21,18 @@
 
 use std::arch::x86_64::*;
 
+use super::avx2::{Avx2, NodeRay8, Tuv8};
 use super::floats;
 use super::stack::Stack;
-use super::x86::{Avx2, NodeRay8, TriRay4};
+use super::x86::TriRay4;
 use super::{BlockHits, Lanes, NodeRay, TriRay};
-use crate::bvh::wide::packet::{Bests, Group, PACKET, Rays, Tris, group_exact, perm_of};
+use crate::bvh::PACKET;
+use crate::bvh::RayTile;
+use crate::bvh::wide::WideBvh;
+use crate::bvh::wide::packet::{Bests, Group, Rays, Tris, group_exact, perm_of};
+use crate::bvh::wide::traverse::{self, Best};
 use crate::bvh::wide::{BLOCK, TriBlock, WIDTH, WideNode};
+use crate::cpu::Avx512Cpu;
 use crate::geometry::Ray;
 
 /// The AVX-512 kernel's lanes: [`Avx2`]'s tests, but groups of up to sixteen rays.
@@ -66,7 +73,7 @@ impl Lanes for Avx512 {
         Avx2::push_others_in_order::<DIST>(n, r, mask, near, stack)
     }
 
-    type Pair = super::x86::Tuv8;
+    type Pair = Tuv8;
 
     #[inline(always)]
     fn block_pair(a: &TriBlock, b: &TriBlock, r: &TriRay4, limit: f32) -> BlockHits<Self::Pair> {
@@ -330,3 +337,9 @@ fn triangle_rays16(
     }
     (found.hits, found.exact)
 }
+
+super::x86::entry_points!(
+    Avx512Cpu,
+    Avx512,
+    "avx2,fma,popcnt,bmi1,bmi2,lzcnt,avx512f,avx512vl,avx512bw,avx512dq"
+);

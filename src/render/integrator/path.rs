@@ -1,0 +1,300 @@
+//! The `path` integrator: unidirectional path tracing.
+//!
+//! At every surface a path meets, next-event estimation samples the lights (point lights,
+//! rectangle lights and the scene's emissive triangles), and a bounce carries the path on,
+//! sampled from the surface's lobes (cosine-weighted for the diffuse one, by half vector or
+//! visible normal for the glossy one: [`crate::render::bsdf`]). Light a bounce finds by hitting an
+//! emitter that next-event estimation also samples is weighted against it by multiple
+//! importance sampling (the power heuristic, Veach 1997, against the density of the mixture
+//! of lobes), so each path counts every light once. Mirrors and transparent surfaces are followed
+//! as in the `direct` integrator. Russian roulette ends paths whose throughput has become
+//! small, and a depth limit ends the rest: with `max_depth = D`, the vertices up to `D`
+//! bounces after the camera's hit take light samples and bounce, and the bounce from the last
+//! of them only collects emission (Mitsuba's `path` with `max_depth = D + 2`).
+//!
+
+use glam::Vec3;
+
+use super::Onward;
+use crate::bvh::Hit;
+use crate::geometry::Ray;
+use crate::render::RayCounts;
+use crate::render::Tracer;
+use crate::render::bsdf::Sample;
+use crate::render::light::{Owner, RectLight, power};
+use crate::render::surface::Surface;
+use crate::sampling::PathSampler;
+use crate::scene::{Light, face_normal};
+
+/// Bounce depth from which Russian roulette may end a path.
+const ROULETTE_DEPTH: u32 = 3;
+
+/// Highest survival probability of Russian roulette (some paths always end, so no path runs
+/// on forever between mirrors).
+const MAX_SURVIVAL: f32 = 0.95;
+
+/// How the ray that reached a surface was chosen: says how emission found there counts.
+#[derive(Clone, Copy, Debug)]
+pub(in crate::render) enum Arrival {
+    /// From the camera or a mirror: emission counts in full.
+    Specular,
+    /// A bounce from a surface at bounce depth `from`, with solid-angle density `pdf`,
+    /// `travelled` units ago (straight through transparent surfaces on the way): emission from a
+    /// light that next-event estimation samples is weighted against it.
+    Bounce { pdf: f32, from: u32, travelled: f32 },
+}
+
+impl Tracer<'_> {
+    /// Radiance along `ray`, whose closest hit is `hit`, by path tracing. `depth` counts the
+    /// bounces before this surface; `beta` is the path's throughput so far (for Russian
+    /// roulette).
+    #[allow(clippy::too_many_arguments)]
+    pub(in crate::render) fn path(
+        &self,
+        ray: &Ray,
+        hit: Option<Hit>,
+        depth: u32,
+        arrival: Arrival,
+        beta: Vec3,
+        rng: &mut PathSampler,
+        counts: &mut RayCounts,
+    ) -> Vec3 {
+        let Some(hit) = hit else {
+            return self.background(ray.dir);
+        };
+        let (s, alpha, wo) = self.vertex(ray, &hit);
+        let mut l = Vec3::ZERO;
+        if s.material.is_emissive() {
+            l += alpha * self.emission_found(ray, &hit, s.emission, arrival);
+        }
+        // The bounce from the last vertex only collects emission.
+        if depth <= self.max_depth {
+            l += alpha * self.lights_at(&s, wo, depth, rng, counts);
+            l += alpha * self.bounce(&s, wo, depth, beta * alpha, rng, counts);
+            self.pass_on(
+                ray,
+                &s,
+                alpha,
+                wo,
+                &mut l,
+                counts,
+                |way, onward, tint, counts| {
+                    // Shadow rays pass straight through transparent surfaces: light a bounce
+                    // finds beyond one is weighted as if the bounce had found it directly.
+                    let arrival = match (way, arrival) {
+                        (Onward::Mirror, _) => Arrival::Specular,
+                        (
+                            Onward::Through,
+                            Arrival::Bounce {
+                                pdf,
+                                from,
+                                travelled,
+                            },
+                        ) => Arrival::Bounce {
+                            pdf,
+                            from,
+                            travelled: travelled + hit.t * ray.dir.length(),
+                        },
+                        (Onward::Through, a) => a,
+                    };
+                    let h = self.bvh.intersect(onward, f32::INFINITY);
+                    self.path(onward, h, depth + 1, arrival, beta * tint, rng, counts)
+                },
+            );
+        }
+        self.absorb(&s, ray, &hit, &mut l);
+        l
+    }
+
+    /// Emission `le` of the triangle `hit` found, weighted for how the ray was chosen.
+    pub(in crate::render) fn emission_found(
+        &self,
+        ray: &Ray,
+        hit: &Hit,
+        le: Vec3,
+        arrival: Arrival,
+    ) -> Vec3 {
+        let Arrival::Bounce {
+            pdf,
+            from,
+            travelled,
+        } = arrival
+        else {
+            return le;
+        };
+        let dir = ray.dir.normalize();
+        let d = travelled + hit.t * ray.dir.length();
+        match self.lights.owner.get(&hit.prim) {
+            Some(Owner::Set) => {
+                let tri = &self.scene.mesh.triangles[hit.prim as usize];
+                let cos = face_normal(tri).dot(dir).abs();
+                if cos <= 0.0 {
+                    return Vec3::ZERO;
+                }
+                let p_light = d * d / (cos * self.lights.area);
+                le * power(1.0, pdf, p_light)
+            }
+            Some(&Owner::Rect(i)) if self.lights.visible[i as usize] => {
+                let Light::Rect {
+                    edge_u,
+                    edge_v,
+                    samples,
+                    ..
+                } = self.scene.lights[i as usize]
+                else {
+                    return Vec3::ZERO;
+                };
+                let normal = edge_u.cross(edge_v);
+                let area = normal.length();
+                // The rectangle emits on its front side only.
+                let cos = -(normal / area).dot(dir);
+                if cos <= 0.0 {
+                    return Vec3::ZERO;
+                }
+                let p_light = d * d / (cos * area);
+                let n = self.rect_samples(samples, from) as f32;
+                le * power(1.0, pdf, n * p_light)
+            }
+            // Part of a rectangle light its triangles do not cover: the light's samples count
+            // it all.
+            _ => Vec3::ZERO,
+        }
+    }
+
+    /// Light samples a rectangle light with `samples` takes at bounce depth `depth`: its own
+    /// count (capped by the plan) at the camera's hit, one deeper.
+    pub(in crate::render) fn rect_samples(&self, samples: u32, depth: u32) -> u32 {
+        if depth > 0 {
+            return 1;
+        }
+        self.capped_samples(samples).max(1)
+    }
+
+    /// Next-event estimation at `s`: every point and rectangle light, and one sample of the
+    /// emissive triangles, each weighted against the bounce that could find it.
+    pub(in crate::render) fn lights_at(
+        &self,
+        s: &Surface,
+        wo: Vec3,
+        depth: u32,
+        rng: &mut PathSampler,
+        counts: &mut RayCounts,
+    ) -> Vec3 {
+        let m = s.material;
+        if !m.reflects() {
+            return Vec3::ZERO;
+        }
+        let origin = s.origin;
+        let bsdf = s.bsdf();
+        // Only the rectangle lights no triangles cover need it.
+        let glossy = self.lights.hidden_rects && bsdf.gloss_probability(wo) > 0.0;
+        let mut sum = Vec3::ZERO;
+        for (i, light) in self.scene.lights.iter().enumerate() {
+            sum += match *light {
+                Light::Point { .. } | Light::Spot { .. } => light
+                    .point_towards(s.p)
+                    .map_or(Vec3::ZERO, |(position, i)| {
+                        self.point_light(s, origin, wo, position, i, counts)
+                    }),
+                Light::Rect {
+                    corner,
+                    edge_u,
+                    edge_v,
+                    color,
+                    intensity,
+                    samples,
+                } => {
+                    let n = self.rect_samples(samples, depth);
+                    let rect = RectLight {
+                        corner,
+                        edge_u,
+                        edge_v,
+                        color,
+                        intensity,
+                        samples: n,
+                    };
+                    // Bounces find the light when its triangles cover it; on a glossy
+                    // surface they look for it by its rectangle when they do not.
+                    let weighted = self.lights.visible[i] || glossy;
+                    self.rect_light(s, wo, &rect, rng, counts, |sample, _, area| {
+                        if weighted {
+                            let p_light = sample.d2 / (sample.cos_l * area);
+                            power(n as f32, p_light, bsdf.pdf(sample.wi, wo))
+                        } else {
+                            1.0
+                        }
+                    })
+                }
+            };
+        }
+        if let Some(e) = self.emissive_sample(s, wo, rng, counts) {
+            sum += e.value * power(1.0, e.p_light, bsdf.pdf(e.wi, wo));
+        }
+        sum
+    }
+
+    /// The bounce from `s`, sampled from its lobes, and the light it brings back (weighted by
+    /// the surface's reflectance over the sampling density).
+    pub(in crate::render) fn bounce(
+        &self,
+        s: &Surface,
+        wo: Vec3,
+        depth: u32,
+        beta: Vec3,
+        rng: &mut PathSampler,
+        counts: &mut RayCounts,
+    ) -> Vec3 {
+        let m = s.material;
+        if !m.reflects() {
+            return Vec3::ZERO;
+        }
+        let bsdf = s.bsdf();
+        // On a glossy surface the bounce also looks for the rectangle lights no triangles
+        // cover (which it cannot hit), as `lights_at` weights their samples.
+        let glossy = self.lights.hidden_rects && bsdf.gloss_probability(wo) > 0.0;
+        if depth == self.max_depth
+            && self.lights.owner.is_empty()
+            && !self.plan.environment
+            && !glossy
+        {
+            // The last bounce only collects emission, and there is none to find.
+            return Vec3::ZERO;
+        }
+        let u = rng.next_2d();
+        let Some(Sample { wi, pdf }) = bsdf.sample(wo, u) else {
+            return Vec3::ZERO;
+        };
+        let cos = s.n().dot(wi);
+        if cos <= 0.0 || wi.dot(s.ng) <= 0.0 || pdf <= 0.0 {
+            return Vec3::ZERO;
+        }
+        let mut weight = bsdf.eval(wi, wo) * cos / pdf;
+        let mut l = Vec3::ZERO;
+        if glossy {
+            l += weight
+                * self.rects_along(s, wi, pdf, 1, counts, |i, samples| {
+                    (!self.lights.visible[i]).then(|| self.rect_samples(samples, depth))
+                });
+        }
+        if depth == self.max_depth && self.lights.owner.is_empty() && !self.plan.environment {
+            return l;
+        }
+        if depth >= ROULETTE_DEPTH {
+            let survive = (beta * weight).max_element().min(MAX_SURVIVAL);
+            if rng.next_2d().x >= survive {
+                return l;
+            }
+            weight /= survive;
+        }
+        counts.bounce += 1;
+        let bounce = Ray::new(s.origin, wi);
+        // Drawn at random: neighbouring paths' bounces take other paths through the tree.
+        let hit = self.bvh.intersect_incoherent(&bounce, f32::INFINITY);
+        let arrival = Arrival::Bounce {
+            pdf,
+            from: depth,
+            travelled: 0.0,
+        };
+        l + weight * self.path(&bounce, hit, depth + 1, arrival, beta * weight, rng, counts)
+    }
+}

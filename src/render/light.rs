@@ -1,0 +1,594 @@
+//! The lights both integrators sample: point, spot and rectangle lights, and the emissive
+//! triangles no rectangle light stands for ([`LightSet`]), each sampled with its shadow ray
+//! (through transparent surfaces where the plan says so); the power heuristic that weighs
+//! light samples against a bounce's directions.
+//!
+//! A rectangle light and emissive triangles lying inside it (the Cornell box's ceiling light:
+//! the quad the camera sees, and the light that lights the room) are one light: its samples
+//! and a bounce that hits its triangles are weighted against each other; when the triangles do
+//! not cover the whole rectangle, bounces that hit them add nothing (the samples count it all).
+
+use std::collections::HashMap;
+
+use glam::{Vec2, Vec3};
+
+use super::surface::{Surface, barycentric, beer_lambert, brdf, textured};
+use super::{RayCounts, Tracer};
+use crate::bvh::Hit;
+use crate::geometry::Ray;
+use crate::sampling::PathSampler;
+use crate::scene::{Light, Scene, face_normal};
+
+/// What stands for an emissive triangle when a bounce hits it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) enum Owner {
+    /// The set of emissive triangles sampled together by area.
+    Set,
+    /// The rectangle light with this index in [`Scene::lights`].
+    Rect(u32),
+}
+
+/// The lights both integrators sample, besides the scene's point and rectangle lights: the
+/// emissive triangles no rectangle light stands for, chosen by area.
+#[derive(Clone, Debug, Default)]
+pub struct LightSet {
+    /// Emissive triangles sampled by area.
+    pub(super) tris: Vec<u32>,
+    /// Running sum of their areas (the last is `area`).
+    pub(super) cdf: Vec<f32>,
+    /// Their total area.
+    pub(super) area: f32,
+    /// Every emissive triangle with area: what a bounce that hits it is weighted against.
+    pub(super) owner: HashMap<u32, Owner>,
+    /// Per scene light: true when emissive triangles cover it, so bounces find it.
+    pub(super) visible: Vec<bool>,
+    /// True when some rectangle light has no triangles covering it.
+    pub(super) hidden_rects: bool,
+}
+
+/// Relative tolerance for a triangle lying in a rectangle light's plane and inside it.
+const COINCIDE: f32 = 1e-4;
+
+impl LightSet {
+    /// Finds the scene's emissive triangles and the rectangle lights they lie in.
+    pub fn new(scene: &Scene) -> Self {
+        let mut set = LightSet {
+            visible: vec![false; scene.lights.len()],
+            ..Default::default()
+        };
+        let emissive: Vec<bool> = scene.materials.iter().map(|m| m.is_emissive()).collect();
+        if !emissive.iter().any(|&e| e) {
+            set.hidden_rects = scene.lights.iter().any(|l| matches!(l, Light::Rect { .. }));
+            return set;
+        }
+        let mut covered = vec![0.0f32; scene.lights.len()];
+        for (prim, (tri, &mat)) in scene
+            .mesh
+            .triangles
+            .iter()
+            .zip(&scene.mesh.material_ids)
+            .enumerate()
+        {
+            if !emissive[mat as usize] {
+                continue;
+            }
+            let area = 0.5 * (tri[1] - tri[0]).cross(tri[2] - tri[0]).length();
+            if !(area > 0.0 && area.is_finite()) {
+                continue;
+            }
+            let rect = scene
+                .lights
+                .iter()
+                .position(|l| rect_contains(l, tri))
+                .map(|i| i as u32);
+            let owner = match rect {
+                Some(i) => {
+                    covered[i as usize] += area;
+                    Owner::Rect(i)
+                }
+                None => {
+                    set.area += area;
+                    set.tris.push(prim as u32);
+                    set.cdf.push(set.area);
+                    Owner::Set
+                }
+            };
+            set.owner.insert(prim as u32, owner);
+        }
+        for (i, light) in scene.lights.iter().enumerate() {
+            if let Light::Rect { edge_u, edge_v, .. } = light {
+                let area = edge_u.cross(*edge_v).length();
+                set.visible[i] = covered[i] >= area * (1.0 - 1e-3);
+                set.hidden_rects |= !set.visible[i];
+            }
+        }
+        set
+    }
+
+    /// Number of emissive triangles sampled as lights of their own.
+    pub fn sampled_triangles(&self) -> usize {
+        self.tris.len()
+    }
+
+    /// True when bounces can find scene light `i` (its triangles cover it).
+    pub fn is_visible(&self, i: usize) -> bool {
+        self.visible.get(i).copied().unwrap_or(false)
+    }
+
+    /// A triangle of the set chosen by area, and `u.x` rescaled to stay uniform.
+    fn pick(&self, u: Vec2) -> (u32, Vec2) {
+        let x = u.x * self.area;
+        let i = self
+            .cdf
+            .partition_point(|&c| c <= x)
+            .min(self.tris.len() - 1);
+        let lo = if i == 0 { 0.0 } else { self.cdf[i - 1] };
+        let a = self.cdf[i] - lo;
+        let ux = ((x - lo) / a).clamp(0.0, 1.0 - f32::EPSILON);
+        (self.tris[i], Vec2::new(ux, u.y))
+    }
+}
+
+/// True when `light` is a rectangle and all of `tri` lies in its plane and inside it.
+fn rect_contains(light: &Light, tri: &[Vec3; 3]) -> bool {
+    let Light::Rect {
+        corner,
+        edge_u,
+        edge_v,
+        ..
+    } = *light
+    else {
+        return false;
+    };
+    let n = edge_u.cross(edge_v);
+    let size = edge_u.length() + edge_v.length();
+    let Some(nu) = n.try_normalize() else {
+        return false;
+    };
+    // Coordinates along the edges by the dual basis (the edges need not be perpendicular).
+    let du = edge_v.cross(n);
+    let dv = n.cross(edge_u);
+    let (su, sv) = (edge_u.dot(du), edge_v.dot(dv));
+    let inside = |x: f32| (-COINCIDE..=1.0 + COINCIDE).contains(&x);
+    tri.iter().all(|&p| {
+        let d = p - corner;
+        d.dot(nu).abs() <= COINCIDE * size && inside(d.dot(du) / su) && inside(d.dot(dv) / sv)
+    })
+}
+
+/// Power heuristic for a strategy with `n` samples of density `p` against one of density `q`.
+#[inline]
+pub(super) fn power(n: f32, p: f32, q: f32) -> f32 {
+    let a = n * p;
+    let a2 = a * a;
+    if a2.is_infinite() {
+        1.0
+    } else if a2 + q * q > 0.0 {
+        a2 / (a2 + q * q)
+    } else {
+        0.0
+    }
+}
+
+/// One light sample of the emissive triangles ([`Tracer::emissive_sample`]).
+pub(super) struct EmissiveSample {
+    /// The light reflected towards the viewer, shadow included, before any weight.
+    pub(super) value: Vec3,
+    /// The sample's density over solid angle at the surface.
+    pub(super) p_light: f32,
+    /// Unit direction from the surface to the sampled point.
+    pub(super) wi: Vec3,
+    /// True when its shadow ray went through a transparent surface (or shadows are off): a
+    /// direction drawn from the lobes would not have found the point as its closest hit.
+    pub(super) crossed: bool,
+}
+
+/// A rectangle light's shape and emission: the rectangle `corner + [0, 1] edge_u +
+/// [0, 1] edge_v`, facing along `edge_u x edge_v`, `color * intensity`, and the number of
+/// samples to estimate its light with.
+#[derive(Clone, Copy)]
+pub(super) struct RectLight {
+    pub(super) corner: Vec3,
+    pub(super) edge_u: Vec3,
+    pub(super) edge_v: Vec3,
+    pub(super) color: Vec3,
+    pub(super) intensity: f32,
+    pub(super) samples: u32,
+}
+
+/// A point on a rectangle light seen from a surface.
+pub(super) struct RectSample {
+    /// The point.
+    pub(super) q: Vec3,
+    /// Unit direction from the surface to it.
+    pub(super) wi: Vec3,
+    /// Squared distance.
+    pub(super) d2: f32,
+    /// Cosine at the light (positive: its front faces the surface).
+    pub(super) cos_l: f32,
+}
+
+/// The point `u` of the rectangle `corner + u.x edge_u + u.y edge_v` (unit normal `ln`) as seen
+/// from `s`, or `None` when it lies behind the surface or shows the surface its back.
+pub(super) fn rect_sample(
+    s: &Surface,
+    corner: Vec3,
+    edge_u: Vec3,
+    edge_v: Vec3,
+    ln: Vec3,
+    u: glam::Vec2,
+) -> Option<RectSample> {
+    let q = corner + u.x * edge_u + u.y * edge_v;
+    let to = q - s.p;
+    let d2 = to.length_squared();
+    let wi = to / d2.sqrt();
+    let cos_l = -ln.dot(wi);
+    if s.n().dot(wi) <= 0.0 || cos_l <= 0.0 || s.ng.dot(to) <= 0.0 {
+        return None;
+    }
+    Some(RectSample { q, wi, d2, cos_l })
+}
+
+/// Where the ray from `p` along the unit direction `wi` meets the front of the rectangle
+/// `corner + [0, 1] edge_u + [0, 1] edge_v` (which faces along `edge_u x edge_v`), as the
+/// sample [`rect_sample`] would have drawn there; `None` when it misses the rectangle or
+/// meets its back.
+pub(super) fn rect_hit(
+    p: Vec3,
+    wi: Vec3,
+    corner: Vec3,
+    edge_u: Vec3,
+    edge_v: Vec3,
+) -> Option<RectSample> {
+    let normal = edge_u.cross(edge_v);
+    let ln = normal.try_normalize()?;
+    let cos_l = -ln.dot(wi);
+    if cos_l.is_nan() || cos_l <= 0.0 {
+        return None;
+    }
+    let t = (corner - p).dot(ln) / -cos_l;
+    if !(t > 0.0 && t.is_finite()) {
+        return None;
+    }
+    let q = p + t * wi;
+    // Coordinates along the edges by the dual basis (the edges need not be perpendicular).
+    let d = q - corner;
+    let a = d.dot(edge_v.cross(normal)) / edge_u.dot(edge_v.cross(normal));
+    let b = d.dot(normal.cross(edge_u)) / edge_v.dot(normal.cross(edge_u));
+    if !((0.0..=1.0).contains(&a) && (0.0..=1.0).contains(&b)) {
+        return None;
+    }
+    Some(RectSample {
+        q,
+        wi,
+        d2: t * t,
+        cos_l,
+    })
+}
+
+impl Tracer<'_> {
+    /// Radiance from the rectangle lights that the direction `wi` from `s` meets on their
+    /// front, each seen through a shadow ray and weighted against the light's own samples by
+    /// the power heuristic: `wi` is one of `count` directions drawn with density `pdf`, and
+    /// `light_samples(i, samples)` says how many samples rectangle light `i` (of `samples`)
+    /// takes here, or `None` to leave it out. Lights do not shadow each other, as with their
+    /// samples: a direction counts every rectangle it meets.
+    pub(super) fn rects_along(
+        &self,
+        s: &Surface,
+        wi: Vec3,
+        pdf: f32,
+        count: u32,
+        counts: &mut RayCounts,
+        light_samples: impl Fn(usize, u32) -> Option<u32>,
+    ) -> Vec3 {
+        let mut acc = Vec3::ZERO;
+        for (i, light) in self.scene.lights.iter().enumerate() {
+            let Light::Rect {
+                corner,
+                edge_u,
+                edge_v,
+                color,
+                intensity,
+                samples,
+            } = *light
+            else {
+                continue;
+            };
+            let Some(n) = light_samples(i, samples) else {
+                continue;
+            };
+            let Some(hit) = rect_hit(s.p, wi, corner, edge_u, edge_v) else {
+                continue;
+            };
+            let area = edge_u.cross(edge_v).length();
+            let p_light = hit.d2 / (hit.cos_l * area);
+            let w = power(count as f32, pdf, n as f32 * p_light);
+            if w == 0.0 {
+                continue;
+            }
+            let pass = self.shadow(s.origin, hit.q - s.origin, 1.0 - 1e-4, counts);
+            acc += color * intensity * pass * w;
+        }
+        acc
+    }
+
+    /// Light a point light of radiant intensity `intensity` sends to `s` and `s` reflects
+    /// towards `wo`, shadow ray from `origin` included (zero from behind the surface).
+    pub(super) fn point_light(
+        &self,
+        s: &Surface,
+        origin: Vec3,
+        wo: Vec3,
+        position: Vec3,
+        intensity: Vec3,
+        counts: &mut RayCounts,
+    ) -> Vec3 {
+        // The light's direction and distance from the surface point itself; only the shadow
+        // ray starts from the offset origin.
+        let to = position - s.p;
+        let d2 = to.length_squared();
+        let wi = to / d2.sqrt();
+        if s.n().dot(wi) <= 0.0 || s.ng.dot(to) <= 0.0 {
+            return Vec3::ZERO;
+        }
+        let pass = self.shadow(origin, position - origin, 1.0, counts);
+        brdf(s, wi, wo) * s.n().dot(wi) * intensity * pass / d2
+    }
+
+    /// Light the rectangle light `rect` sends to `s` and `s` reflects towards `wo`, from
+    /// `rect.samples` samples of it, each with its shadow ray (stopping just short of the
+    /// light, so that its own quad does not shadow it). Each sample's term is scaled by
+    /// `weight(sample, cos, area)` (`cos` at the surface, `area` the light's): the path
+    /// tracer's multiple-importance weight, 1 for direct light alone; a sample weighted 0
+    /// casts no shadow ray.
+    pub(super) fn rect_light(
+        &self,
+        s: &Surface,
+        wo: Vec3,
+        rect: &RectLight,
+        rng: &mut PathSampler,
+        counts: &mut RayCounts,
+        weight: impl Fn(&RectSample, f32, f32) -> f32,
+    ) -> Vec3 {
+        let RectLight {
+            corner,
+            edge_u,
+            edge_v,
+            color,
+            intensity,
+            samples: n,
+        } = *rect;
+        let origin = s.origin;
+        let normal = edge_u.cross(edge_v);
+        let area = normal.length();
+        let ln = normal / area;
+        let mut acc = Vec3::ZERO;
+        for _ in 0..n {
+            let Some(sample) = rect_sample(s, corner, edge_u, edge_v, ln, rng.next_2d()) else {
+                continue;
+            };
+            let cos = s.n().dot(sample.wi);
+            let w = weight(&sample, cos, area);
+            if w == 0.0 {
+                continue;
+            }
+            let RectSample { q, wi, d2, cos_l } = sample;
+            let pass = self.shadow(origin, q - origin, 1.0 - 1e-4, counts);
+            acc += brdf(s, wi, wo) * cos * cos_l * area / d2 * pass * w;
+        }
+        acc * color * intensity / n as f32
+    }
+
+    /// A rectangle light's `samples` after the plan's cap.
+    pub(super) fn capped_samples(&self, samples: u32) -> u32 {
+        self.plan
+            .max_light_samples
+            .map_or(samples, |cap| samples.min(cap.max(1)))
+    }
+
+    /// Fraction of light passing from `origin + to * t_max` back to `origin`, per channel.
+    pub(super) fn shadow(
+        &self,
+        origin: Vec3,
+        to: Vec3,
+        t_max: f32,
+        counts: &mut RayCounts,
+    ) -> Vec3 {
+        self.shadow_through(origin, to, t_max, counts).0
+    }
+
+    /// [`Tracer::shadow`], and whether the light it passes went through a transparent surface
+    /// (or was not looked at, shadows being off): then a ray along `to` would not have reached
+    /// the light as its closest hit.
+    pub(super) fn shadow_through(
+        &self,
+        origin: Vec3,
+        to: Vec3,
+        t_max: f32,
+        counts: &mut RayCounts,
+    ) -> (Vec3, bool) {
+        if !self.plan.shadows {
+            return (Vec3::ONE, true);
+        }
+        counts.shadow += 1;
+        let ray = Ray::new(origin, to);
+        if !self.plan.transparent_shadows {
+            let pass = if self.bvh.occluded(&ray, t_max) {
+                Vec3::ZERO
+            } else {
+                Vec3::ONE
+            };
+            return (pass, false);
+        }
+        let mut crossed = false;
+        let scene = self.scene;
+        let len = to.length();
+        // Absorption needs the distance travelled inside each medium. Summing `+t` over exits
+        // and `-t` over entries gives it in any order, so hits need no sorting; a medium the
+        // segment ends inside adds `t_max` once per unmatched entry.
+        let mut inside: Vec<(u32, f32, i32)> = Vec::new();
+        let mut pass = self.bvh.transmittance(&ray, t_max, |prim, t| {
+            let m = scene.material_of(prim);
+            if !m.is_transparent() {
+                return Vec3::ZERO;
+            }
+            // A texture's alpha and colour are read where the shadow ray crosses the
+            // triangle, as the camera would see them there.
+            let (opacity, diffuse) = if m.is_textured() {
+                let tri = &scene.mesh.triangles[prim as usize];
+                let (u, v) = barycentric(tri, origin + to * t);
+                let look = textured(scene, m, prim, u, v);
+                (look.opacity, look.diffuse)
+            } else {
+                (m.opacity_at(1.0), m.diffuse)
+            };
+            if opacity >= 1.0 {
+                return Vec3::ZERO;
+            }
+            crossed = true;
+            if self.plan.absorption && m.absorption.max_element() > 0.0 {
+                let id = scene.mesh.material_ids[prim as usize];
+                let entering = face_normal(&scene.mesh.triangles[prim as usize]).dot(to) < 0.0;
+                let (dt, db) = if entering { (-t, 1) } else { (t, -1) };
+                match inside.iter_mut().find(|e| e.0 == id) {
+                    Some(e) => {
+                        e.1 += dt;
+                        e.2 += db;
+                    }
+                    None => inside.push((id, dt, db)),
+                }
+            }
+            m.transmission(opacity, diffuse)
+        });
+        for (id, sum, balance) in inside {
+            let d = (sum + balance.max(0) as f32 * t_max) * len;
+            pass *= beer_lambert(scene.materials[id as usize].absorption, d.max(0.0));
+        }
+        (pass, crossed)
+    }
+
+    /// One light sample of the emissive triangles no rectangle light stands for (a triangle
+    /// chosen by area, a point uniform on it), with its shadow ray: the light `s` reflects
+    /// towards `wo` from it, unweighted. `None` when there are none, or the point lies behind
+    /// the surface.
+    pub(super) fn emissive_sample(
+        &self,
+        s: &Surface,
+        wo: Vec3,
+        rng: &mut PathSampler,
+        counts: &mut RayCounts,
+    ) -> Option<EmissiveSample> {
+        if self.lights.tris.is_empty() {
+            return None;
+        }
+        let (prim, u) = self.lights.pick(rng.next_2d());
+        let tri = &self.scene.mesh.triangles[prim as usize];
+        let su = u.x.sqrt();
+        let (b1, b2) = (su * (1.0 - u.y), su * u.y);
+        let q = tri[0] * (1.0 - su) + tri[1] * b1 + tri[2] * b2;
+        let to = q - s.p;
+        let d2 = to.length_squared();
+        let wi = to / d2.sqrt();
+        let cos_l = face_normal(tri).dot(wi).abs();
+        let cos = s.n().dot(wi);
+        if cos <= 0.0 || cos_l <= 0.0 || s.ng.dot(to) <= 0.0 {
+            return None;
+        }
+        let p_light = d2 / (cos_l * self.lights.area);
+        let (pass, crossed) = self.shadow_through(s.origin, q - s.origin, 1.0 - 1e-4, counts);
+        let le = self.look(prim, b1, b2).emission;
+        Some(EmissiveSample {
+            value: brdf(s, wi, wo) * cos * le * pass / p_light,
+            p_light,
+            wi,
+            crossed,
+        })
+    }
+
+    /// The emission of the triangle `hit` that a direction `wi` from `s` drawn with density
+    /// `pdf` (one of `count`) reached as its closest hit, weighted against one light sample of
+    /// the emissive triangles (the power heuristic); zero when `hit` is not one of them.
+    pub(super) fn emissive_along(
+        &self,
+        s: &Surface,
+        wi: Vec3,
+        hit: &Hit,
+        pdf: f32,
+        count: u32,
+    ) -> Vec3 {
+        if self.lights.owner.get(&hit.prim) != Some(&Owner::Set) {
+            return Vec3::ZERO;
+        }
+        let tri = &self.scene.mesh.triangles[hit.prim as usize];
+        let cos_l = face_normal(tri).dot(wi).abs();
+        if cos_l <= 0.0 {
+            return Vec3::ZERO;
+        }
+        let d = (s.p - (s.origin + hit.t * wi)).length();
+        let p_light = d * d / (cos_l * self.lights.area);
+        let le = self.look(hit.prim, hit.u, hit.v).emission;
+        le * power(count as f32, pdf, p_light)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A skewed rectangle (edges not perpendicular) facing along `edge_u x edge_v`.
+    const CORNER: Vec3 = Vec3::new(1.0, 2.0, 0.5);
+    const EDGE_U: Vec3 = Vec3::new(1.5, 0.0, 0.3);
+    const EDGE_V: Vec3 = Vec3::new(0.4, 0.0, 1.2);
+
+    fn towards(p: Vec3, a: f32, b: f32) -> Vec3 {
+        (CORNER + a * EDGE_U + b * EDGE_V - p).normalize()
+    }
+
+    #[test]
+    fn rect_hit_finds_the_point_a_direction_was_aimed_at() {
+        // The front faces -y (edge_u x edge_v), so points below see it.
+        assert!(EDGE_U.cross(EDGE_V).y < 0.0);
+        let ln = EDGE_U.cross(EDGE_V).normalize();
+        for (i, p) in [
+            Vec3::ZERO,
+            Vec3::new(3.0, -1.0, 2.0),
+            Vec3::new(1.2, 1.9, 1.0),
+        ]
+        .into_iter()
+        .enumerate()
+        {
+            for (a, b) in [(0.5, 0.5), (0.01, 0.98), (0.99, 0.02), (0.3, 0.7)] {
+                let q = CORNER + a * EDGE_U + b * EDGE_V;
+                let wi = towards(p, a, b);
+                let hit = rect_hit(p, wi, CORNER, EDGE_U, EDGE_V)
+                    .unwrap_or_else(|| panic!("point {i}, ({a}, {b}): missed"));
+                assert!((hit.q - q).length() < 1e-5, "point {i}: {} vs {q}", hit.q);
+                assert!((hit.d2 - (q - p).length_squared()).abs() < 1e-4 * hit.d2);
+                assert!((hit.cos_l + ln.dot(wi)).abs() < 1e-6 && hit.cos_l > 0.0);
+                assert_eq!(hit.wi, wi);
+            }
+        }
+    }
+
+    #[test]
+    fn rect_hit_misses_outside_the_edges_behind_and_on_the_back() {
+        let p = Vec3::new(1.5, 0.0, 1.0);
+        for (a, b) in [
+            (1.02, 0.5),
+            (-0.02, 0.5),
+            (0.5, 1.02),
+            (0.5, -0.02),
+            (1.1, 1.1),
+        ] {
+            assert!(rect_hit(p, towards(p, a, b), CORNER, EDGE_U, EDGE_V).is_none());
+        }
+        // Looking away from it, and from above (its back).
+        assert!(rect_hit(p, -towards(p, 0.5, 0.5), CORNER, EDGE_U, EDGE_V).is_none());
+        let above = Vec3::new(1.5, 4.0, 1.0);
+        assert!(rect_hit(above, towards(above, 0.5, 0.5), CORNER, EDGE_U, EDGE_V).is_none());
+        // Parallel to its plane, and a rectangle without area.
+        assert!(rect_hit(p, Vec3::X, CORNER, EDGE_U, EDGE_V).is_none());
+        assert!(rect_hit(p, towards(p, 0.5, 0.5), CORNER, EDGE_U, EDGE_U).is_none());
+    }
+}

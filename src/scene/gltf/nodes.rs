@@ -1,0 +1,305 @@
+//! A glTF scene's node graph: nodes visited from the scene's roots with their transforms
+//! composed in f64, each mesh placed once per node that uses it, skins posed by their joints.
+
+use super::*;
+
+/// Each vertex's transform under a skin: its joints' matrices blended by its weights
+/// (normalised to sum to 1; a vertex with no weight keeps the node's `world`). A joint past
+/// the skin's list is an error.
+pub(super) fn skinning(
+    at: &str,
+    joints: &[DMat4],
+    influences: &Influences,
+    world: &DMat4,
+) -> Result<Vec<Transform>> {
+    influences
+        .iter()
+        .map(|inf| {
+            let (mut m, mut sum) = (DMat4::ZERO, 0.0);
+            for &(j, w) in inf {
+                let Some(jm) = joints.get(j as usize) else {
+                    bail!(
+                        "{at}: a vertex names joint {j} of a skin with {} joints",
+                        joints.len()
+                    );
+                };
+                m += *jm * f64::from(w);
+                sum += f64::from(w);
+            }
+            Ok(Transform::of(&if sum > 0.0 {
+                m * (1.0 / sum)
+            } else {
+                *world
+            }))
+        })
+        .collect()
+}
+
+impl Loader<'_> {
+    pub(super) fn visit(
+        &mut self,
+        index: usize,
+        parent: DMat4,
+        on_path: &mut [bool],
+        depth: usize,
+    ) -> Result<()> {
+        if on_path[index] {
+            bail!(
+                "{}: nodes[{index}]: the node hierarchy has a cycle (nodes[{index}] is its own ancestor)",
+                self.name
+            );
+        }
+        if depth > MAX_NODE_DEPTH {
+            bail!(
+                "{}: nodes[{index}]: the node hierarchy is deeper than {MAX_NODE_DEPTH} levels",
+                self.name
+            );
+        }
+        self.visits += 1;
+        if self.visits > MAX_NODE_VISITS {
+            bail!(
+                "{}: the node hierarchy places more than {MAX_NODE_VISITS} nodes (nodes under several parents?)",
+                self.name
+            );
+        }
+        let Some(node) = self.nodes.get(index).cloned() else {
+            bail!("{}: nodes[{index}] does not exist", self.name);
+        };
+        let local = DMat4::from_cols_array_2d(&node.transform().matrix().map(|c| c.map(f64::from)));
+        let world = parent * local;
+        if !world.is_finite() {
+            bail!("{}: nodes[{index}]: its transform is not finite", self.name);
+        }
+        if let Some(mesh) = node.mesh() {
+            // Morph targets at the node's weights, else the mesh's (no animation is played).
+            let weights = node.weights().or(mesh.weights()).unwrap_or(&[]);
+            // A skinned mesh is placed by its joints; the node's own transform is ignored,
+            // as the specification asks.
+            let skin = match node.skin() {
+                Some(skin) => Some(self.joint_matrices(&skin)?),
+                None => None,
+            };
+            for prim in mesh.primitives() {
+                self.place(
+                    mesh.index(),
+                    prim,
+                    weights,
+                    &world,
+                    skin.as_deref().map(Vec::as_slice),
+                )?;
+            }
+        }
+        if self.camera.is_none()
+            && let Some(cam) = node.camera()
+        {
+            match cam.projection() {
+                ::gltf::camera::Projection::Perspective(p) => {
+                    let forward = world.transform_vector3(-DVec3::Z).normalize_or_zero();
+                    let up = world.transform_vector3(DVec3::Y).normalize_or_zero();
+                    if forward != DVec3::ZERO && up != DVec3::ZERO {
+                        self.camera = Some(GltfCamera {
+                            position: world.transform_point3(DVec3::ZERO),
+                            forward,
+                            up,
+                            vfov_deg: p.yfov().to_degrees().clamp(1.0, 179.0),
+                        });
+                    }
+                }
+                ::gltf::camera::Projection::Orthographic(_) => self.warnings.push(format!(
+                    "{}: cameras[{}]: orthographic cameras are not supported; skipped",
+                    self.name,
+                    cam.index()
+                )),
+            }
+        }
+        if let Some(light) = node.light() {
+            use ::gltf::khr_lights_punctual::Kind;
+            let (kind, cone) = match light.kind() {
+                Kind::Point => (LightKind::Point, None),
+                Kind::Spot {
+                    inner_cone_angle,
+                    outer_cone_angle,
+                } => {
+                    // The specification asks for 0 <= inner < outer <= pi / 2; a cone outside
+                    // that is clamped into it, with a warning.
+                    let or = |a: f32, default: f32| if a.is_finite() { a } else { default };
+                    let outer = or(outer_cone_angle, std::f32::consts::FRAC_PI_4)
+                        .clamp(1e-4, std::f32::consts::FRAC_PI_2);
+                    let inner = or(inner_cone_angle, 0.0).clamp(0.0, outer * 0.9999);
+                    if !(outer == outer_cone_angle && inner == inner_cone_angle) {
+                        self.warnings.push(format!(
+                            "{}: lights[{}]: spot cone angles {inner_cone_angle} and \
+                             {outer_cone_angle} are outside 0 <= inner < outer <= pi/2; \
+                             used {inner} and {outer}",
+                            self.name,
+                            light.index()
+                        ));
+                    }
+                    (LightKind::Spot, Some((inner, outer)))
+                }
+                Kind::Directional => (LightKind::Directional, None),
+            };
+            let intensity = light.intensity();
+            if intensity.is_finite() && intensity >= 0.0 {
+                self.lights.push(GltfLight {
+                    kind,
+                    position: world.transform_point3(DVec3::ZERO),
+                    direction: world.transform_vector3(-DVec3::Z).normalize_or(-DVec3::Z),
+                    color: Vec3::from(light.color()),
+                    intensity,
+                    cone,
+                });
+            }
+        }
+        on_path[index] = true;
+        for child in node.children() {
+            self.visit(child.index(), world, on_path, depth + 1)?;
+        }
+        on_path[index] = false;
+        Ok(())
+    }
+
+    /// Places one primitive with the node's world transform, its morph targets at `weights`,
+    /// or by the joint matrices of the node's skin.
+    pub(super) fn place(
+        &mut self,
+        mesh: usize,
+        prim: ::gltf::Primitive,
+        weights: &[f32],
+        world: &DMat4,
+        skin: Option<&[DMat4]>,
+    ) -> Result<()> {
+        let key = (
+            mesh,
+            prim.index(),
+            weights.iter().map(|w| w.to_bits()).collect(),
+            skin.is_some(),
+        );
+        let data = match self.primitives.get(&key) {
+            Some(d) => d.clone(),
+            None => {
+                let skinned = skin.is_some();
+                let d = self
+                    .read_primitive(mesh, &prim, weights, skinned)?
+                    .map(Arc::new);
+                self.primitives.insert(key, d.clone());
+                d
+            }
+        };
+        let Some(p) = data else {
+            return Ok(());
+        };
+        if self.material_ids.len() + p.triangles.len() > MAX_TRIANGLES {
+            bail!(
+                "{}: meshes[{mesh}] placed again would make more than {MAX_TRIANGLES} triangles",
+                self.name
+            );
+        }
+        let at = format!("{}: meshes[{mesh}].primitives[{}]", self.name, prim.index());
+        // Each vertex's transform: the node's, or the blend of its joints' for a skin.
+        let skinned = match (skin, &p.influences) {
+            (Some(joints), Some(influences)) => Some(skinning(&at, joints, influences, world)?),
+            (Some(_), None) => {
+                self.warnings.push(format!(
+                    "{at}: its node has a skin but the primitive has no JOINTS_0; placed by the node's transform"
+                ));
+                None
+            }
+            _ => None,
+        };
+        let one = Transform::of(world);
+        let xf = |i: usize| skinned.as_ref().map_or(&one, |s| &s[i]);
+        for (ti, t) in p.triangles.iter().enumerate() {
+            // A mirroring transform turns the winding around: corners are swapped back so
+            // that the front face stays the front face.
+            let flip = xf(t[0] as usize).flip;
+            let order: [usize; 3] = if flip { [0, 2, 1] } else { [0, 1, 2] };
+            let c = order.map(|k| t[k] as usize);
+            self.positions
+                .extend(c.map(|i| xf(i).full.transform_point3(p.positions[i].as_dvec3())));
+            let turn =
+                |i: usize, n: Vec3| (xf(i).normal * n.as_dvec3()).normalize_or_zero().as_vec3();
+            self.normals.push(match (&p.normals, &p.corner_normals) {
+                (Some(n), _) => Some(c.map(|i| turn(i, n[i]))),
+                (None, Some(cn)) => Some(order.map(|k| turn(t[k] as usize, cn[ti][k]))),
+                (None, None) => None,
+            });
+            self.uvs.push(match &p.uvs {
+                Some(uv) => c.map(|i| uv[i]),
+                None => [Vec2::ZERO; 3],
+            });
+            self.uvs1.push(match &p.uvs1 {
+                Some(uv) => c.map(|i| uv[i]),
+                None => [Vec2::ZERO; 3],
+            });
+            // Tangents turn as positions do; a mirror turns the bitangent's handedness.
+            self.tangents.push(p.tangents.as_ref().map(|t| {
+                c.map(|i| {
+                    let v = (xf(i).linear * t[i].truncate().as_dvec3()).normalize_or_zero();
+                    v.as_vec3().extend(if flip { -t[i].w } else { t[i].w })
+                })
+            }));
+            self.material_ids.push(p.material);
+        }
+        Ok(())
+    }
+
+    /// A skin's joint matrices: each joint node's world transform times its inverse bind
+    /// matrix (the identity when the skin gives none).
+    pub(super) fn joint_matrices(&mut self, skin: &::gltf::Skin) -> Result<Arc<Vec<DMat4>>> {
+        if let Some(m) = self.skins.get(&skin.index()) {
+            return Ok(m.clone());
+        }
+        let at = format!("{}: skins[{}]", self.name, skin.index());
+        let joints: Vec<usize> = skin.joints().map(|j| j.index()).collect();
+        let inverse_bind: Vec<DMat4> = match skin.inverse_bind_matrices() {
+            Some(acc) => {
+                let what = "inverseBindMatrices";
+                self.check_accessor(&at, what, &acc, &[DataType::F32], Dimensions::Mat4)?;
+                let buffers = self.buffers;
+                let m: Vec<DMat4> = skin
+                    .reader(|b| buffers.get(b.index()).and_then(|d| d.as_deref().ok()))
+                    .read_inverse_bind_matrices()
+                    .ok_or_else(|| anyhow!("{at}: {what} cannot be read"))?
+                    .map(|m| DMat4::from_cols_array_2d(&m.map(|c| c.map(f64::from))))
+                    .collect();
+                if m.len() < joints.len() {
+                    bail!("{at}: {} {what} for {} joints", m.len(), joints.len());
+                }
+                m
+            }
+            None => vec![DMat4::IDENTITY; joints.len()],
+        };
+        let mut out = Vec::with_capacity(joints.len());
+        for (&j, ib) in joints.iter().zip(inverse_bind) {
+            let m = self.world_of(j)? * ib;
+            if !m.is_finite() {
+                bail!("{at}: the matrix of joint nodes[{j}] is not finite");
+            }
+            out.push(m);
+        }
+        let out = Arc::new(out);
+        self.skins.insert(skin.index(), out.clone());
+        Ok(out)
+    }
+
+    /// A node's world transform, through its parents (the first that lists it).
+    pub(super) fn world_of(&self, node: usize) -> Result<DMat4> {
+        let mut m = DMat4::IDENTITY;
+        let mut i = node;
+        for _ in 0..=MAX_NODE_DEPTH {
+            let Some(n) = self.nodes.get(i) else {
+                bail!("{}: nodes[{i}] does not exist", self.name);
+            };
+            m = DMat4::from_cols_array_2d(&n.transform().matrix().map(|c| c.map(f64::from))) * m;
+            match self.parents[i] {
+                Some(p) => i = p,
+                None => return Ok(m),
+            }
+        }
+        bail!(
+            "{}: nodes[{node}]: its ancestors are deeper than {MAX_NODE_DEPTH} levels (or a cycle)",
+            self.name
+        )
+    }
+}
