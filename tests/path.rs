@@ -25,6 +25,7 @@ fn scene(parts: Vec<(Vec<[Vec3; 3]>, Material)>, lights: Vec<Light>, camera: Cam
         camera,
         environment: Environment::None,
         integrator: Integrator::Path,
+        energy_compensation: true,
         warnings: Vec::new(),
     }
 }

@@ -421,6 +421,7 @@ fn cube_on_floor(offset: Vec3) -> Scene {
         },
         environment: Environment::None,
         integrator: tracery::scene::Integrator::Direct,
+        energy_compensation: true,
         warnings: Vec::new(),
     }
 }

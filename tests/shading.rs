@@ -28,6 +28,7 @@ fn scene(parts: Vec<(Vec<[Vec3; 3]>, Material)>, lights: Vec<Light>, env: Enviro
         camera: Camera::canonical(&tracery::geometry::Aabb::new(Vec3::splat(-1.0), Vec3::ONE)),
         environment: env,
         integrator: tracery::scene::Integrator::Direct,
+        energy_compensation: false,
         warnings: Vec::new(),
     }
 }

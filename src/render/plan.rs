@@ -35,6 +35,10 @@ pub struct RenderPlan {
     /// terminator of a smooth mesh (as Mitsuba 3's `normalmap` and `bumpmap` do by default;
     /// see [`super::bsdf::Bump`]); else the bent normal shades as it is.
     pub soft_terminator: bool,
+    /// GGX lobes put back the light lost between their microfacets
+    /// ([`super::bsdf::compensation`]; the scene file's `[render] energy_compensation`, on by
+    /// default).
+    pub energy_compensation: bool,
     /// At most this many shadow samples per area light and shading point (`None`: each
     /// light's own count). The viewer's moving preview takes 1: noisier, several times cheaper.
     pub max_light_samples: Option<u32>,
@@ -73,6 +77,7 @@ impl RenderPlan {
                 .iter()
                 .any(|m| m.has_normal_map() || m.has_height_map()),
             soft_terminator: settings.soft_terminator,
+            energy_compensation: scene.energy_compensation,
             max_light_samples: None,
         }
     }
@@ -91,6 +96,7 @@ impl RenderPlan {
             thin_lens: true,
             normal_maps: true,
             soft_terminator: true,
+            energy_compensation: true,
             max_light_samples: None,
         }
     }

@@ -113,6 +113,13 @@ impl Tracer<'_> {
             mut coat,
             mirror,
         } = self.look(prim, u, v);
+        let gloss = match gloss {
+            Gloss::Ggx(g) if self.plan.energy_compensation => Gloss::Ggx(Ggx {
+                compensate: true,
+                ..g
+            }),
+            g => g,
+        };
         if coat.weight > 0.0 {
             // The coat's own normal: the interpolated one, or its own map's about it.
             coat.n = plain;
@@ -263,6 +270,8 @@ fn ggx(lobes: &Lobes) -> Gloss {
                 f0: lobes.dielectric.f0.max_element(),
                 weight: lobes.dielectric.weight,
             },
+            // Set where the plan says (`Tracer::surface`).
+            compensate: false,
         })
     }
 }

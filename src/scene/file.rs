@@ -99,6 +99,7 @@ struct SceneDef {
 #[serde(deny_unknown_fields)]
 struct RenderDef {
     integrator: Option<Integrator>,
+    energy_compensation: Option<bool>,
 }
 
 #[derive(Deserialize)]
@@ -648,6 +649,7 @@ pub fn parse(path: &Path, text: &str, read: ReadFn, check_files: bool) -> Result
     };
 
     let environment = ctx.environment(&def.environment)?;
+    let render = def.render.unwrap_or_default();
 
     Ok(Scene {
         name: name_of(path),
@@ -656,10 +658,8 @@ pub fn parse(path: &Path, text: &str, read: ReadFn, check_files: bool) -> Result
         lights,
         camera,
         environment,
-        integrator: def
-            .render
-            .and_then(|r| r.integrator)
-            .unwrap_or(Integrator::Direct),
+        integrator: render.integrator.unwrap_or(Integrator::Direct),
+        energy_compensation: render.energy_compensation.unwrap_or(true),
         warnings,
     })
 }

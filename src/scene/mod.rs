@@ -86,6 +86,9 @@ pub struct Scene {
     pub environment: Environment,
     /// How light is gathered (scene files choose with `[render] integrator`).
     pub integrator: Integrator,
+    /// GGX lobes put back the light lost between their microfacets (scene files turn it off
+    /// with `[render] energy_compensation = false`).
+    pub energy_compensation: bool,
     /// Problems found while loading that did not stop it (a missing MTL file, say).
     pub warnings: Vec<String>,
 }
@@ -144,6 +147,7 @@ impl Scene {
                 rotation_deg: 0.0,
             },
             integrator: Integrator::Direct,
+            energy_compensation: true,
             warnings: Vec::new(),
         }
     }

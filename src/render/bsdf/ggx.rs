@@ -9,6 +9,7 @@
 
 use glam::{Vec2, Vec3};
 
+use super::compensation::multiple_scattering;
 use super::dielectric::DielectricLayer;
 use super::microfacet::{ggx_d, reflect_about_visible_normal, schlick, smith_g1};
 use super::{Lobe, MIN_ALPHA, luminance};
@@ -24,6 +25,8 @@ pub struct Ggx {
     pub alpha: f32,
     /// The dielectric that dims the diffuse lobe under it.
     pub dielectric: DielectricLayer,
+    /// The light lost between the microfacets is put back ([`super::compensation`]).
+    pub compensate: bool,
 }
 
 impl Lobe for Ggx {
@@ -37,7 +40,11 @@ impl Lobe for Ggx {
         let a = self.alpha.max(MIN_ALPHA);
         let d = ggx_d(n.dot(h), a);
         let g = smith_g1(ci, a) * smith_g1(co, a);
-        Some(schlick(self.f0, self.f90, vh) * (d * g / (4.0 * ci * co)))
+        let single = schlick(self.f0, self.f90, vh) * (d * g / (4.0 * ci * co));
+        if !self.compensate {
+            return Some(single);
+        }
+        Some(single + multiple_scattering(self.f0, self.f90, a, ci, co))
     }
 
     fn pdf(&self, n: Vec3, _wi: Vec3, wo: Vec3, h: Vec3) -> f32 {

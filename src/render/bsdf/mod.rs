@@ -37,8 +37,10 @@
 
 mod bump;
 mod coat;
+pub mod compensation;
 mod dielectric;
 mod ggx;
+pub mod ggx_albedo;
 mod lambert;
 mod microfacet;
 mod phong;
@@ -417,6 +419,27 @@ impl Bsdf {
             Gloss::Phong(p) => p.sample(self.n, wo, u),
             Gloss::Ggx(g) => g.sample(self.n, wo, u),
         }
+    }
+}
+
+impl Bsdf {
+    /// The light a uniform white environment gives, reflected towards `wo` (the directional
+    /// albedo: the white furnace), estimated from `n x n` stratified samples of
+    /// [`Bsdf::sample`], each weighted by `f cos / pdf`.
+    pub fn reflectance_from(&self, wo: Vec3, n: usize) -> Vec3 {
+        let mut sum = glam::DVec3::ZERO;
+        for y in 0..n {
+            for x in 0..n {
+                let u = Vec2::new((x as f32 + 0.5) / n as f32, (y as f32 + 0.5) / n as f32);
+                if let Some(s) = self.sample(wo, u) {
+                    let cos = self.n.dot(s.wi);
+                    if cos > 0.0 && s.pdf > 0.0 {
+                        sum += (self.eval(s.wi, wo) * cos / s.pdf).as_dvec3();
+                    }
+                }
+            }
+        }
+        (sum / (n * n) as f64).as_vec3()
     }
 }
 

@@ -71,6 +71,7 @@ fn lobes() -> Vec<Bsdf> {
                     f0: dielectric_f0,
                     weight,
                 },
+                compensate: false,
             }),
             sheen: Sheen::NONE,
             coat: Coat::NONE,
@@ -323,6 +324,7 @@ fn importance_sampling_is_unbiased() {
                 f0: 0.04,
                 weight: 1.0,
             },
+            compensate: false,
         }),
         sheen: Sheen::NONE,
         coat: Coat::NONE,
@@ -484,6 +486,7 @@ fn a_batch_of_lobes_evaluates_as_each_lobe_alone() {
                 f0: 0.04,
                 weight: 1.0,
             },
+            compensate: true,
         })
         .collect();
     let wo = views(n);
@@ -500,4 +503,47 @@ fn a_batch_of_lobes_evaluates_as_each_lobe_alone() {
             "lobe {j} reflects nothing: a weak test"
         );
     }
+}
+
+/// A white GGX conductor (Fresnel 1), its light lost between microfacets put back or not.
+fn white_conductor(roughness: f32, compensate: bool) -> Bsdf {
+    Bsdf {
+        n: Vec3::Z,
+        diffuse: Vec3::ZERO,
+        gloss: Gloss::Ggx(Ggx {
+            f0: Vec3::ONE,
+            f90: 1.0,
+            alpha: (roughness * roughness).max(MIN_ALPHA),
+            dielectric: DielectricLayer {
+                f0: 0.04,
+                weight: 1.0,
+            },
+            compensate,
+        }),
+        sheen: Sheen::NONE,
+        coat: Coat::NONE,
+        bump: Bump::NONE,
+    }
+}
+
+/// The white furnace: with energy compensation a white conductor reflects all of a uniform
+/// white environment, within 1%, seen from every view cosine 0.1 to 1 at roughness 0.1 to 1
+/// (2^16 stratified samples each); without it, it reflects about 0.69 at roughness 0.7 seen
+/// from the normal, so the test fails without the compensation.
+#[test]
+fn a_white_conductor_reflects_the_whole_furnace() {
+    for r in 1..=10 {
+        let roughness = r as f32 / 10.0;
+        for c in 1..=10 {
+            let cos = c as f32 / 10.0;
+            let wo = Vec3::new((1.0 - cos * cos).sqrt(), 0.0, cos);
+            let e = white_conductor(roughness, true).reflectance_from(wo, 256).x;
+            assert!(
+                (e - 1.0).abs() <= 0.01,
+                "roughness {roughness}, view cosine {cos}: {e}"
+            );
+        }
+    }
+    let plain = white_conductor(0.7, false).reflectance_from(Vec3::Z, 256).x;
+    assert!((0.66..0.72).contains(&plain), "{plain}");
 }
