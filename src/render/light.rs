@@ -196,6 +196,32 @@ pub(super) struct RectLight {
     pub(super) samples: u32,
 }
 
+impl RectLight {
+    /// `light` as a rectangle light estimated with `samples(n)` samples, `n` its own count;
+    /// `None` for a point or spot light.
+    pub(super) fn of(light: &Light, samples: impl FnOnce(u32) -> u32) -> Option<Self> {
+        let Light::Rect {
+            corner,
+            edge_u,
+            edge_v,
+            color,
+            intensity,
+            samples: n,
+        } = *light
+        else {
+            return None;
+        };
+        Some(Self {
+            corner,
+            edge_u,
+            edge_v,
+            color,
+            intensity,
+            samples: samples(n),
+        })
+    }
+}
+
 /// A point on a rectangle light seen from a surface.
 pub(super) struct RectSample {
     /// The point.
@@ -284,46 +310,39 @@ impl Tracer<'_> {
     ) -> Vec3 {
         let mut acc = Vec3::ZERO;
         for (i, light) in self.scene.lights.iter().enumerate() {
-            let Light::Rect {
-                corner,
-                edge_u,
-                edge_v,
-                color,
-                intensity,
-                samples,
-            } = *light
-            else {
+            let Some(rect) = RectLight::of(light, |n| n) else {
                 continue;
             };
-            let Some(n) = light_samples(i, samples) else {
+            let Some(n) = light_samples(i, rect.samples) else {
                 continue;
             };
-            let Some(hit) = rect_hit(s.p, wi, corner, edge_u, edge_v) else {
+            let Some(hit) = rect_hit(s.p, wi, rect.corner, rect.edge_u, rect.edge_v) else {
                 continue;
             };
-            let area = edge_u.cross(edge_v).length();
+            let area = rect.edge_u.cross(rect.edge_v).length();
             let p_light = hit.d2 / (hit.cos_l * area);
             let w = power(count as f32, pdf, n as f32 * p_light);
             if w == 0.0 {
                 continue;
             }
             let pass = self.shadow(s.origin, hit.q - s.origin, 1.0 - 1e-4, counts);
-            acc += color * intensity * pass * w;
+            acc += rect.color * rect.intensity * pass * w;
         }
         acc
     }
 
-    /// Light a point light of radiant intensity `intensity` sends to `s` and `s` reflects
-    /// towards `wo`, shadow ray from `origin` included (zero from behind the surface).
+    /// Light the point or spot light `light` sends to `s` and `s` reflects towards `wo`, its
+    /// shadow ray included (zero from behind the surface, and for a rectangle light).
     pub(super) fn point_light(
         &self,
         s: &Surface,
-        origin: Vec3,
         wo: Vec3,
-        position: Vec3,
-        intensity: Vec3,
+        light: &Light,
         counts: &mut RayCounts,
     ) -> Vec3 {
+        let Some((position, intensity)) = light.point_towards(s.p) else {
+            return Vec3::ZERO;
+        };
         // The light's direction and distance from the surface point itself; only the shadow
         // ray starts from the offset origin.
         let to = position - s.p;
@@ -332,6 +351,7 @@ impl Tracer<'_> {
         if s.n().dot(wi) <= 0.0 || s.ng.dot(to) <= 0.0 {
             return Vec3::ZERO;
         }
+        let origin = s.origin;
         let pass = self.shadow(origin, position - origin, 1.0, counts);
         brdf(s, wi, wo) * s.n().dot(wi) * intensity * pass / d2
     }
@@ -355,10 +375,9 @@ impl Tracer<'_> {
             corner,
             edge_u,
             edge_v,
-            color,
-            intensity,
-            samples: n,
+            ..
         } = *rect;
+        let n = rect.samples;
         let origin = s.origin;
         let normal = edge_u.cross(edge_v);
         let area = normal.length();
@@ -377,7 +396,7 @@ impl Tracer<'_> {
             let pass = self.shadow(origin, q - origin, 1.0 - 1e-4, counts);
             acc += brdf(s, wi, wo) * cos * cos_l * area / d2 * pass * w;
         }
-        acc * color * intensity / n as f32
+        acc * rect.color * rect.intensity / n as f32
     }
 
     /// A rectangle light's `samples` after the plan's cap.

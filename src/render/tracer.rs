@@ -5,7 +5,6 @@
 use glam::Vec3;
 
 use super::environment::EnvironmentMap;
-use super::integrator::path::Arrival;
 use super::light::LightSet;
 use super::surface::{Look, textured};
 use super::{RayCounts, RenderPlan};
@@ -127,10 +126,7 @@ impl<'a> Tracer<'a> {
         }
         match self.plan.integrator {
             Integrator::Direct => self.shade(ray, hit, 0, rng, counts),
-            Integrator::Path => {
-                let a = Arrival::Specular;
-                self.path(ray, hit, 0, a, Vec3::ONE, rng, counts)
-            }
+            Integrator::Path => self.path(ray, hit, rng, counts),
         }
     }
 

@@ -42,18 +42,15 @@ impl Tracer<'_> {
         let (s, alpha, wo) = self.vertex(ray, &hit);
         let mut l = alpha * (s.emission + self.direct(&s, wo, rng, counts));
         if depth < self.max_depth {
-            self.pass_on(
-                ray,
-                &s,
-                alpha,
-                wo,
-                &mut l,
-                counts,
-                |_, onward, _, counts| self.trace(onward, depth + 1, rng, counts),
-            );
+            for c in self
+                .onward(ray, &s, alpha, wo, counts)
+                .into_iter()
+                .flatten()
+            {
+                l += c.tint * self.trace(&c.ray, depth + 1, rng, counts);
+            }
         }
-        self.absorb(&s, ray, &hit, &mut l);
-        l
+        l * self.absorption(&s, ray, &hit)
     }
 
     /// Light arriving directly from the light sources, reflected towards `wo`.
@@ -79,7 +76,6 @@ impl Tracer<'_> {
         if !m.reflects() {
             return Vec3::ZERO;
         }
-        let origin = s.origin;
         let bsdf = s.bsdf();
         // Directions drawn from the lobes, as many as the most light samples a rectangle
         // light takes here (one for the emissive triangles); none without a glossy lobe.
@@ -98,39 +94,19 @@ impl Tracer<'_> {
         };
         let mut sum = Vec3::ZERO;
         for light in &self.scene.lights {
-            sum += match *light {
-                Light::Point { .. } | Light::Spot { .. } => light
-                    .point_towards(s.p)
-                    .map_or(Vec3::ZERO, |(position, i)| {
-                        self.point_light(s, origin, wo, position, i, counts)
-                    }),
-                Light::Rect {
-                    corner,
-                    edge_u,
-                    edge_v,
-                    color,
-                    intensity,
-                    samples,
-                } => {
-                    let rect = RectLight {
-                        corner,
-                        edge_u,
-                        edge_v,
-                        color,
-                        intensity,
-                        samples: self.capped_samples(samples),
-                    };
-                    let n = rect.samples as f32;
-                    let m = by_bsdf as f32;
-                    self.rect_light(s, wo, &rect, rng, counts, |sample, _, area| {
-                        if by_bsdf == 0 {
-                            return 1.0;
-                        }
-                        let p_light = sample.d2 / (sample.cos_l * area);
-                        power(n, p_light, m * bsdf.pdf(sample.wi, wo))
-                    })
-                }
+            let Some(rect) = RectLight::of(light, |n| self.capped_samples(n)) else {
+                sum += self.point_light(s, wo, light, counts);
+                continue;
             };
+            let n = rect.samples as f32;
+            let m = by_bsdf as f32;
+            sum += self.rect_light(s, wo, &rect, rng, counts, |sample, _, area| {
+                if by_bsdf == 0 {
+                    return 1.0;
+                }
+                let p_light = sample.d2 / (sample.cos_l * area);
+                power(n, p_light, m * bsdf.pdf(sample.wi, wo))
+            });
         }
         if let Some(e) = self.emissive_sample(s, wo, rng, counts) {
             // Where the lobes' directions could not have found the point, its sample counts

@@ -13,6 +13,17 @@ use super::{RayCounts, Tracer};
 use crate::bvh::Hit;
 use crate::geometry::{Ray, offset_ray_origin};
 
+/// A ray a surface passes light on from ([`Tracer::onward`]).
+#[derive(Clone, Copy, Debug)]
+pub(in crate::render) struct Continuation {
+    /// Which way the surface passes it on.
+    pub(in crate::render) way: Onward,
+    /// The new ray.
+    pub(in crate::render) ray: Ray,
+    /// What the light found along it is multiplied by.
+    pub(in crate::render) tint: Vec3,
+}
+
 /// Which way a surface passes a ray on.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub(in crate::render) enum Onward {
@@ -36,46 +47,55 @@ impl Tracer<'_> {
         (s, alpha, -ray.dir.normalize())
     }
 
-    /// Adds to `l` the light the surface `s` (met by `ray`, of opacity `alpha`, seen from
-    /// `wo`) passes on from further along: first along its mirror reflection (where the plan
-    /// traces reflections, the surface mirrors and the reflection leaves above it), then
-    /// through it (where it is not opaque). Each is `along(way, ray, tint)`, the radiance the
-    /// integrator finds along the new ray, times the tint; the rays are counted.
-    #[allow(clippy::too_many_arguments)]
-    pub(in crate::render) fn pass_on(
+    /// The rays the surface `s` (met by `ray`, of opacity `alpha`, seen from `wo`) passes
+    /// light on from, in the order both integrators follow them: first its mirror reflection
+    /// (where the plan traces reflections, the surface mirrors and the reflection leaves above
+    /// it), then straight through it (where it is not opaque). Each comes with the tint the
+    /// light it brings is multiplied by; the rays are counted.
+    #[inline]
+    pub(in crate::render) fn onward(
         &self,
         ray: &Ray,
         s: &Surface,
         alpha: f32,
         wo: Vec3,
-        l: &mut Vec3,
         counts: &mut RayCounts,
-        mut along: impl FnMut(Onward, &Ray, Vec3, &mut RayCounts) -> Vec3,
-    ) {
+    ) -> [Option<Continuation>; 2] {
+        let mut mirror = None;
         if self.plan.reflections && s.is_mirror() {
             let r = reflect(ray.dir, s.n());
             if r.dot(s.ng) > 0.0 {
                 counts.reflection += 1;
-                let bounce = Ray::new(s.origin, r);
-                let tint = alpha * s.mirror_tint(wo);
-                *l += tint * along(Onward::Mirror, &bounce, tint, counts);
+                mirror = Some(Continuation {
+                    way: Onward::Mirror,
+                    ray: Ray::new(s.origin, r),
+                    tint: alpha * s.mirror_tint(wo),
+                });
             }
         }
+        let mut through = None;
         if alpha < 1.0 {
             counts.transmission += 1;
             let (dir, side) = transmit(ray.dir, s);
-            let through = Ray::new(offset_ray_origin(s.p, s.p_err, side), dir);
-            let tint = s.material.transmission(alpha, s.bsdf.diffuse);
-            *l += tint * along(Onward::Through, &through, tint, counts);
+            through = Some(Continuation {
+                way: Onward::Through,
+                ray: Ray::new(offset_ray_origin(s.p, s.p_err, side), dir),
+                tint: s.material.transmission(alpha, s.bsdf.diffuse),
+            });
         }
+        [mirror, through]
     }
 
-    /// Dims `l` by the absorption inside a closed transparent mesh when `ray`, which met `s`
-    /// at `hit`, was leaving it (the segment just travelled ran inside: Beer-Lambert).
-    pub(in crate::render) fn absorb(&self, s: &Surface, ray: &Ray, hit: &Hit, l: &mut Vec3) {
+    /// The absorption inside a closed transparent mesh that light arriving along `ray` at `s`
+    /// (met at `hit`) went through: the segment just travelled ran inside the mesh when the
+    /// ray is leaving it (Beer-Lambert), and is one otherwise.
+    #[inline]
+    pub(in crate::render) fn absorption(&self, s: &Surface, ray: &Ray, hit: &Hit) -> Vec3 {
         let m = s.material;
         if self.plan.absorption && !s.entering && m.is_transparent() {
-            *l *= beer_lambert(m.absorption, hit.t * ray.dir.length());
+            beer_lambert(m.absorption, hit.t * ray.dir.length())
+        } else {
+            Vec3::ONE
         }
     }
 }

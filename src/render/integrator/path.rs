@@ -44,66 +44,144 @@ pub(in crate::render) enum Arrival {
     Bounce { pdf: f32, from: u32, travelled: f32 },
 }
 
+/// A vertex a path has still to meet: the ray that reaches it, the ray's closest hit, and
+/// what the path carries there.
+#[derive(Clone, Copy, Debug)]
+pub(in crate::render) struct Vertex {
+    /// The ray arriving at the vertex.
+    pub(in crate::render) ray: Ray,
+    /// Its closest hit (none: the ray leaves the scene).
+    pub(in crate::render) hit: Option<Hit>,
+    /// Bounces before this vertex.
+    pub(in crate::render) depth: u32,
+    /// How the ray was chosen.
+    pub(in crate::render) arrival: Arrival,
+    /// The path's throughput: what light leaving the vertex towards the previous one is
+    /// multiplied by on its way to the camera.
+    pub(in crate::render) beta: Vec3,
+}
+
+/// A bounce sampled from a surface's lobes ([`Tracer::bounce`]).
+pub(in crate::render) struct Bounce {
+    /// Unit direction.
+    wi: Vec3,
+    /// Its density over solid angle.
+    pdf: f32,
+    /// The surface's reflectance along it times the cosine over the density (and over the
+    /// chance of surviving Russian roulette).
+    weight: Vec3,
+}
+
 impl Tracer<'_> {
-    /// Radiance along `ray`, whose closest hit is `hit`, by path tracing. `depth` counts the
-    /// bounces before this surface; `beta` is the path's throughput so far (for Russian
-    /// roulette).
-    #[allow(clippy::too_many_arguments)]
+    /// Radiance along the camera ray `ray`, whose closest hit is `hit`, by path tracing.
+    ///
+    /// One loop meets the path's vertices one at a time ([`Tracer::path_vertex`]). A vertex
+    /// carries the path on by a bounce, and also by its mirror and through it where it has
+    /// them: the bounce is met next, and the mirror's and the transmitted vertices wait on a
+    /// stack, each followed to its end before the next (so they draw their random numbers in
+    /// the same order on every run).
     pub(in crate::render) fn path(
         &self,
         ray: &Ray,
         hit: Option<Hit>,
-        depth: u32,
-        arrival: Arrival,
-        beta: Vec3,
         rng: &mut PathSampler,
         counts: &mut RayCounts,
     ) -> Vec3 {
-        let Some(hit) = hit else {
-            return self.background(ray.dir);
+        // Empty until a mirror or a transparent surface is met: no allocation on most paths.
+        let mut pending = Vec::new();
+        let mut v = Vertex {
+            ray: *ray,
+            hit,
+            depth: 0,
+            arrival: Arrival::Specular,
+            beta: Vec3::ONE,
+        };
+        let mut l = Vec3::ZERO;
+        loop {
+            let (found, goes_on) = self.path_vertex(&mut v, &mut pending, rng, counts);
+            l += found;
+            if !goes_on {
+                match pending.pop() {
+                    Some(p) => v = p,
+                    None => return l,
+                }
+            }
+        }
+    }
+
+    /// One step of the path integrator: the light the path gathers at `v` (emission found,
+    /// next-event estimation) times the path's throughput, and whether its bounce carries it
+    /// on (then `v` is the vertex the bounce reaches; updated in place, as moving it costs
+    /// time). The vertices its mirror and transmission carry it on to are pushed onto
+    /// `pending` (the one to be met first last).
+    pub(in crate::render) fn path_vertex(
+        &self,
+        v: &mut Vertex,
+        pending: &mut Vec<Vertex>,
+        rng: &mut PathSampler,
+        counts: &mut RayCounts,
+    ) -> (Vec3, bool) {
+        let ray = &v.ray;
+        let Some(hit) = v.hit else {
+            return (v.beta * self.background(ray.dir), false);
         };
         let (s, alpha, wo) = self.vertex(ray, &hit);
+        let beta = v.beta * self.absorption(&s, ray, &hit);
         let mut l = Vec3::ZERO;
         if s.material.is_emissive() {
-            l += alpha * self.emission_found(ray, &hit, s.emission, arrival);
+            l += alpha * self.emission_found(ray, &hit, s.emission, v.arrival);
         }
         // The bounce from the last vertex only collects emission.
-        if depth <= self.max_depth {
-            l += alpha * self.lights_at(&s, wo, depth, rng, counts);
-            l += alpha * self.bounce(&s, wo, depth, beta * alpha, rng, counts);
-            self.pass_on(
-                ray,
-                &s,
-                alpha,
-                wo,
-                &mut l,
-                counts,
-                |way, onward, tint, counts| {
-                    // Shadow rays pass straight through transparent surfaces: light a bounce
-                    // finds beyond one is weighted as if the bounce had found it directly.
-                    let arrival = match (way, arrival) {
-                        (Onward::Mirror, _) => Arrival::Specular,
-                        (
-                            Onward::Through,
-                            Arrival::Bounce {
-                                pdf,
-                                from,
-                                travelled,
-                            },
-                        ) => Arrival::Bounce {
-                            pdf,
-                            from,
-                            travelled: travelled + hit.t * ray.dir.length(),
-                        },
-                        (Onward::Through, a) => a,
-                    };
-                    let h = self.bvh.intersect(onward, f32::INFINITY);
-                    self.path(onward, h, depth + 1, arrival, beta * tint, rng, counts)
-                },
-            );
+        if v.depth > self.max_depth {
+            return (beta * l, false);
         }
-        self.absorb(&s, ray, &hit, &mut l);
-        l
+        l += alpha * self.lights_at(&s, wo, v.depth, rng, counts);
+        let (found, bounce) = self.bounce(&s, wo, v.depth, beta * alpha, rng, counts);
+        l += alpha * found;
+        // Pushed in reverse, so that the mirror's path is met before the transmitted one.
+        let onward = self.onward(ray, &s, alpha, wo, counts);
+        for c in onward.into_iter().rev().flatten() {
+            // Shadow rays pass straight through transparent surfaces: light a bounce finds
+            // beyond one is weighted as if the bounce had found it directly.
+            let arrival = match (c.way, v.arrival) {
+                (Onward::Mirror, _) => Arrival::Specular,
+                (
+                    Onward::Through,
+                    Arrival::Bounce {
+                        pdf,
+                        from,
+                        travelled,
+                    },
+                ) => Arrival::Bounce {
+                    pdf,
+                    from,
+                    travelled: travelled + hit.t * ray.dir.length(),
+                },
+                (Onward::Through, a) => a,
+            };
+            pending.push(Vertex {
+                ray: c.ray,
+                hit: self.bvh.intersect(&c.ray, f32::INFINITY),
+                depth: v.depth + 1,
+                arrival,
+                beta: beta * c.tint,
+            });
+        }
+        let Some(b) = bounce else {
+            return (beta * l, false);
+        };
+        counts.bounce += 1;
+        v.ray = Ray::new(s.origin, b.wi);
+        // Drawn at random: neighbouring paths' bounces take other paths through the tree.
+        v.hit = self.bvh.intersect_incoherent(&v.ray, f32::INFINITY);
+        v.arrival = Arrival::Bounce {
+            pdf: b.pdf,
+            from: v.depth,
+            travelled: 0.0,
+        };
+        v.depth += 1;
+        v.beta = beta * alpha * b.weight;
+        (beta * l, true)
     }
 
     /// Emission `le` of the triangle `hit` found, weighted for how the ray was chosen.
@@ -184,48 +262,27 @@ impl Tracer<'_> {
         if !m.reflects() {
             return Vec3::ZERO;
         }
-        let origin = s.origin;
         let bsdf = s.bsdf();
         // Only the rectangle lights no triangles cover need it.
         let glossy = self.lights.hidden_rects && bsdf.gloss_probability(wo) > 0.0;
         let mut sum = Vec3::ZERO;
         for (i, light) in self.scene.lights.iter().enumerate() {
-            sum += match *light {
-                Light::Point { .. } | Light::Spot { .. } => light
-                    .point_towards(s.p)
-                    .map_or(Vec3::ZERO, |(position, i)| {
-                        self.point_light(s, origin, wo, position, i, counts)
-                    }),
-                Light::Rect {
-                    corner,
-                    edge_u,
-                    edge_v,
-                    color,
-                    intensity,
-                    samples,
-                } => {
-                    let n = self.rect_samples(samples, depth);
-                    let rect = RectLight {
-                        corner,
-                        edge_u,
-                        edge_v,
-                        color,
-                        intensity,
-                        samples: n,
-                    };
-                    // Bounces find the light when its triangles cover it; on a glossy
-                    // surface they look for it by its rectangle when they do not.
-                    let weighted = self.lights.visible[i] || glossy;
-                    self.rect_light(s, wo, &rect, rng, counts, |sample, _, area| {
-                        if weighted {
-                            let p_light = sample.d2 / (sample.cos_l * area);
-                            power(n as f32, p_light, bsdf.pdf(sample.wi, wo))
-                        } else {
-                            1.0
-                        }
-                    })
-                }
+            let Some(rect) = RectLight::of(light, |n| self.rect_samples(n, depth)) else {
+                sum += self.point_light(s, wo, light, counts);
+                continue;
             };
+            let n = rect.samples as f32;
+            // Bounces find the light when its triangles cover it; on a glossy surface they
+            // look for it by its rectangle when they do not.
+            let weighted = self.lights.visible[i] || glossy;
+            sum += self.rect_light(s, wo, &rect, rng, counts, |sample, _, area| {
+                if weighted {
+                    let p_light = sample.d2 / (sample.cos_l * area);
+                    power(n, p_light, bsdf.pdf(sample.wi, wo))
+                } else {
+                    1.0
+                }
+            });
         }
         if let Some(e) = self.emissive_sample(s, wo, rng, counts) {
             sum += e.value * power(1.0, e.p_light, bsdf.pdf(e.wi, wo));
@@ -233,8 +290,10 @@ impl Tracer<'_> {
         sum
     }
 
-    /// The bounce from `s`, sampled from its lobes, and the light it brings back (weighted by
-    /// the surface's reflectance over the sampling density).
+    /// The bounce from `s`, sampled from its lobes: the light of the rectangle lights it finds
+    /// by their rectangles (weighted by the surface's reflectance over the sampling density),
+    /// and the bounce itself, unless the path ends here. `beta` is the
+    /// path's throughput at `s` (for Russian roulette).
     pub(in crate::render) fn bounce(
         &self,
         s: &Surface,
@@ -243,58 +302,46 @@ impl Tracer<'_> {
         beta: Vec3,
         rng: &mut PathSampler,
         counts: &mut RayCounts,
-    ) -> Vec3 {
+    ) -> (Vec3, Option<Bounce>) {
         let m = s.material;
         if !m.reflects() {
-            return Vec3::ZERO;
+            return (Vec3::ZERO, None);
         }
         let bsdf = s.bsdf();
         // On a glossy surface the bounce also looks for the rectangle lights no triangles
         // cover (which it cannot hit), as `lights_at` weights their samples.
         let glossy = self.lights.hidden_rects && bsdf.gloss_probability(wo) > 0.0;
-        if depth == self.max_depth
-            && self.lights.owner.is_empty()
-            && !self.plan.environment
-            && !glossy
-        {
+        let nothing_to_find = self.lights.owner.is_empty() && !self.plan.environment;
+        if depth == self.max_depth && nothing_to_find && !glossy {
             // The last bounce only collects emission, and there is none to find.
-            return Vec3::ZERO;
+            return (Vec3::ZERO, None);
         }
         let u = rng.next_2d();
         let Some(Sample { wi, pdf }) = bsdf.sample(wo, u) else {
-            return Vec3::ZERO;
+            return (Vec3::ZERO, None);
         };
         let cos = s.n().dot(wi);
         if cos <= 0.0 || wi.dot(s.ng) <= 0.0 || pdf <= 0.0 {
-            return Vec3::ZERO;
+            return (Vec3::ZERO, None);
         }
         let mut weight = bsdf.eval(wi, wo) * cos / pdf;
-        let mut l = Vec3::ZERO;
+        let mut found = Vec3::ZERO;
         if glossy {
-            l += weight
+            found = weight
                 * self.rects_along(s, wi, pdf, 1, counts, |i, samples| {
                     (!self.lights.visible[i]).then(|| self.rect_samples(samples, depth))
                 });
         }
-        if depth == self.max_depth && self.lights.owner.is_empty() && !self.plan.environment {
-            return l;
+        if depth == self.max_depth && nothing_to_find {
+            return (found, None);
         }
         if depth >= ROULETTE_DEPTH {
             let survive = (beta * weight).max_element().min(MAX_SURVIVAL);
             if rng.next_2d().x >= survive {
-                return l;
+                return (found, None);
             }
             weight /= survive;
         }
-        counts.bounce += 1;
-        let bounce = Ray::new(s.origin, wi);
-        // Drawn at random: neighbouring paths' bounces take other paths through the tree.
-        let hit = self.bvh.intersect_incoherent(&bounce, f32::INFINITY);
-        let arrival = Arrival::Bounce {
-            pdf,
-            from: depth,
-            travelled: 0.0,
-        };
-        l + weight * self.path(&bounce, hit, depth + 1, arrival, beta * weight, rng, counts)
+        (found, Some(Bounce { wi, pdf, weight }))
     }
 }

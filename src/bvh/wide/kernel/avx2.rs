@@ -1,6 +1,7 @@
 //! The AVX2 + FMA kernel: a node's eight boxes in one 256-bit register, a leaf's two blocks of
 //! triangles eight lanes at once, a packet's rays eight at a time against a triangle
-//! ([`triangle_rays8`]); and its entry points, compiled for AVX2.
+//! ([`group::group_blocks`] over [`RayLanes`] of eight lanes); and its entry points, compiled
+//! for AVX2.
 #![allow(
     unsafe_code,
     reason = "SIMD intrinsics: loads, stores and target-feature calls"
@@ -9,12 +10,13 @@
 use std::arch::x86_64::*;
 
 use super::floats::{self, Floats};
+use super::group::{self, MAX_LANES, RayLanes};
 use super::stack::Stack;
 use super::x86::{TriRay4, block_sse, tri_ray4};
 use super::{BlockHits, Lanes, NodeRay, TriRay};
-use crate::bvh::wide::packet::{Bests, Group, Rays, Tris, group_exact, perm_of};
+use crate::bvh::wide::packet::{Bests, Group, Rays, Tris};
 use crate::bvh::wide::traverse::{self, Best};
-use crate::bvh::wide::{BLOCK, TriBlock, WIDTH, WideBvh, WideNode};
+use crate::bvh::wide::{TriBlock, WIDTH, WideBvh, WideNode};
 use crate::bvh::{PACKET, RayTile};
 use crate::cpu::Avx2Cpu;
 use crate::geometry::Ray;
@@ -315,65 +317,45 @@ impl Lanes for Avx2 {
 
     const RAYS_TOGETHER: usize = RAYS_TOGETHER;
 
-    /// Each triangle against the group's rays at once, one ray per lane (gathered from their
-    /// places in the packet).
+    /// Each triangle against the group's rays at once, eight lanes ([`group::group_blocks`]).
     #[inline(always)]
     fn group_blocks(blocks: &[TriBlock], r: &Rays, tris: &Tris, g: &Group, bests: &mut Bests) {
-        let k = perm_of(g.perm);
-        // Lanes past the group's end repeat its first ray and are masked off.
-        let gather = |a: &[f32; PACKET]| -> __m256 {
-            let v: [f32; 8] = std::array::from_fn(|j| a[g.idx[j]]);
-            // SAFETY: only reached inside the AVX2 and AVX-512 entry points; `v` holds eight floats.
-            unsafe { _mm256_loadu_ps(v.as_ptr()) }
-        };
-        let o = [
-            gather(&r.origin[k[0]]),
-            gather(&r.origin[k[1]]),
-            gather(&r.origin[k[2]]),
-        ];
-        let shear = [
-            gather(&tris.shear[0]),
-            gather(&tris.shear[1]),
-            gather(&tris.shear[2]),
-        ];
-        let lanes = (1u32 << g.n) - 1;
-        let mut out = [[0.0f32; 8]; 3];
-        // The rays' best distances, kept in a register from triangle to triangle (a hit is
-        // never farther than the best it beats or ties), read back from `bests` only after
-        // the scalar test decided some lane.
-        let mut best = gather(&bests.t);
-        for b in blocks {
-            for tri in 0..BLOCK {
-                if b.prim[tri] == u32::MAX {
-                    continue;
-                }
-                // Each ray's limit: the next float above its best distance (ties still count).
-                let limit8 = next_up8(best);
-                let (mut hits, exact) =
-                    triangle_rays8(b, tri, k, &o, &shear, limit8, lanes, &mut out);
-                if hits != 0 {
-                    // SAFETY: only reached inside the AVX2 and AVX-512 entry points; `out[0]`
-                    // holds eight floats.
-                    best = unsafe {
-                        _mm256_blendv_ps(best, _mm256_loadu_ps(out[0].as_ptr()), lane_mask8(hits))
-                    };
-                }
-                while hits != 0 {
-                    let j = hits.trailing_zeros() as usize;
-                    hits &= hits - 1;
-                    bests.offer(g.idx[j], out[0][j], b.prim[tri], out[1][j], out[2][j]);
-                }
-                if exact == 0 {
-                    continue;
-                }
-                let mut limit = [0.0f32; 8];
-                // SAFETY: only reached inside the AVX2 and AVX-512 entry points; `limit` holds
-                // eight floats.
-                unsafe { _mm256_storeu_ps(limit.as_mut_ptr(), limit8) };
-                group_exact(b, tri, g, exact, &limit, r, tris, bests);
-                best = gather(&bests.t);
-            }
-        }
+        group::group_blocks::<__m256>(blocks, r, tris, g, bests)
+    }
+}
+
+/// Eight rays of a group, gathered from their places in the packet one float at a time.
+impl RayLanes for __m256 {
+    type Picks = [usize; 8];
+
+    #[inline(always)]
+    fn picks(g: &Group) -> [usize; 8] {
+        std::array::from_fn(|j| g.idx[j])
+    }
+
+    #[inline(always)]
+    fn gather(a: &[f32; PACKET], p: &[usize; 8]) -> __m256 {
+        let v: [f32; 8] = std::array::from_fn(|j| a[p[j]]);
+        // SAFETY: only reached inside the AVX2 and AVX-512 entry points; `v` holds eight floats.
+        unsafe { _mm256_loadu_ps(v.as_ptr()) }
+    }
+
+    #[inline(always)]
+    fn next_up(self) -> __m256 {
+        next_up8(self)
+    }
+
+    #[inline(always)]
+    fn select(self, new: __m256, bits: u32) -> __m256 {
+        // SAFETY: only reached inside the AVX2 and AVX-512 entry points.
+        unsafe { _mm256_blendv_ps(self, new, lane_mask8(bits)) }
+    }
+
+    #[inline(always)]
+    fn store(self, out: &mut [f32; MAX_LANES]) {
+        // SAFETY: only reached inside the AVX2 and AVX-512 entry points; the store writes the
+        // first eight of the sixteen floats.
+        unsafe { _mm256_storeu_ps(out.as_mut_ptr(), self) }
     }
 }
 
@@ -413,35 +395,6 @@ fn ld8(a: &[f32; PACKET], base: usize) -> __m256 {
     // SAFETY: only reached inside the AVX2 and AVX-512 entry points; the slice `base..base + 8` is
     // bounds-checked before the load reads it.
     unsafe { _mm256_loadu_ps(a[base..base + 8].as_ptr()) }
-}
-
-/// The watertight test of one triangle against eight rays sharing one axis permutation
-/// ([`floats::triangle_rays`]): returns the rays (lane bits, within `lanes`) hit at
-/// `0 < t < limit` and the rays the scalar test must decide, with `t`, `u`, `v` per lane in
-/// `out` when some ray was hit.
-#[inline(always)]
-#[allow(clippy::too_many_arguments)]
-fn triangle_rays8(
-    b: &TriBlock,
-    tri: usize,
-    k: [usize; 3],
-    o: &[__m256; 3],
-    shear: &[__m256; 3],
-    limit: __m256,
-    lanes: u32,
-    out: &mut [[f32; 8]; 3],
-) -> (u32, u32) {
-    let found = floats::triangle_rays(b, tri, k, o, shear, limit, lanes);
-    if let (true, Some([t, u, v])) = (found.hits != 0, found.tuv) {
-        // SAFETY: only reached inside the AVX2 and AVX-512 entry points; the stores write
-        // whole `[f32; 8]`s.
-        unsafe {
-            _mm256_storeu_ps(out[0].as_mut_ptr(), t);
-            _mm256_storeu_ps(out[1].as_mut_ptr(), u);
-            _mm256_storeu_ps(out[2].as_mut_ptr(), v);
-        }
-    }
-    (found.hits, found.exact)
 }
 
 super::x86::entry_points!(Avx2Cpu, Avx2, "avx2,fma,popcnt,bmi1,bmi2,lzcnt");

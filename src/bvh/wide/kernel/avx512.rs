@@ -6,10 +6,11 @@
 //! for two things. A packet's rays, six floats each, become its arrays of origins and
 //! directions by two-source lane permutations ([`Avx512::load_rays`]): five instructions per
 //! component for sixteen rays, where copying them one float at a time took six loads and six
-//! stores per ray. And at a leaf, the rays of a packet that share an axis permutation are taken in
-//! groups of up to sixteen instead of eight, and a group of more than eight is tested against
-//! each triangle in one 512-bit register per value ([`triangle_rays16`]). A leaf is entered by
-//! about twelve rays of a tile, so most leaves need one group where eight lanes needed two.
+//! stores per ray. And at a leaf, the rays of a packet that share an axis permutation are
+//! taken in groups of up to sixteen instead of eight, and a group of more than eight is tested
+//! against each triangle in one 512-bit register per value (the same [`group::group_blocks`]
+//! over [`RayLanes`] of sixteen lanes). A leaf is entered by about twelve rays of a tile, so
+//! most leaves need one group where eight lanes needed two.
 //!
 //! The test is [`super::avx2`]'s eight-lane test lane for lane, with masks in place of
 //! movemasks: the same multiplications, subtractions and one division in the same order as
@@ -22,16 +23,16 @@
 use std::arch::x86_64::*;
 
 use super::avx2::{Avx2, NodeRay8, Tuv8};
-use super::floats;
+use super::group::{self, MAX_LANES, RayLanes};
 use super::stack::Stack;
 use super::x86::TriRay4;
 use super::{BlockHits, Lanes, NodeRay, TriRay};
 use crate::bvh::PACKET;
 use crate::bvh::RayTile;
 use crate::bvh::wide::WideBvh;
-use crate::bvh::wide::packet::{Bests, Group, Rays, Tris, group_exact, perm_of};
+use crate::bvh::wide::packet::{Bests, Group, Rays, Tris};
 use crate::bvh::wide::traverse::{self, Best};
-use crate::bvh::wide::{BLOCK, TriBlock, WIDTH, WideNode};
+use crate::bvh::wide::{TriBlock, WIDTH, WideNode};
 use crate::cpu::Avx512Cpu;
 use crate::geometry::Ray;
 
@@ -160,7 +161,7 @@ impl Lanes for Avx512 {
         if g.n <= 8 {
             Avx2::group_blocks(blocks, r, tris, g, bests)
         } else {
-            group_blocks16(blocks, r, tris, g, bests)
+            group::group_blocks::<__m512>(blocks, r, tris, g, bests)
         }
     }
 
@@ -198,16 +199,20 @@ const TRANSPOSE: [[[i32; 16]; 2]; 6] = {
     t
 };
 
-/// Where [`gather16`] takes its lanes from: the group's ray indices (each below [`PACKET`], 64)
-/// as sixteen 32-bit lanes, and the lanes whose ray lies in the packet's upper half.
-struct Picks {
+/// Where a group's sixteen lanes are taken from: the group's ray indices (each below
+/// [`PACKET`], 64) as sixteen 32-bit lanes, and the lanes whose ray lies in the packet's upper
+/// half.
+pub(crate) struct Picks {
     idx: __m512i,
     upper: __mmask16,
 }
 
-impl Picks {
+/// Sixteen rays of a group, picked from the packet's arrays by lane permutations.
+impl RayLanes for __m512 {
+    type Picks = Picks;
+
     #[inline(always)]
-    fn of(g: &Group) -> Picks {
+    fn picks(g: &Group) -> Picks {
         debug_assert!(g.idx.iter().all(|&i| i < PACKET));
         // SAFETY: only reached inside the AVX-512 entry points; each load reads eight of the
         // sixteen `usize` indices (64 bytes).
@@ -219,123 +224,51 @@ impl Picks {
             Picks { idx, upper }
         }
     }
-}
 
-/// Sixteen lanes of a packet array, lane `j` from the group's `j`-th ray: each half of the
-/// array (32 floats, two registers) permuted by the indices' low five bits, and the halves
-/// blended by their sixth. Copying the floats one by one through memory, as `array::from_fn`
-/// did, compiled to a function the AVX-512 kernel called fourteen times per group (each call
-/// behind a `vzeroupper`, its vector registers saved around it).
-#[inline(always)]
-fn gather16(a: &[f32; PACKET], p: &Picks) -> __m512 {
-    // SAFETY: only reached inside the AVX-512 entry points; the four loads read floats
-    // 0-15, 16-31, 32-47 and 48-63 of the 64.
-    unsafe {
-        let at = |k: usize| _mm512_loadu_ps(a[16 * k..16 * k + 16].as_ptr());
-        let lo = _mm512_permutex2var_ps(at(0), p.idx, at(1));
-        let hi = _mm512_permutex2var_ps(at(2), p.idx, at(3));
-        _mm512_mask_blend_ps(p.upper, lo, hi)
-    }
-}
-
-/// Each triangle against the group's rays at once, one ray per lane (lanes past the group's
-/// end repeat its first ray and are masked off), as [`Avx2`]'s eight-lane group test does.
-#[inline(always)]
-fn group_blocks16(blocks: &[TriBlock], r: &Rays, tris: &Tris, g: &Group, bests: &mut Bests) {
-    let k = perm_of(g.perm);
-    let picks = Picks::of(g);
-    let o = [
-        gather16(&r.origin[k[0]], &picks),
-        gather16(&r.origin[k[1]], &picks),
-        gather16(&r.origin[k[2]], &picks),
-    ];
-    let shear = [
-        gather16(&tris.shear[0], &picks),
-        gather16(&tris.shear[1], &picks),
-        gather16(&tris.shear[2], &picks),
-    ];
-    let lanes = ((1u64 << g.n) - 1) as u32;
-    let mut out = [[0.0f32; 16]; 3];
-    // The rays' best distances, kept in a register from triangle to triangle (a hit is never
-    // farther than the best it beats or ties), read back after the scalar test decided a lane.
-    let mut best = gather16(&bests.t, &picks);
-    for b in blocks {
-        for tri in 0..BLOCK {
-            if b.prim[tri] == u32::MAX {
-                continue;
-            }
-            // Each ray's limit: the next float above its best distance (ties still count).
-            let limit16 = next_up16(best);
-            let (mut hits, exact) =
-                triangle_rays16(b, tri, k, &o, &shear, limit16, lanes, &mut out);
-            if hits != 0 {
-                // SAFETY: only reached inside the AVX-512 entry points; `out[0]` holds sixteen
-                // floats.
-                best = unsafe {
-                    _mm512_mask_blend_ps(hits as __mmask16, best, _mm512_loadu_ps(out[0].as_ptr()))
-                };
-            }
-            while hits != 0 {
-                let j = hits.trailing_zeros() as usize;
-                hits &= hits - 1;
-                bests.offer(g.idx[j], out[0][j], b.prim[tri], out[1][j], out[2][j]);
-            }
-            if exact == 0 {
-                continue;
-            }
-            let mut limit = [0.0f32; 16];
-            // SAFETY: only reached inside the AVX-512 entry points; `limit` holds sixteen floats.
-            unsafe { _mm512_storeu_ps(limit.as_mut_ptr(), limit16) };
-            group_exact(b, tri, g, exact, &limit, r, tris, bests);
-            best = gather16(&bests.t, &picks);
-        }
-    }
-}
-
-/// The next float above each lane (infinity stays; the lanes are positive distances, never
-/// NaN), as [`crate::bvh::wide::traverse::next_up`].
-#[inline(always)]
-fn next_up16(t: __m512) -> __m512 {
-    // SAFETY: only reached inside the AVX-512 entry points.
-    unsafe {
-        let below = _mm512_cmp_ps_mask::<_CMP_LT_OQ>(t, _mm512_set1_ps(f32::INFINITY));
-        let bits = _mm512_castps_si512(t);
-        _mm512_castsi512_ps(_mm512_mask_add_epi32(
-            bits,
-            below,
-            bits,
-            _mm512_set1_epi32(1),
-        ))
-    }
-}
-
-/// The watertight test of one triangle against sixteen rays sharing one axis permutation
-/// ([`floats::triangle_rays`]): returns the rays (lane bits, within `lanes`) hit at
-/// `0 < t < limit` and the rays the scalar test must decide, with `t`, `u`, `v` per lane in
-/// `out` when some ray was hit.
-#[inline(always)]
-#[allow(clippy::too_many_arguments)]
-fn triangle_rays16(
-    b: &TriBlock,
-    tri: usize,
-    k: [usize; 3],
-    o: &[__m512; 3],
-    shear: &[__m512; 3],
-    limit: __m512,
-    lanes: u32,
-    out: &mut [[f32; 16]; 3],
-) -> (u32, u32) {
-    let found = floats::triangle_rays(b, tri, k, o, shear, limit, lanes);
-    if let (true, Some([t, u, v])) = (found.hits != 0, found.tuv) {
-        // SAFETY: only reached inside the AVX-512 entry points; the stores write whole
-        // `[f32; 16]`s.
+    /// Each half of the array (32 floats, two registers) permuted by the indices' low five
+    /// bits, and the halves blended by their sixth. Copying the floats one by one through
+    /// memory, as the eight-lane gather does, compiled to a function the AVX-512 kernel called
+    /// fourteen times per group (each call behind a `vzeroupper`, its vector registers saved
+    /// around it).
+    #[inline(always)]
+    fn gather(a: &[f32; PACKET], p: &Picks) -> __m512 {
+        // SAFETY: only reached inside the AVX-512 entry points; the four loads read floats
+        // 0-15, 16-31, 32-47 and 48-63 of the 64.
         unsafe {
-            _mm512_storeu_ps(out[0].as_mut_ptr(), t);
-            _mm512_storeu_ps(out[1].as_mut_ptr(), u);
-            _mm512_storeu_ps(out[2].as_mut_ptr(), v);
+            let at = |k: usize| _mm512_loadu_ps(a[16 * k..16 * k + 16].as_ptr());
+            let lo = _mm512_permutex2var_ps(at(0), p.idx, at(1));
+            let hi = _mm512_permutex2var_ps(at(2), p.idx, at(3));
+            _mm512_mask_blend_ps(p.upper, lo, hi)
         }
     }
-    (found.hits, found.exact)
+
+    #[inline(always)]
+    fn next_up(self) -> __m512 {
+        // SAFETY: only reached inside the AVX-512 entry points.
+        unsafe {
+            let below = _mm512_cmp_ps_mask::<_CMP_LT_OQ>(self, _mm512_set1_ps(f32::INFINITY));
+            let bits = _mm512_castps_si512(self);
+            _mm512_castsi512_ps(_mm512_mask_add_epi32(
+                bits,
+                below,
+                bits,
+                _mm512_set1_epi32(1),
+            ))
+        }
+    }
+
+    #[inline(always)]
+    fn select(self, new: __m512, bits: u32) -> __m512 {
+        // SAFETY: only reached inside the AVX-512 entry points.
+        unsafe { _mm512_mask_blend_ps(bits as __mmask16, self, new) }
+    }
+
+    #[inline(always)]
+    fn store(self, out: &mut [f32; MAX_LANES]) {
+        // SAFETY: only reached inside the AVX-512 entry points; the store writes the sixteen
+        // floats.
+        unsafe { _mm512_storeu_ps(out.as_mut_ptr(), self) }
+    }
 }
 
 super::x86::entry_points!(

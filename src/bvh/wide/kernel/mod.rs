@@ -30,6 +30,8 @@ pub(crate) mod avx2;
 pub(crate) mod avx512;
 #[cfg(target_arch = "x86_64")]
 mod floats;
+#[cfg(target_arch = "x86_64")]
+mod group;
 mod scalar;
 #[cfg(target_arch = "x86_64")]
 mod sse2;

@@ -5,7 +5,7 @@
 //! They share the triangle test ([`block_sse`], 4 lanes in 128-bit registers, VEX-encoded
 //! inside the AVX2 functions), which is [`super::floats::watertight`] on a block's lanes, as
 //! the AVX2 kernel's test of two blocks at once (`Avx2::block_pair`, 8 lanes in 256-bit
-//! registers) is on two blocks' lanes and the packets' eight-ray test ([`triangle_rays8`]) on
+//! registers) is on two blocks' lanes and the packets' group test ([`super::group::group_blocks`]) on
 //! eight rays' lanes. The box test is 8 lanes in one 256-bit register with AVX2, two
 //! 128-bit halves with SSE2. The traversal loops are the generic ones of
 //! [`super::super::traverse`], instantiated inside `#[target_feature]` entry points so that
