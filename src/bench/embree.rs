@@ -1,7 +1,12 @@
 //! Embree 3 (Debian's `libembree-dev`), the engine users would pick instead, through the few
-//! functions a benchmark needs: a device, a scene of one triangle geometry at medium build
-//! quality, `rtcIntersect1` / `rtcOccluded1` for single rays and `rtcIntersect16` /
-//! `rtcOccluded16` for coherent 4x4-pixel packets.
+//! functions a benchmark needs: a device, a scene of one triangle geometry over shared buffers
+//! at medium build quality, `rtcIntersect1` / `rtcOccluded1` for single rays and
+//! `rtcIntersect16` / `rtcOccluded16` for coherent 4x4-pixel packets.
+//!
+//! Its build is timed as its users time it: the device ([`Device`], its thread pool) and the
+//! triangles' buffers ([`Buffers`]) are made once, and `rtcCommitScene` alone is timed. The C
+//! program `embree_build.c` beside this file times the same calls in a process of its own;
+//! `scripts/embree-build-time` compares the two.
 //!
 //! Embree is not linked: its library (`libembree3.so.3`) is loaded when the benchmark first
 //! asks for it ([`available`]), so every build has the peer where Embree is installed. The struct
@@ -15,6 +20,7 @@
 )]
 
 use std::ffi::{c_char, c_int, c_uint, c_void};
+use std::sync::Arc;
 
 use anyhow::{Result, bail};
 use glam::Vec3;
@@ -132,14 +138,16 @@ struct Api {
     release_scene: unsafe extern "C" fn(scene: RtcScene),
     set_scene_build_quality: unsafe extern "C" fn(scene: RtcScene, quality: c_int),
     new_geometry: unsafe extern "C" fn(device: RtcDevice, kind: c_int) -> RtcGeometry,
-    set_new_geometry_buffer: unsafe extern "C" fn(
+    set_shared_geometry_buffer: unsafe extern "C" fn(
         geometry: RtcGeometry,
         kind: c_int,
         slot: c_uint,
         format: c_int,
+        ptr: *const c_void,
+        byte_offset: usize,
         byte_stride: usize,
         item_count: usize,
-    ) -> *mut c_void,
+    ),
     commit_geometry: unsafe extern "C" fn(geometry: RtcGeometry),
     attach_geometry: unsafe extern "C" fn(scene: RtcScene, geometry: RtcGeometry) -> c_uint,
     release_geometry: unsafe extern "C" fn(geometry: RtcGeometry),
@@ -214,7 +222,7 @@ impl Api {
             release_scene: get(l, "rtcReleaseScene")?,
             set_scene_build_quality: get(l, "rtcSetSceneBuildQuality")?,
             new_geometry: get(l, "rtcNewGeometry")?,
-            set_new_geometry_buffer: get(l, "rtcSetNewGeometryBuffer")?,
+            set_shared_geometry_buffer: get(l, "rtcSetSharedGeometryBuffer")?,
             commit_geometry: get(l, "rtcCommitGeometry")?,
             attach_geometry: get(l, "rtcAttachGeometry")?,
             release_geometry: get(l, "rtcReleaseGeometry")?,
@@ -241,151 +249,191 @@ pub fn available() -> std::result::Result<&'static str, &'static str> {
     api().map(|a| a.path.as_str())
 }
 
-/// An Embree device and a committed scene over a triangle list (built with a given number of
-/// threads; tracing runs on whatever threads call it).
-pub struct Embree {
+/// An Embree device: its thread pool and its settings (thread count, instruction set), made
+/// once and shared by every scene built on it, as Embree's users keep one.
+pub struct Device {
     api: &'static Api,
-    device: RtcDevice,
-    scene: RtcScene,
-    /// Milliseconds the scene took to build: from `rtcNewScene` to the end of
-    /// `rtcCommitScene`, the copy into Embree's vertex buffers included, the device's creation
-    /// (its thread pool) not.
-    pub build_ms: f64,
+    handle: RtcDevice,
     /// The instruction set the device was held to (`None`: Embree's choice).
     isa: Option<&'static str>,
 }
 
+// SAFETY: Embree's device functions are thread-safe (its API documentation: a device may be
+// used from several threads), and the handle is only released in `drop`.
+unsafe impl Send for Device {}
+// SAFETY: as above.
+unsafe impl Sync for Device {}
+
+impl Device {
+    /// A device building with `threads` threads, held to the instruction set of one of our
+    /// kernels (its `isa` setting: [`Embree::isa_name`]) or, with `None`, choosing its kernels
+    /// for the CPU. The CPU must run the instruction set.
+    pub fn new(threads: usize, isa: Option<Kernel>) -> Result<Arc<Device>> {
+        let api = api().map_err(anyhow::Error::msg)?;
+        let isa = isa.map(Embree::isa_name);
+        let held = isa.map_or(String::new(), |i| format!(",isa={i}"));
+        let config = std::ffi::CString::new(format!("threads={}{held}", threads.max(1)))
+            .expect("no NUL in a number or an ISA name");
+        // SAFETY: `config` is a NUL-terminated string that outlives the call.
+        let handle = unsafe { (api.new_device)(config.as_ptr()) };
+        if handle.is_null() {
+            bail!("Embree: rtcNewDevice failed (is this CPU one Embree supports?)");
+        }
+        Ok(Arc::new(Device { api, handle, isa }))
+    }
+
+    fn error(&self) -> c_int {
+        // SAFETY: `self.handle` is live until `drop`.
+        unsafe { (self.api.get_device_error)(self.handle) }
+    }
+}
+
+impl Drop for Device {
+    fn drop(&mut self) {
+        // SAFETY: the handle is live and released once; every scene built on the device holds
+        // an `Arc` of it, so none outlives it.
+        unsafe { (self.api.release_device)(self.handle) }
+    }
+}
+
+/// A triangle list as Embree's shared buffers: three vertices of its own per triangle (no
+/// vertex is shared, as the triangles come) and their indices, made once and read by every
+/// scene built over them.
+pub struct Buffers {
+    /// `9 n` floats and one more: Embree reads a vertex with a 16-byte load, so the buffer
+    /// must be readable 4 bytes past the last vertex.
+    vertices: Vec<f32>,
+    /// `3 n` indices, `0..3 n`.
+    indices: Vec<u32>,
+}
+
+impl Buffers {
+    /// The buffers of `triangles` (finite ones: the benchmark leaves out the others before any
+    /// engine sees them).
+    pub fn of(triangles: &[[Vec3; 3]]) -> Arc<Buffers> {
+        let mut vertices: Vec<f32> = triangles
+            .iter()
+            .flatten()
+            .flat_map(|v| v.to_array())
+            .collect();
+        vertices.push(0.0);
+        let indices = (0..3 * triangles.len() as u32).collect();
+        Arc::new(Buffers { vertices, indices })
+    }
+
+    fn triangles(&self) -> usize {
+        self.indices.len() / 3
+    }
+}
+
+/// A committed Embree scene of one triangle geometry over shared [`Buffers`], on a [`Device`]
+/// (built with the device's threads; tracing runs on whatever threads call it).
+pub struct Embree {
+    api: &'static Api,
+    scene: RtcScene,
+    /// Milliseconds `rtcCommitScene` took, the build alone: the device and the buffers were
+    /// made before, as Embree's users time it (and as `src/bench/embree_build.c` does).
+    pub build_ms: f64,
+    /// Kept alive while the scene refers to them.
+    device: Arc<Device>,
+    _buffers: Arc<Buffers>,
+}
+
 // SAFETY: Embree documents a committed scene as safe to trace from any number of threads at
-// once, and the device and scene handles are only released in `drop`.
+// once, and the scene handle is only released in `drop`; the device and the buffers are
+// `Send` and `Sync` (the buffers are never written after they are made).
 unsafe impl Send for Embree {}
 // SAFETY: as above; `&Embree` only reaches the thread-safe trace calls.
 unsafe impl Sync for Embree {}
 
 impl Embree {
     /// Builds the scene at medium quality with `threads` threads, Embree choosing its kernels
-    /// for the CPU. Triangles must be finite (the benchmark leaves out the others before any
-    /// engine sees them).
+    /// for the CPU, on a device and buffers of its own. Triangles must be finite.
     pub fn build(triangles: &[[Vec3; 3]], threads: usize) -> Result<Embree> {
         Self::build_for(triangles, threads, None)
     }
 
-    /// [`Embree::build`] with Embree held to the instruction set of one of our kernels (its
-    /// device's `isa` setting: [`Embree::isa_name`]); `None` leaves the choice to Embree. The
-    /// CPU must run it.
+    /// [`Embree::build`] with Embree held to the instruction set of one of our kernels
+    /// ([`Device::new`]).
     pub fn build_for(
         triangles: &[[Vec3; 3]],
         threads: usize,
         isa: Option<Kernel>,
     ) -> Result<Embree> {
-        let api = api().map_err(anyhow::Error::msg)?;
-        let isa = isa.map(Self::isa_name);
-        let held = isa.map_or(String::new(), |i| format!(",isa={i}"));
-        let config = std::ffi::CString::new(format!("threads={}{held}", threads.max(1)))
-            .expect("no NUL in a number or an ISA name");
-        // SAFETY: `config` is a NUL-terminated string that outlives the call.
-        let device = unsafe { (api.new_device)(config.as_ptr()) };
-        if device.is_null() {
-            bail!("Embree: rtcNewDevice failed (is this CPU one Embree supports?)");
+        Self::build_on(&Device::new(threads, isa)?, &Buffers::of(triangles))
+    }
+
+    /// Builds a scene over `buffers` at medium quality on `device`, timing `rtcCommitScene`
+    /// alone.
+    pub fn build_on(device: &Arc<Device>, buffers: &Arc<Buffers>) -> Result<Embree> {
+        let api = device.api;
+        let handle = device.handle;
+        // SAFETY: `handle` is a live device handle.
+        let scene = unsafe { (api.new_scene)(handle) };
+        if scene.is_null() {
+            bail!("Embree: rtcNewScene failed ({})", device.error());
         }
-        // From here `Drop` releases the device (and the scene once it is set).
+        // From here `Drop` releases the scene.
         let mut e = Embree {
             api,
-            device,
-            scene: std::ptr::null_mut(),
+            scene,
             build_ms: 0.0,
-            isa,
+            device: Arc::clone(device),
+            _buffers: Arc::clone(buffers),
         };
-        let start = std::time::Instant::now();
-        // SAFETY: `device` is a live device handle.
-        e.scene = unsafe { (api.new_scene)(device) };
-        if e.scene.is_null() {
-            bail!("Embree: rtcNewScene failed ({})", e.error());
-        }
-        // SAFETY: `e.scene` is a live scene handle.
-        unsafe { (api.set_scene_build_quality)(e.scene, RTC_BUILD_QUALITY_MEDIUM) };
-        let n = triangles.len();
-        // SAFETY: `device` is live; the geometry is released below after attaching.
-        let geometry = unsafe { (api.new_geometry)(device, RTC_GEOMETRY_TYPE_TRIANGLE) };
+        // SAFETY: `scene` is a live scene handle.
+        unsafe { (api.set_scene_build_quality)(scene, RTC_BUILD_QUALITY_MEDIUM) };
+        // SAFETY: `handle` is live; the geometry is released below after attaching.
+        let geometry = unsafe { (api.new_geometry)(handle, RTC_GEOMETRY_TYPE_TRIANGLE) };
         if geometry.is_null() {
-            bail!("Embree: rtcNewGeometry failed ({})", e.error());
+            bail!("Embree: rtcNewGeometry failed ({})", device.error());
         }
-        // SAFETY: `geometry` is live; Embree allocates (with its own padding) and returns
-        // buffers of `3 n` float3 and `n` uint3 items, or null on failure.
-        let (vertices, indices) = unsafe {
-            (
-                (api.set_new_geometry_buffer)(
-                    geometry,
-                    RTC_BUFFER_TYPE_VERTEX,
-                    0,
-                    RTC_FORMAT_FLOAT3,
-                    12,
-                    3 * n,
-                ) as *mut f32,
-                (api.set_new_geometry_buffer)(
-                    geometry,
-                    RTC_BUFFER_TYPE_INDEX,
-                    0,
-                    RTC_FORMAT_UINT3,
-                    12,
-                    n,
-                ) as *mut u32,
-            )
-        };
-        if n > 0 && (vertices.is_null() || indices.is_null()) {
-            // SAFETY: `geometry` is live and not attached.
-            unsafe { (api.release_geometry)(geometry) };
-            bail!(
-                "Embree: cannot allocate buffers for {n} triangles ({})",
-                e.error()
-            );
-        }
-        if n > 0 {
-            // SAFETY: the buffers hold exactly `9 n` floats and `3 n` u32 (allocated above
-            // with those item counts and strides), are suitably aligned by Embree, and nothing
-            // else refers to them yet.
-            let (v, i) = unsafe {
-                (
-                    std::slice::from_raw_parts_mut(vertices, 9 * n),
-                    std::slice::from_raw_parts_mut(indices, 3 * n),
-                )
-            };
-            for (k, t) in triangles.iter().enumerate() {
-                for c in 0..3 {
-                    v[9 * k + 3 * c..9 * k + 3 * c + 3].copy_from_slice(&t[c].to_array());
-                    i[3 * k + c] = (3 * k + c) as u32;
-                }
-            }
-        }
-        // SAFETY: `geometry` and `e.scene` are live; the scene keeps its own reference to the
-        // geometry, so ours is released at once.
+        let n = buffers.triangles();
+        // SAFETY: `geometry` is live; the buffers hold `3 n` float3 vertices (plus the padding
+        // Embree's loads need) and `n` uint3 triangles at the given strides, are never written
+        // again, and outlive the scene (`e` holds an `Arc` of them); the scene keeps its own
+        // reference to the geometry, so ours is released at once.
         unsafe {
+            (api.set_shared_geometry_buffer)(
+                geometry,
+                RTC_BUFFER_TYPE_VERTEX,
+                0,
+                RTC_FORMAT_FLOAT3,
+                buffers.vertices.as_ptr().cast(),
+                0,
+                12,
+                3 * n,
+            );
+            (api.set_shared_geometry_buffer)(
+                geometry,
+                RTC_BUFFER_TYPE_INDEX,
+                0,
+                RTC_FORMAT_UINT3,
+                buffers.indices.as_ptr().cast(),
+                0,
+                12,
+                n,
+            );
             (api.commit_geometry)(geometry);
-            (api.attach_geometry)(e.scene, geometry);
+            (api.attach_geometry)(scene, geometry);
             (api.release_geometry)(geometry);
-            (api.commit_scene)(e.scene);
         }
+        let start = std::time::Instant::now();
+        // SAFETY: `scene` is live, its geometry committed and attached.
+        unsafe { (api.commit_scene)(scene) };
         e.build_ms = start.elapsed().as_secs_f64() * 1e3;
-        match e.error() {
+        match device.error() {
             0 => Ok(e),
             code => bail!("Embree: the scene build failed (error {code})"),
         }
-    }
-
-    fn error(&self) -> c_int {
-        // SAFETY: `self.device` is live until `drop`.
-        unsafe { (self.api.get_device_error)(self.device) }
     }
 }
 
 impl Drop for Embree {
     fn drop(&mut self) {
-        // SAFETY: both handles are live (or null, which is checked) and released once.
-        unsafe {
-            if !self.scene.is_null() {
-                (self.api.release_scene)(self.scene);
-            }
-            (self.api.release_device)(self.device);
-        }
+        // SAFETY: the scene handle is live and released once (the device, held by `self`,
+        // outlives it).
+        unsafe { (self.api.release_scene)(self.scene) }
     }
 }
 
@@ -407,7 +455,7 @@ impl Engine for Embree {
         Some(self.build_ms)
     }
     fn isa(&self) -> Option<&'static str> {
-        self.isa
+        self.device.isa
     }
     fn closest(&self, ray: &Ray) -> HitRecord {
         self.intersect1(ray)
@@ -521,7 +569,7 @@ impl Engine for EmbreePackets {
     }
 
     fn isa(&self) -> Option<&'static str> {
-        self.0.isa
+        self.0.device.isa
     }
     fn tile(&self) -> Option<u32> {
         Some(4)

@@ -15,6 +15,7 @@ pub mod secondary;
 
 use std::io::{BufReader, BufWriter, Read, Write};
 use std::path::Path;
+use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result, bail};
@@ -65,6 +66,28 @@ pub fn write_rays(path: &Path, rays: &[Ray]) -> Result<()> {
     for r in rays {
         for v in r.origin.to_array().into_iter().chain(r.dir.to_array()) {
             w.write_all(&v.to_le_bytes())?;
+        }
+    }
+    w.flush()
+        .with_context(|| format!("{}: cannot write", path.display()))
+}
+
+/// Writes the triangles the engines are given (the finite ones of `triangles`, in order) as a
+/// little-endian `u32` count and nine `f32` a triangle: the input of the C program that times
+/// Embree's build alone (`src/bench/embree_build.c`).
+pub fn write_triangles(path: &Path, triangles: &[[Vec3; 3]]) -> Result<()> {
+    let finite: Vec<&[Vec3; 3]> = triangles
+        .iter()
+        .filter(|t| t.iter().all(|v| v.is_finite()))
+        .collect();
+    let mut w = BufWriter::new(
+        std::fs::File::create(path)
+            .with_context(|| format!("{}: cannot create", path.display()))?,
+    );
+    w.write_all(&(finite.len() as u32).to_le_bytes())?;
+    for v in finite.into_iter().flatten() {
+        for x in v.to_array() {
+            w.write_all(&x.to_le_bytes())?;
         }
     }
     w.flush()
@@ -343,7 +366,7 @@ pub fn run(
     }
     let tris = &finite[..];
 
-    let builders = builders(tris, config);
+    let builders = builders(tris, config)?;
     // Builds, interleaved, with each thread count. A peer's build time is its builder call
     // (plus putting its triangles in leaf order for obvhs; for Embree its scene's build, not
     // the device's creation); ours includes the 8-wide layout with its triangle blocks (the
@@ -389,8 +412,9 @@ pub fn run(
     })
 }
 
-/// The builders of every engine `config` asks for, over `tris`.
-fn builders<'a>(tris: &'a [[Vec3; 3]], config: &BenchConfig) -> Vec<(String, Builder<'a>)> {
+/// The builders of every engine `config` asks for, over `tris` (an error where Embree cannot
+/// make a device).
+fn builders<'a>(tris: &'a [[Vec3; 3]], config: &BenchConfig) -> Result<Vec<(String, Builder<'a>)>> {
     let isa = config.isa;
     let mut builders: Vec<(String, Builder)> = Vec::new();
     for (name, options) in &config.ours {
@@ -419,19 +443,32 @@ fn builders<'a>(tris: &'a [[Vec3; 3]], config: &BenchConfig) -> Vec<(String, Bui
         ));
     }
     if config.embree && BenchConfig::embree_available() {
+        // As Embree's users time a build: one device per thread count and the triangles'
+        // buffers made once, before any build; `rtcCommitScene` alone is timed.
+        let devices: Result<Vec<(usize, Arc<embree::Device>)>> = config
+            .threads
+            .iter()
+            .map(|&t| Ok((t, embree::Device::new(t, isa)?)))
+            .collect();
+        let devices = Arc::new(devices?);
+        let buffers = embree::Buffers::of(tris);
+        let build = move |threads: usize| -> Result<embree::Embree> {
+            let device = devices
+                .iter()
+                .find(|(t, _)| *t == threads)
+                .map(|(_, d)| d)
+                .context("no Embree device for this thread count")?;
+            embree::Embree::build_on(device, &buffers)
+        };
+        let packets = build.clone();
         builders.push((
             "embree".into(),
-            Box::new(move |threads| {
-                Ok((
-                    Box::new(embree::Embree::build_for(tris, threads, isa)?) as Box<dyn Engine>,
-                    None,
-                ))
-            }),
+            Box::new(move |threads| Ok((Box::new(build(threads)?) as Box<dyn Engine>, None))),
         ));
         builders.push((
             "embree-packet16".into(),
             Box::new(move |threads| {
-                let e = embree::EmbreePackets(embree::Embree::build_for(tris, threads, isa)?);
+                let e = embree::EmbreePackets(packets(threads)?);
                 Ok((Box::new(e) as Box<dyn Engine>, None))
             }),
         ));
@@ -446,7 +483,7 @@ fn builders<'a>(tris: &'a [[Vec3; 3]], config: &BenchConfig) -> Vec<(String, Bui
             Box::new(move |_| Ok((Box::new(obvhs::Cwbvh::build(tris)) as Box<dyn Engine>, None))),
         ));
     }
-    builders
+    Ok(builders)
 }
 
 /// Builds every engine on every pool, `repeat` rounds interleaved, each engine dropped as soon

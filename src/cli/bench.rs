@@ -46,6 +46,10 @@ pub struct BenchArgs {
     /// Write the canonical rays to this file (a mesh-name suffix is added for several meshes).
     #[arg(long)]
     rays_out: Option<PathBuf>,
+    /// Write the triangles the engines are given to this file (suffixed like --rays-out): the
+    /// input of `src/bench/embree_build.c`, which times Embree's build in a C program.
+    #[arg(long)]
+    triangles_out: Option<PathBuf>,
     /// Write tracery-sah's closest hits to this file (suffixed like --rays-out).
     #[arg(long)]
     hits_out: Option<PathBuf>,
@@ -132,6 +136,11 @@ pub fn run(a: BenchArgs) -> Result<()> {
             let p = ensure_parent(&per_mesh(p, &scene.name, several))?;
             bench::write_rays(&p, &rays)?;
             eprintln!("wrote rays to {}", p.display());
+        }
+        if let Some(p) = &a.triangles_out {
+            let p = ensure_parent(&per_mesh(p, &scene.name, several))?;
+            bench::write_triangles(&p, tris)?;
+            eprintln!("wrote triangles to {}", p.display());
         }
         let out = bench::run(
             &scene.name,
