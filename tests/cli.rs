@@ -235,6 +235,37 @@ fn stats_json_has_both_builders() {
     }
 }
 
+#[test]
+fn report_threads_has_a_row_per_thread_count_up_to_every_core() {
+    let o = tracery(&[
+        "report", "threads", "--width", "16", "--height", "12", "--spp", "1", "--repeat", "1",
+    ]);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let out = text(&o.stdout);
+    // Rows: | threads | ms per sample | speed-up | build ms | speed-up |
+    let rows: Vec<Vec<String>> = out
+        .lines()
+        .filter(|l| l.starts_with("| ") && l.as_bytes()[2].is_ascii_digit())
+        .map(|l| l.split('|').map(|c| c.trim().to_string()).collect())
+        .collect();
+    let threads: Vec<usize> = rows.iter().map(|r| r[1].parse().unwrap()).collect();
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    assert_eq!(threads.first(), Some(&1), "{out}");
+    assert_eq!(threads.last(), Some(&cores), "{out}");
+    assert!(threads.windows(2).all(|w| w[0] < w[1]), "{out}");
+    // One thread is the speed-ups' base; every time is a positive figure.
+    assert_eq!(
+        (rows[0][3].as_str(), rows[0][5].as_str()),
+        ("1.00x", "1.00x"),
+        "{out}"
+    );
+    for r in &rows {
+        for c in [2, 4] {
+            assert!(r[c].parse::<f64>().is_ok_and(|x| x > 0.0), "{out}");
+        }
+    }
+}
+
 /// Output into a pipe whose reader has gone (`tracery stats --json | head -0`) ends the process
 /// quietly, as SIGPIPE ends other command-line tools, not with a panic.
 #[cfg(unix)]

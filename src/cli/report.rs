@@ -47,6 +47,29 @@ enum ReportKind {
         #[arg(long)]
         plot: Option<PathBuf>,
     },
+    /// Speed-up against threads: path tracing a scene (ms per sample) and our SAH build of a
+    /// mesh, on 1, 2, 4, ... threads up to every core, in interleaved rounds, each figure its
+    /// best round. On a machine with more cores, this is the table of how far they pay.
+    Threads {
+        /// Scene to path trace (the built-in Cornell box when left out); the path integrator
+        /// is used whatever the scene says.
+        scene: Option<PathBuf>,
+        /// Mesh or scene whose BVH build is timed (the scene's when left out).
+        #[arg(long)]
+        build: Option<PathBuf>,
+        /// Picture width in pixels.
+        #[arg(long, default_value_t = 320)]
+        width: u32,
+        /// Picture height in pixels.
+        #[arg(long, default_value_t = 240)]
+        height: u32,
+        /// Samples per pixel of each timed render.
+        #[arg(long, default_value_t = 16)]
+        spp: u32,
+        /// Repeat each measurement and keep the best.
+        #[arg(long, default_value_t = 3)]
+        repeat: usize,
+    },
     /// SAH bin counts against build ms, SAH cost, closest-hit Mrays/s (one thread) and the
     /// nodes and triangle blocks a canonical ray's closest-hit walk tests (counts that do not
     /// depend on the machine's load).
@@ -66,6 +89,14 @@ pub fn run(a: ReportArgs) -> Result<()> {
     match a.kind {
         ReportKind::Splits { meshes, repeat } => splits(meshes, repeat),
         ReportKind::Bins { mesh, bins, repeat } => bins_table(mesh, bins, repeat),
+        ReportKind::Threads {
+            scene,
+            build,
+            width,
+            height,
+            spp,
+            repeat,
+        } => threads_table(scene, build, (width, height, spp), repeat),
         ReportKind::Scaling {
             meshes,
             generated,
@@ -237,6 +268,97 @@ fn canonical_visits(bvh: &Bvh) -> CanonicalVisits {
     v
 }
 
+/// `x` with three significant digits (at least one decimal): a small mesh's build takes
+/// microseconds.
+fn three_digits(x: f64) -> String {
+    let decimals = if x > 0.0 {
+        (2 - x.log10().floor() as i32).clamp(1, 9) as usize
+    } else {
+        1
+    };
+    format!("{x:.decimals$}")
+}
+
+/// The thread counts the threads table measures: powers of two below `cores`, then `cores`.
+fn thread_counts(cores: usize) -> Vec<usize> {
+    let mut counts: Vec<usize> = std::iter::successors(Some(1usize), |t| Some(t * 2))
+        .take_while(|&t| t < cores)
+        .collect();
+    counts.push(cores.max(1));
+    counts
+}
+
+fn threads_table(
+    scene: Option<PathBuf>,
+    build: Option<PathBuf>,
+    (width, height, spp): (u32, u32, u32),
+    repeat: usize,
+) -> Result<()> {
+    let mut scene = load_scene(scene.as_deref())?;
+    scene.integrator = tracery::scene::Integrator::Path;
+    let built = match &build {
+        Some(p) => load_scene(Some(p))?,
+        None => scene.clone(),
+    };
+    let settings = RenderSettings {
+        width,
+        height,
+        spp,
+        seed: 0,
+        ..RenderSettings::default()
+    };
+    settings.validate().map_err(anyhow::Error::msg)?;
+    let bvh = Bvh::build(&scene.mesh.triangles, &BuildOptions::sah());
+    let counts = thread_counts(all_threads());
+    let pools = counts
+        .iter()
+        .map(|&t| rayon::ThreadPoolBuilder::new().num_threads(t).build())
+        .collect::<Result<Vec<_>, _>>()?;
+    eprintln!(
+        "{}: path traced at {width}x{height}, {spp} spp; {} ({} triangles) built; threads {:?}",
+        scene.name,
+        built.name,
+        built.mesh.triangles.len(),
+        counts
+    );
+    // Interleaved rounds: every thread count once per round, so a burst of load elsewhere on
+    // the machine costs them alike; the first round warms the pools and the caches, untimed.
+    let mut best = vec![[f64::INFINITY; 2]; counts.len()]; // [render ms, build ms]
+    for round in 0..=repeat.max(1) {
+        for (k, pool) in pools.iter().enumerate() {
+            eprintln!("  round {}: {} thread(s)", round, counts[k]);
+            if round == 0 {
+                pool.install(|| render(&scene, &bvh, &settings, &|_| {}))?;
+                pool.install(|| Bvh::build(&built.mesh.triangles, &BuildOptions::sah()));
+                continue;
+            }
+            let start = Instant::now();
+            pool.install(|| render(&scene, &bvh, &settings, &|_| {}))?;
+            best[k][0] = best[k][0].min(start.elapsed().as_secs_f64() * 1e3);
+            let ms = build_ms(pool, || {
+                Ok(Bvh::build(&built.mesh.triangles, &BuildOptions::sah()))
+            })?;
+            best[k][1] = best[k][1].min(ms);
+        }
+    }
+    println!(
+        "| threads | path tracing, ms per sample ({}, {width}x{height}) | speed-up | SAH build ms ({}) | speed-up |",
+        scene.name, built.name
+    );
+    println!("|---:|---:|---:|---:|---:|");
+    for (k, t) in counts.iter().enumerate() {
+        let [render_ms, build] = best[k];
+        println!(
+            "| {t} | {} | {:.2}x | {} | {:.2}x |",
+            three_digits(render_ms / spp as f64),
+            best[0][0] / render_ms,
+            three_digits(build),
+            best[0][1] / build
+        );
+    }
+    Ok(())
+}
+
 /// Time in ms of one `build` on `pool`; what it built is dropped after the clock stops.
 fn build_ms<T: Send>(
     pool: &rayon::ThreadPool,
@@ -292,20 +414,31 @@ fn scaling(
         pool.map(|pool| (t, pool))
     });
     let pools = pools.into_iter().collect::<Result<Vec<_>, _>>()?;
+    // One Embree device per pool, made once, as Embree's users keep one.
+    let devices = embree
+        .then(|| {
+            pools
+                .iter()
+                .map(|(t, _)| bench::embree::Device::new(*t, None))
+                .collect::<Result<Vec<_>>>()
+        })
+        .transpose()?;
     let mut rows: Vec<ScalingRow> = Vec::new();
     for (name, tris) in &inputs {
         eprintln!("{name}: {} triangles", tris.len());
+        let buffers = embree.then(|| bench::embree::Buffers::of(tris));
         // Interleaved rounds, as in `tracery bench`: every engine on every pool once per
         // round, each figure its best round, so a burst of load from another tenant of the
         // machine costs both engines alike.
         let mut best = [[f64::INFINITY; 2]; 2]; // [ours, Embree][1 thread, all threads]
         for _ in 0..repeat.max(1) {
-            for (p, (threads, pool)) in pools.iter().enumerate() {
+            for (p, (_, pool)) in pools.iter().enumerate() {
                 let ms = build_ms(pool, || Ok(Bvh::build(tris, &BuildOptions::sah())))?;
                 best[0][p] = best[0][p].min(ms);
-                if embree {
-                    // The scene's build, as `tracery bench` counts it (not the device's).
-                    let e = pool.install(|| bench::embree::Embree::build(tris, *threads))?;
+                if let (Some(devices), Some(buffers)) = (&devices, &buffers) {
+                    // `rtcCommitScene` alone, as `tracery bench` times it.
+                    let e =
+                        pool.install(|| bench::embree::Embree::build_on(&devices[p], buffers))?;
                     best[1][p] = best[1][p].min(e.build_ms);
                 }
             }
