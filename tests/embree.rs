@@ -1,9 +1,9 @@
 //! Embree through our FFI (`src/bench/embree.rs`, loaded at run time), the peer every speed
 //! figure is measured against, checked as our own BVH is: its single-ray closest hits and
-//! occlusion against brute force, its 16-ray packets through the benchmark's agreement column,
-//! on each instruction set `tracery bench --isa` can hold it to. A wrong field offset in the
-//! hand-written ray and hit structs, a misread hit or a packet lane put back in the wrong place
-//! shows here as rays that disagree.
+//! occlusion against brute force, its 16-ray packets through the benchmark's agreement column
+//! on each instruction set `tracery bench --isa` can hold it to, and its stream queries against
+//! its single-ray ones. A wrong field offset in the hand-written ray and hit structs, a misread
+//! hit or a packet lane put back in the wrong place shows here as rays that disagree.
 
 mod common;
 
@@ -147,6 +147,47 @@ fn embree_packets_agree_with_ours_on_every_isa() {
                 (false, None) => None,
             };
             assert_eq!(r.isa.as_deref(), expected, "{}", r.engine);
+        }
+    }
+}
+
+/// Embree's stream queries (`rtcIntersect1M` / `rtcOccluded1M`, the benchmark's batched peer
+/// on incoherent rays) give each ray of a stream the answer its single-ray query gives: a
+/// wrong stride or record layout would move answers between rays.
+#[test]
+fn embree_streams_answer_each_ray_as_its_single_query_does() {
+    if !common::embree() {
+        return;
+    }
+    for (name, tris) in meshes() {
+        let embree = Embree::build(&tris, 1).expect("Embree builds");
+        let rays = common::random_rays(&tris, 5_000, 0x57E4 ^ tris.len() as u64);
+        for stream in [&rays[..], &rays[..1], &rays[..1000], &rays[1000..1037]] {
+            let mut hits = vec![bench::HitRecord::MISS; stream.len()];
+            let mut blocked = vec![false; stream.len()];
+            embree.intersect_stream(stream, &mut hits);
+            embree.occluded_stream(stream, &mut blocked);
+            let mut hit = 0;
+            for (i, r) in stream.iter().enumerate() {
+                let one = embree.intersect1(r);
+                // The same triangle at the same distance (Embree's packet test may round the
+                // last bits differently from its single-ray one).
+                assert!(
+                    hits[i].prim == one.prim
+                        && (one.prim == bench::HitRecord::MISS.prim
+                            || (hits[i].t - one.t).abs() <= 1e-5 * one.t),
+                    "{name}: ray {i} of {}: stream {:?}, single {:?}",
+                    stream.len(),
+                    (hits[i].prim, hits[i].t),
+                    (one.prim, one.t)
+                );
+                assert_eq!(blocked[i], embree.occluded1(r), "{name}: ray {i}");
+                hit += usize::from(one.prim != bench::HitRecord::MISS.prim);
+            }
+            assert!(
+                stream.len() < 100 || (hit > 0 && hit < stream.len()),
+                "{name}: {hit} hit"
+            );
         }
     }
 }

@@ -19,6 +19,23 @@ pub(super) trait Engine: Sync + Send {
     }
     /// Whether anything lies on the ray.
     fn occluded(&self, ray: &Ray) -> bool;
+    /// Whether the engine has a batched query for incoherent rays
+    /// ([`Engine::closest_batch`], [`Engine::occluded_batch`]).
+    fn batched(&self) -> bool {
+        false
+    }
+    /// Closest hits of a batch of incoherent rays in one call (an engine with
+    /// [`Engine::batched`]; the others one by one); each ray's record to the same index of
+    /// `out`.
+    fn closest_batch(&self, rays: &[Ray], out: &mut [HitRecord]) {
+        for (o, r) in out.iter_mut().zip(rays) {
+            *o = self.closest_incoherent(r);
+        }
+    }
+    /// Occluded rays among a batch of incoherent rays, in one call where the engine has one.
+    fn occluded_batch(&self, rays: &[Ray]) -> usize {
+        rays.iter().filter(|r| self.occluded(r)).count()
+    }
     /// The build time the engine measured itself, when its builder call does more than build
     /// (Embree's creates a device, with its thread pool, first); `None`: the call's time.
     fn build_ms(&self) -> Option<f64> {
@@ -179,6 +196,27 @@ pub(super) fn trace_closest(
 pub(super) fn trace_closest_incoherent(engine: &dyn Engine, rays: &[Ray], out: &mut [HitRecord]) {
     assert_eq!(rays.len(), out.len(), "one record per ray");
     trace_singles(rays, out, |r| engine.closest_incoherent(r));
+}
+
+/// Closest hits of an incoherent set by the engine's batched query, [`CHUNK`] consecutive
+/// rays a call, on the current pool.
+pub(super) fn trace_closest_batched(engine: &dyn Engine, rays: &[Ray], out: &mut [HitRecord]) {
+    assert_eq!(rays.len(), out.len(), "one record per ray");
+    out.par_chunks_mut(CHUNK)
+        .enumerate()
+        .with_max_len(1)
+        .for_each(|(c, o)| {
+            engine.closest_batch(&rays[c * CHUNK..c * CHUNK + o.len()], o);
+        });
+}
+
+/// Occluded rays of an incoherent set by the engine's batched query, as
+/// [`trace_closest_batched`].
+pub(super) fn trace_occluded_batched(engine: &dyn Engine, rays: &[Ray]) -> usize {
+    rays.par_chunks(CHUNK)
+        .with_max_len(1)
+        .map(|c| engine.occluded_batch(c))
+        .sum()
 }
 
 /// `out[i] = closest(&rays[i])` for every ray, in chunks of [`CHUNK`] on the current pool.

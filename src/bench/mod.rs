@@ -172,8 +172,10 @@ pub struct EngineResult {
     /// it, apart (the one-thread row of each single-ray engine; `None` for the others).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub split: Option<SplitRates>,
-    /// One thread, single rays: the rates on the secondary rays made from the canonical hits
-    /// ([`secondary`]; the one-thread row of each single-ray engine, `None` for the others).
+    /// One thread: the rates on the secondary rays made from the canonical hits
+    /// ([`secondary`]): single rays for the one-thread row of each single-ray engine, and a
+    /// batched call for a packet engine with a query for streams of incoherent rays (Embree's
+    /// `rtcIntersect1M` / `rtcOccluded1M`, 1024 rays a call); `None` for the others.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub secondary: Option<SecondaryRates>,
 }
@@ -690,6 +692,22 @@ impl Timings {
                         second_times[e][1] = second_times[e][1].min(start.elapsed());
                         second_blocked[e] = blocked;
                     }
+                }
+                if let Some(p) = one
+                    && entry.engine.batched()
+                    && !second.bounce.is_empty()
+                {
+                    let (engine, pool) = (&*entry.engine, &pools[p].1);
+                    let out = &mut second_hits[e];
+                    out.resize(second.bounce.len(), HitRecord::MISS);
+                    let start = Instant::now();
+                    pool.install(|| engines::trace_closest_batched(engine, &second.bounce, out));
+                    second_times[e][0] = second_times[e][0].min(start.elapsed());
+                    let start = Instant::now();
+                    let blocked =
+                        pool.install(|| engines::trace_occluded_batched(engine, &second.shadow));
+                    second_times[e][1] = second_times[e][1].min(start.elapsed());
+                    second_blocked[e] = blocked;
                 }
             }
         }

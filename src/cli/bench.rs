@@ -374,16 +374,18 @@ fn print_split(rows: &[EngineResult]) {
     }
 }
 
-/// The one-thread single-ray rates on the secondary rays (a diffuse bounce and a shadow ray
-/// from each canonical hit), and tracery-sah's ratios to Embree on them.
+/// The one-thread rates on the secondary rays (a diffuse bounce and a shadow ray from each
+/// canonical hit): single rays, and Embree's batched query (`embree-packet16`: its stream
+/// queries, 1024 rays a call, incoherent flag); tracery-sah's ratios to both.
 fn print_secondary(rows: &[EngineResult]) {
     let second = rows_with(rows, |r| r.secondary);
     let Some((_, first)) = second.first() else {
         return;
     };
     println!(
-        "one thread, single rays, secondary rays from the {} hits: a diffuse bounce each \
-         (closest) and a shadow ray to a light above the mesh (occluded) (Mr/s):",
+        "one thread, secondary rays from the {} hits: a diffuse bounce each (closest) and a \
+         shadow ray to a light above the mesh (occluded), single rays (embree-packet16: \
+         rtcIntersect1M / rtcOccluded1M, 1024 rays a call) (Mr/s):",
         first.rays
     );
     println!(
@@ -401,11 +403,13 @@ fn print_secondary(rows: &[EngineResult]) {
         );
     }
     let find = |e: &str| second.iter().find(|(n, _)| *n == e).map(|(_, s)| s);
-    if let (Some(us), Some(them)) = (find("tracery-sah"), find("embree")) {
-        println!(
-            "tracery-sah / embree (1 thread): secondary rays: bounce closest {:.2}x, shadow occluded {:.2}x",
-            us.bounce_closest_mrays / them.bounce_closest_mrays,
-            us.shadow_occluded_mrays / them.shadow_occluded_mrays
-        );
+    for peer in ["embree", "embree-packet16"] {
+        if let (Some(us), Some(them)) = (find("tracery-sah"), find(peer)) {
+            println!(
+                "tracery-sah / {peer} (1 thread): secondary rays: bounce closest {:.2}x, shadow occluded {:.2}x",
+                us.bounce_closest_mrays / them.bounce_closest_mrays,
+                us.shadow_occluded_mrays / them.shadow_occluded_mrays
+            );
+        }
     }
 }
