@@ -15,7 +15,6 @@ pub mod secondary;
 
 use std::io::{BufReader, BufWriter, Read, Write};
 use std::path::Path;
-use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result, bail};
@@ -445,22 +444,13 @@ fn builders<'a>(tris: &'a [[Vec3; 3]], config: &BenchConfig) -> Result<Vec<(Stri
         ));
     }
     if config.embree && BenchConfig::embree_available() {
-        // As Embree's users time a build: one device per thread count and the triangles'
-        // buffers made once, before any build; `rtcCommitScene` alone is timed.
-        let devices: Result<Vec<(usize, Arc<embree::Device>)>> = config
-            .threads
-            .iter()
-            .map(|&t| Ok((t, embree::Device::new(t, isa)?)))
-            .collect();
-        let devices = Arc::new(devices?);
+        // As Embree's users time a build: the triangles' buffers made once, `rtcCommitScene`
+        // alone timed. Each build gets a device of its own, made before it and not timed:
+        // Embree's thread count is the process's (the live device asking for the most sets
+        // it), so a one-thread build cannot run beside a live two-thread device.
         let buffers = embree::Buffers::of(tris);
         let build = move |threads: usize| -> Result<embree::Embree> {
-            let device = devices
-                .iter()
-                .find(|(t, _)| *t == threads)
-                .map(|(_, d)| d)
-                .context("no Embree device for this thread count")?;
-            embree::Embree::build_on(device, &buffers)
+            embree::Embree::build_on(&embree::Device::new(threads, isa)?, &buffers)
         };
         let packets = build.clone();
         builders.push((

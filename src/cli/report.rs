@@ -414,15 +414,6 @@ fn scaling(
         pool.map(|pool| (t, pool))
     });
     let pools = pools.into_iter().collect::<Result<Vec<_>, _>>()?;
-    // One Embree device per pool, made once, as Embree's users keep one.
-    let devices = embree
-        .then(|| {
-            pools
-                .iter()
-                .map(|(t, _)| bench::embree::Device::new(*t, None))
-                .collect::<Result<Vec<_>>>()
-        })
-        .transpose()?;
     let mut rows: Vec<ScalingRow> = Vec::new();
     for (name, tris) in &inputs {
         eprintln!("{name}: {} triangles", tris.len());
@@ -432,13 +423,14 @@ fn scaling(
         // machine costs both engines alike.
         let mut best = [[f64::INFINITY; 2]; 2]; // [ours, Embree][1 thread, all threads]
         for _ in 0..repeat.max(1) {
-            for (p, (_, pool)) in pools.iter().enumerate() {
+            for (p, (threads, pool)) in pools.iter().enumerate() {
                 let ms = build_ms(pool, || Ok(Bvh::build(tris, &BuildOptions::sah())))?;
                 best[0][p] = best[0][p].min(ms);
-                if let (Some(devices), Some(buffers)) = (&devices, &buffers) {
-                    // `rtcCommitScene` alone, as `tracery bench` times it.
-                    let e =
-                        pool.install(|| bench::embree::Embree::build_on(&devices[p], buffers))?;
+                if let Some(buffers) = &buffers {
+                    // `rtcCommitScene` alone, on a device of its own, as `tracery bench` times
+                    // it.
+                    let device = bench::embree::Device::new(*threads, None)?;
+                    let e = pool.install(|| bench::embree::Embree::build_on(&device, buffers))?;
                     best[1][p] = best[1][p].min(e.build_ms);
                 }
             }

@@ -12,6 +12,9 @@
 //! bounces after the camera's hit take light samples and bounce, and the bounce from the last
 //! of them only collects emission (Mitsuba's `path` with `max_depth = D + 2`).
 //!
+//! The integrator is one loop over a path's vertices ([`Tracer::path`]) around one step per
+//! vertex ([`Tracer::path_vertex`]), which multiplies the light found there by the path's
+//! throughput: the unit a renderer that advances many paths together would run over batches.
 
 use glam::Vec3;
 
