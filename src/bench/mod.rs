@@ -668,34 +668,34 @@ impl Timings {
                         pool.install(|| engines::trace_occluded(engine, set, width));
                         split[e][2 + i] = split[e][2 + i].min(start.elapsed());
                     }
-                    if !second.bounce.is_empty() {
-                        let out = &mut second_hits[e];
-                        out.resize(second.bounce.len(), HitRecord::MISS);
-                        let start = Instant::now();
-                        pool.install(|| {
-                            engines::trace_closest_incoherent(engine, &second.bounce, out)
-                        });
-                        second_times[e][0] = second_times[e][0].min(start.elapsed());
-                        let start = Instant::now();
-                        let blocked =
-                            pool.install(|| engines::trace_occluded(engine, &second.shadow, width));
-                        second_times[e][1] = second_times[e][1].min(start.elapsed());
-                        second_blocked[e] = blocked;
-                    }
                 }
+                // The secondary rays: one by one on a single-ray engine, by the batched query on
+                // a packet engine that has one (the other packet engines get no figure).
+                let single = entry.engine.tile().is_none();
                 if let Some(p) = one
-                    && entry.engine.batched()
+                    && (single || entry.engine.batched())
                     && !second.bounce.is_empty()
                 {
                     let (engine, pool) = (&*entry.engine, &pools[p].1);
                     let out = &mut second_hits[e];
                     out.resize(second.bounce.len(), HitRecord::MISS);
                     let start = Instant::now();
-                    pool.install(|| engines::trace_closest_batched(engine, &second.bounce, out));
+                    pool.install(|| {
+                        if single {
+                            engines::trace_closest_incoherent(engine, &second.bounce, out)
+                        } else {
+                            engines::trace_closest_batched(engine, &second.bounce, out)
+                        }
+                    });
                     second_times[e][0] = second_times[e][0].min(start.elapsed());
                     let start = Instant::now();
-                    let blocked =
-                        pool.install(|| engines::trace_occluded_batched(engine, &second.shadow));
+                    let blocked = pool.install(|| {
+                        if single {
+                            engines::trace_occluded(engine, &second.shadow, width)
+                        } else {
+                            engines::trace_occluded_batched(engine, &second.shadow)
+                        }
+                    });
                     second_times[e][1] = second_times[e][1].min(start.elapsed());
                     second_blocked[e] = blocked;
                 }
