@@ -89,20 +89,29 @@ fn fast_srgb_encoding_is_within_one_level_of_the_exact_curve() {
     assert_eq!(srgb8_fast(f32::NAN), 0);
 }
 
-/// The render traces camera rays in 8 x 8 tiles of packets; each pixel must still get exactly
-/// what tracing it alone gives (its own sample stream, its own single-ray hit), on an image whose
-/// sides are not multiples of the tile (partial tiles and a partial last band), with and
-/// without the thin lens.
+/// The render traces camera rays in 8 x 8 tiles of packets, and the path integrator advances a
+/// tile's paths together; each pixel must still get exactly what tracing it alone gives (its
+/// own sample stream, its own single-ray hits), on an image whose sides are not multiples of
+/// the tile (partial tiles and a partial last band), with and without the thin lens, through
+/// mirrors and glass (the paths' stacks of waiting vertices) and transparent shadows, with both
+/// integrators.
 #[test]
 fn tiled_render_equals_each_pixel_traced_alone() {
     use tracery::camera::CameraRays;
+    use tracery::render::Integrator;
     use tracery::render::{EnvironmentMap, RayCounts, RenderPlan, Tracer};
     use tracery::sampling::{PathSampler, PixelSampler, concentric_disk, dim};
-    for path in [
+    let scenes = [
         "assets/scenes/cornell_mirror_glass.toml",
         "assets/scenes/depth_of_field.toml",
-    ] {
-        let scene = Scene::load(std::path::Path::new(path)).unwrap();
+        "assets/scenes/transparent_shadow.toml",
+    ];
+    for (path, integrator) in scenes
+        .into_iter()
+        .flat_map(|p| [(p, Integrator::Direct), (p, Integrator::Path)])
+    {
+        let mut scene = Scene::load(std::path::Path::new(path)).unwrap();
+        scene.integrator = integrator;
         let bvh = Bvh::build(&scene.mesh.triangles, &BuildOptions::sah());
         let settings = RenderSettings {
             width: 37,
@@ -135,7 +144,10 @@ fn tiled_render_equals_each_pixel_traced_alone() {
                     let mut counts = RayCounts::default();
                     sum += tracer.radiance(&ray, &mut PathSampler::new(sampler), &mut counts);
                 }
-                assert_eq!(film.sum[pixel as usize], sum, "{path}: pixel ({x}, {y})");
+                assert_eq!(
+                    film.sum[pixel as usize], sum,
+                    "{path}, {integrator:?}: pixel ({x}, {y})"
+                );
             }
         }
     }

@@ -107,6 +107,24 @@ impl Bvh {
         Hit::of(self.wide.closest::<true>(ray, t_max, safe), t_max)
     }
 
+    /// [`Bvh::intersect_incoherent`] of a batch of rays (a path tracer's bounces, one from each
+    /// path of a batch), into `out` (one hit per ray, each the hit the ray gets alone).
+    pub fn intersect_batch(&self, rays: &[Ray], out: &mut [Option<Hit>]) {
+        assert_eq!(rays.len(), out.len(), "one result per ray");
+        for (ray, o) in rays.iter().zip(out) {
+            *o = self.intersect_incoherent(ray, f32::INFINITY);
+        }
+    }
+
+    /// [`Bvh::occluded`] of a batch of rays, each with its own `t_max` (a path tracer's shadow
+    /// rays, from each path of a batch), into `out` (each the answer the ray gets alone).
+    pub fn occluded_batch(&self, rays: &[(Ray, f32)], out: &mut [bool]) {
+        assert_eq!(rays.len(), out.len(), "one result per ray");
+        for ((ray, t_max), o) in rays.iter().zip(out) {
+            *o = self.occluded(ray, *t_max);
+        }
+    }
+
     /// [`Bvh::intersect`], adding to `visits` the nodes and triangle blocks its walk tested:
     /// a measure of the tree's quality for a set of rays that, unlike a time, does not depend
     /// on the machine or its load. Every kernel walks the same way; this runs the scalar one.

@@ -170,17 +170,31 @@ pub(super) fn power(n: f32, p: f32, q: f32) -> f32 {
     }
 }
 
+/// A light sample waiting on its shadow ray: the segment from `origin` to `origin + to *
+/// t_max`, and the light the sample brings when nothing on it blocks the light. The `direct`
+/// integrator traces it at once ([`Tracer::lit`]); the `path` integrator queues the samples of a
+/// batch of paths and traces them together.
+#[derive(Clone, Copy, Debug)]
+pub(in crate::render) struct ShadowRay {
+    /// Where the shadow ray starts (the surface's offset origin).
+    pub(in crate::render) origin: Vec3,
+    /// Towards the light's point: the ray's direction, unnormalised.
+    pub(in crate::render) to: Vec3,
+    /// Where along `to` it stops (just short of the light, so that its own quad does not
+    /// shadow it).
+    pub(in crate::render) t_max: f32,
+    /// The light reflected towards the viewer when the segment is clear.
+    pub(in crate::render) light: Vec3,
+}
+
 /// One light sample of the emissive triangles ([`Tracer::emissive_sample`]).
 pub(super) struct EmissiveSample {
-    /// The light reflected towards the viewer, shadow included, before any weight.
-    pub(super) value: Vec3,
+    /// Its shadow ray, with the light reflected towards the viewer before any weight.
+    pub(super) shadow: ShadowRay,
     /// The sample's density over solid angle at the surface.
     pub(super) p_light: f32,
     /// Unit direction from the surface to the sampled point.
     pub(super) wi: Vec3,
-    /// True when its shadow ray went through a transparent surface (or shadows are off): a
-    /// direction drawn from the lobes would not have found the point as its closest hit.
-    pub(super) crossed: bool,
 }
 
 /// A rectangle light's shape and emission: the rectangle `corner + [0, 1] edge_u +
@@ -293,22 +307,21 @@ pub(super) fn rect_hit(
 }
 
 impl Tracer<'_> {
-    /// Radiance from the rectangle lights that the direction `wi` from `s` meets on their
-    /// front, each seen through a shadow ray and weighted against the light's own samples by
-    /// the power heuristic: `wi` is one of `count` directions drawn with density `pdf`, and
-    /// `light_samples(i, samples)` says how many samples rectangle light `i` (of `samples`)
-    /// takes here, or `None` to leave it out. Lights do not shadow each other, as with their
-    /// samples: a direction counts every rectangle it meets.
+    /// The rectangle lights that the direction `wi` from `s` meets on their front, each as a
+    /// shadow ray with its radiance weighted against the light's own samples by the power
+    /// heuristic (given to `out`): `wi` is one of `count` directions drawn with density `pdf`,
+    /// and `light_samples(i, samples)` says how many samples rectangle light `i` (of
+    /// `samples`) takes here, or `None` to leave it out. Lights do not shadow each other, as
+    /// with their samples: a direction counts every rectangle it meets.
     pub(super) fn rects_along(
         &self,
         s: &Surface,
         wi: Vec3,
         pdf: f32,
         count: u32,
-        counts: &mut RayCounts,
         light_samples: impl Fn(usize, u32) -> Option<u32>,
-    ) -> Vec3 {
-        let mut acc = Vec3::ZERO;
+        mut out: impl FnMut(ShadowRay),
+    ) {
         for (i, light) in self.scene.lights.iter().enumerate() {
             let Some(rect) = RectLight::of(light, |n| n) else {
                 continue;
@@ -325,52 +338,51 @@ impl Tracer<'_> {
             if w == 0.0 {
                 continue;
             }
-            let pass = self.shadow(s.origin, hit.q - s.origin, 1.0 - 1e-4, counts);
-            acc += rect.color * rect.intensity * pass * w;
+            out(ShadowRay {
+                origin: s.origin,
+                to: hit.q - s.origin,
+                t_max: 1.0 - 1e-4,
+                light: rect.color * rect.intensity * w,
+            });
         }
-        acc
     }
 
-    /// Light the point or spot light `light` sends to `s` and `s` reflects towards `wo`, its
-    /// shadow ray included (zero from behind the surface, and for a rectangle light).
-    pub(super) fn point_light(
-        &self,
-        s: &Surface,
-        wo: Vec3,
-        light: &Light,
-        counts: &mut RayCounts,
-    ) -> Vec3 {
-        let Some((position, intensity)) = light.point_towards(s.p) else {
-            return Vec3::ZERO;
-        };
+    /// Light the point or spot light `light` sends to `s` and `s` reflects towards `wo`, with
+    /// its shadow ray (none from behind the surface, and for a rectangle light).
+    pub(super) fn point_light(&self, s: &Surface, wo: Vec3, light: &Light) -> Option<ShadowRay> {
+        let (position, intensity) = light.point_towards(s.p)?;
         // The light's direction and distance from the surface point itself; only the shadow
         // ray starts from the offset origin.
         let to = position - s.p;
         let d2 = to.length_squared();
         let wi = to / d2.sqrt();
         if s.n().dot(wi) <= 0.0 || s.ng.dot(to) <= 0.0 {
-            return Vec3::ZERO;
+            return None;
         }
         let origin = s.origin;
-        let pass = self.shadow(origin, position - origin, 1.0, counts);
-        brdf(s, wi, wo) * s.n().dot(wi) * intensity * pass / d2
+        Some(ShadowRay {
+            origin,
+            to: position - origin,
+            t_max: 1.0,
+            light: brdf(s, wi, wo) * s.n().dot(wi) * intensity / d2,
+        })
     }
 
     /// Light the rectangle light `rect` sends to `s` and `s` reflects towards `wo`, from
-    /// `rect.samples` samples of it, each with its shadow ray (stopping just short of the
-    /// light, so that its own quad does not shadow it). Each sample's term is scaled by
-    /// `weight(sample, cos, area)` (`cos` at the surface, `area` the light's): the path
-    /// tracer's multiple-importance weight, 1 for direct light alone; a sample weighted 0
-    /// casts no shadow ray.
+    /// `rect.samples` samples of it, each given to `out` with its shadow ray (stopping just
+    /// short of the light, so that its own quad does not shadow it) and its share of the
+    /// estimate. Each sample's term is scaled by `weight(sample, cos, area)` (`cos` at the
+    /// surface, `area` the light's): the path tracer's multiple-importance weight, 1 for direct
+    /// light alone; a sample weighted 0 casts no shadow ray.
     pub(super) fn rect_light(
         &self,
         s: &Surface,
         wo: Vec3,
         rect: &RectLight,
         rng: &mut PathSampler,
-        counts: &mut RayCounts,
         weight: impl Fn(&RectSample, f32, f32) -> f32,
-    ) -> Vec3 {
+        mut out: impl FnMut(ShadowRay),
+    ) {
         let RectLight {
             corner,
             edge_u,
@@ -382,7 +394,7 @@ impl Tracer<'_> {
         let normal = edge_u.cross(edge_v);
         let area = normal.length();
         let ln = normal / area;
-        let mut acc = Vec3::ZERO;
+        let scale = rect.color * rect.intensity / n as f32;
         for _ in 0..n {
             let Some(sample) = rect_sample(s, corner, edge_u, edge_v, ln, rng.next_2d()) else {
                 continue;
@@ -393,10 +405,13 @@ impl Tracer<'_> {
                 continue;
             }
             let RectSample { q, wi, d2, cos_l } = sample;
-            let pass = self.shadow(origin, q - origin, 1.0 - 1e-4, counts);
-            acc += brdf(s, wi, wo) * cos * cos_l * area / d2 * pass * w;
+            out(ShadowRay {
+                origin,
+                to: q - origin,
+                t_max: 1.0 - 1e-4,
+                light: brdf(s, wi, wo) * cos * cos_l * area / d2 * w * scale,
+            });
         }
-        acc * rect.color * rect.intensity / n as f32
     }
 
     /// A rectangle light's `samples` after the plan's cap.
@@ -404,6 +419,11 @@ impl Tracer<'_> {
         self.plan
             .max_light_samples
             .map_or(samples, |cap| samples.min(cap.max(1)))
+    }
+
+    /// The light of a light sample that passes its shadow ray, traced now.
+    pub(super) fn lit(&self, r: ShadowRay, counts: &mut RayCounts) -> Vec3 {
+        r.light * self.shadow(r.origin, r.to, r.t_max, counts)
     }
 
     /// Fraction of light passing from `origin + to * t_max` back to `origin`, per channel.
@@ -488,7 +508,7 @@ impl Tracer<'_> {
     }
 
     /// One light sample of the emissive triangles no rectangle light stands for (a triangle
-    /// chosen by area, a point uniform on it), with its shadow ray: the light `s` reflects
+    /// chosen by area, a point uniform on it), with its shadow ray and the light `s` reflects
     /// towards `wo` from it, unweighted. `None` when there are none, or the point lies behind
     /// the surface.
     pub(super) fn emissive_sample(
@@ -496,7 +516,6 @@ impl Tracer<'_> {
         s: &Surface,
         wo: Vec3,
         rng: &mut PathSampler,
-        counts: &mut RayCounts,
     ) -> Option<EmissiveSample> {
         if self.lights.tris.is_empty() {
             return None;
@@ -515,13 +534,16 @@ impl Tracer<'_> {
             return None;
         }
         let p_light = d2 / (cos_l * self.lights.area);
-        let (pass, crossed) = self.shadow_through(s.origin, q - s.origin, 1.0 - 1e-4, counts);
         let le = self.look(prim, b1, b2).emission;
         Some(EmissiveSample {
-            value: brdf(s, wi, wo) * cos * le * pass / p_light,
+            shadow: ShadowRay {
+                origin: s.origin,
+                to: q - s.origin,
+                t_max: 1.0 - 1e-4,
+                light: brdf(s, wi, wo) * cos * le / p_light,
+            },
             p_light,
             wi,
-            crossed,
         })
     }
 

@@ -21,6 +21,7 @@ pub mod tracer;
 
 pub use crate::scene::Integrator;
 pub use environment::{CubeMap, EnvironmentMap, LinearImage, sky};
+pub use integrator::path::PathBatch;
 pub use plan::{Explain, RenderPlan};
 pub use progressive::Progressive;
 pub use tracer::Tracer;
@@ -355,6 +356,8 @@ fn trace_tile(
     let mut firsts = [first; PACKET];
     let mut samplers = [first; PACKET];
     let mut hits = [None; PACKET];
+    let mut radiance = [Vec3::ZERO; PACKET];
+    let mut batch = PathBatch::default();
     let pixel_of = |k: usize| (x0 + k % tw, y0 + k / tw);
     for (k, f) in firsts[..n].iter_mut().enumerate() {
         let (x, y) = pixel_of(k);
@@ -374,15 +377,18 @@ fn trace_tile(
             .bvh
             .intersect_packet(&camera_rays[..n], f32::INFINITY, &mut hits[..n]);
         rays.camera += n as u64;
-        for k in 0..n {
-            let l = tracer.radiance_from_hit(
-                &camera_rays[k],
-                hits[k],
-                &mut PathSampler::new(samplers[k]),
-                &mut rays,
-            );
+        let paths = samplers.map(PathSampler::new);
+        tracer.radiance_batch(
+            &mut batch,
+            &camera_rays[..n],
+            &hits[..n],
+            &paths[..n],
+            &mut rays,
+            &mut radiance[..n],
+        );
+        for (sum, l) in sums[..n].iter_mut().zip(&radiance[..n]) {
             if l.is_finite() {
-                sums[k] += l;
+                *sum += *l;
             } else {
                 rejected += 1;
             }

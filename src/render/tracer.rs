@@ -5,6 +5,7 @@
 use glam::Vec3;
 
 use super::environment::EnvironmentMap;
+use super::integrator::path::PathBatch;
 use super::light::LightSet;
 use super::surface::{Look, textured};
 use super::{RayCounts, RenderPlan};
@@ -127,6 +128,35 @@ impl<'a> Tracer<'a> {
         match self.plan.integrator {
             Integrator::Direct => self.shade(ray, hit, 0, rng, counts),
             Integrator::Path => self.path(ray, hit, rng, counts),
+        }
+    }
+
+    /// [`Tracer::radiance_from_hit`] of many rays, `out[k]` for `rays[k]` with its closest hit
+    /// `hits[k]` and its random numbers `samplers[k]`; the same radiance, bit for bit. With the
+    /// path integrator their paths advance together, their shadow rays and bounces traced in
+    /// batches ([`Tracer::paths`]); `batch` is the working space, kept between calls. Called
+    /// inside [`crate::cpu::with_denormals_flushed`], as [`Tracer::radiance_from_hit`] is.
+    pub fn radiance_batch(
+        &self,
+        batch: &mut PathBatch,
+        rays: &[Ray],
+        hits: &[Option<Hit>],
+        samplers: &[PathSampler],
+        counts: &mut RayCounts,
+        out: &mut [Vec3],
+    ) {
+        assert!(
+            rays.len() == hits.len() && rays.len() == samplers.len() && rays.len() == out.len(),
+            "one hit, sampler and result per ray"
+        );
+        let together =
+            matches!(self.plan.integrator, Integrator::Path) && rays.iter().all(|r| r.is_valid());
+        if together {
+            self.paths(batch, rays, hits, samplers, counts, out);
+            return;
+        }
+        for k in 0..rays.len() {
+            out[k] = self.radiance_from_hit(&rays[k], hits[k], &mut { samplers[k] }, counts);
         }
     }
 

@@ -95,28 +95,39 @@ impl Tracer<'_> {
         let mut sum = Vec3::ZERO;
         for light in &self.scene.lights {
             let Some(rect) = RectLight::of(light, |n| self.capped_samples(n)) else {
-                sum += self.point_light(s, wo, light, counts);
+                if let Some(r) = self.point_light(s, wo, light) {
+                    sum += self.lit(r, counts);
+                }
                 continue;
             };
             let n = rect.samples as f32;
             let m = by_bsdf as f32;
-            sum += self.rect_light(s, wo, &rect, rng, counts, |sample, _, area| {
-                if by_bsdf == 0 {
-                    return 1.0;
-                }
-                let p_light = sample.d2 / (sample.cos_l * area);
-                power(n, p_light, m * bsdf.pdf(sample.wi, wo))
-            });
+            self.rect_light(
+                s,
+                wo,
+                &rect,
+                rng,
+                |sample, _, area| {
+                    if by_bsdf == 0 {
+                        return 1.0;
+                    }
+                    let p_light = sample.d2 / (sample.cos_l * area);
+                    power(n, p_light, m * bsdf.pdf(sample.wi, wo))
+                },
+                |r| sum += self.lit(r, counts),
+            );
         }
-        if let Some(e) = self.emissive_sample(s, wo, rng, counts) {
+        if let Some(e) = self.emissive_sample(s, wo, rng) {
+            let r = e.shadow;
+            let (pass, crossed) = self.shadow_through(r.origin, r.to, r.t_max, counts);
             // Where the lobes' directions could not have found the point, its sample counts
             // alone.
-            let w = if by_bsdf == 0 || e.crossed {
+            let w = if by_bsdf == 0 || crossed {
                 1.0
             } else {
                 power(1.0, e.p_light, by_bsdf as f32 * bsdf.pdf(e.wi, wo))
             };
-            sum += e.value * w;
+            sum += r.light * pass * w;
         }
         if by_bsdf > 0 {
             sum += self.lights_by_bsdf(s, bsdf, wo, by_bsdf, rng, counts);
@@ -149,9 +160,15 @@ impl Tracer<'_> {
                 continue;
             }
             let f = bsdf.eval(wi, wo) * cos / pdf;
-            let mut l = self.rects_along(s, wi, pdf, count, counts, |_, samples| {
-                Some(self.capped_samples(samples).max(1))
-            });
+            let mut l = Vec3::ZERO;
+            self.rects_along(
+                s,
+                wi,
+                pdf,
+                count,
+                |_, samples| Some(self.capped_samples(samples).max(1)),
+                |r| l += self.lit(r, counts),
+            );
             if self.plan.shadows && self.lights.sampled_triangles() > 0 {
                 counts.shadow += 1;
                 if let Some(hit) = self.bvh.intersect(&Ray::new(s.origin, wi), f32::INFINITY) {

@@ -4,7 +4,7 @@
 //! transparent surfaces the same way.
 
 pub(super) mod direct;
-pub(super) mod path;
+pub mod path;
 
 use glam::Vec3;
 

@@ -24,7 +24,7 @@ use crate::geometry::Ray;
 use crate::render::RayCounts;
 use crate::render::Tracer;
 use crate::render::bsdf::Sample;
-use crate::render::light::{Owner, RectLight, power};
+use crate::render::light::{Owner, RectLight, ShadowRay, power};
 use crate::render::surface::Surface;
 use crate::sampling::PathSampler;
 use crate::scene::{Light, face_normal};
@@ -75,53 +75,178 @@ pub(in crate::render) struct Bounce {
     weight: Vec3,
 }
 
+/// One path of a batch: the vertex it has reached, its random numbers, the light it has
+/// gathered so far and the vertices its mirrors and transparent surfaces left waiting.
+struct Lane {
+    v: Vertex,
+    rng: PathSampler,
+    l: Vec3,
+    /// Empty until a mirror or a transparent surface is met: no allocation on most paths.
+    pending: Vec<Vertex>,
+}
+
+/// The working space of a batch of paths ([`Tracer::paths`]): kept from one batch to the next,
+/// so that a render's batches allocate nothing once the first has run.
+#[derive(Default)]
+pub struct PathBatch {
+    lanes: Vec<Lane>,
+    /// The paths whose next vertex's hit is known.
+    ready: Vec<u32>,
+    /// The same, for the next round.
+    next: Vec<u32>,
+    /// The paths whose bounce waits on its closest hit, their rays and the hits found.
+    bouncing: Vec<u32>,
+    rays: Vec<Ray>,
+    hits: Vec<Option<Hit>>,
+    /// The light samples waiting on their shadow rays, the path of each, and what passes.
+    shadows: Vec<ShadowRay>,
+    owners: Vec<u32>,
+    passes: Vec<Vec3>,
+}
+
 impl Tracer<'_> {
-    /// Radiance along the camera ray `ray`, whose closest hit is `hit`, by path tracing.
-    ///
-    /// One loop meets the path's vertices one at a time ([`Tracer::path_vertex`]). A vertex
-    /// carries the path on by a bounce, and also by its mirror and through it where it has
-    /// them: the bounce is met next, and the mirror's and the transmitted vertices wait on a
-    /// stack, each followed to its end before the next (so they draw their random numbers in
-    /// the same order on every run).
+    /// Radiance along the camera ray `ray`, whose closest hit is `hit`, by path tracing: a
+    /// batch of one path ([`Tracer::paths`]).
     pub(in crate::render) fn path(
         &self,
         ray: &Ray,
         hit: Option<Hit>,
-        rng: &mut PathSampler,
+        rng: &PathSampler,
         counts: &mut RayCounts,
     ) -> Vec3 {
-        // Empty until a mirror or a transparent surface is met: no allocation on most paths.
-        let mut pending = Vec::new();
-        let mut v = Vertex {
-            ray: *ray,
-            hit,
-            depth: 0,
-            arrival: Arrival::Specular,
-            beta: Vec3::ONE,
-        };
-        let mut l = Vec3::ZERO;
-        loop {
-            let (found, goes_on) = self.path_vertex(&mut v, &mut pending, rng, counts);
-            l += found;
-            if !goes_on {
-                match pending.pop() {
-                    Some(p) => v = p,
-                    None => return l,
+        let mut out = [Vec3::ZERO];
+        self.paths(
+            &mut PathBatch::default(),
+            std::slice::from_ref(ray),
+            &[hit],
+            std::slice::from_ref(rng),
+            counts,
+            &mut out,
+        );
+        out[0]
+    }
+
+    /// Radiance along each camera ray `rays[k]`, whose closest hit is `hits[k]`, by path
+    /// tracing with the random numbers of `samplers[k]`, into `out[k]`.
+    ///
+    /// The paths advance together, a vertex each per round ([`Tracer::path_vertex`]): each
+    /// round's light samples queue their shadow rays and its bounces their rays, and both are
+    /// traced as batches ([`crate::bvh::Bvh::occluded_batch`],
+    /// [`crate::bvh::Bvh::intersect_batch`]) before the next round. A path also carried on by
+    /// a mirror or through a transparent surface keeps those vertices on a stack of its own, each
+    /// followed to its end after the bounce's, so every path draws its random numbers in the
+    /// same order whatever the batch: a path's radiance is the same, bit for bit, in a batch of
+    /// any size.
+    pub(in crate::render) fn paths(
+        &self,
+        b: &mut PathBatch,
+        rays: &[Ray],
+        hits: &[Option<Hit>],
+        samplers: &[PathSampler],
+        counts: &mut RayCounts,
+        out: &mut [Vec3],
+    ) {
+        debug_assert!(rays.len() == hits.len() && rays.len() == samplers.len());
+        b.lanes.clear();
+        b.ready.clear();
+        for (k, ((ray, hit), rng)) in rays.iter().zip(hits).zip(samplers).enumerate() {
+            b.lanes.push(Lane {
+                v: Vertex {
+                    ray: *ray,
+                    hit: *hit,
+                    depth: 0,
+                    arrival: Arrival::Specular,
+                    beta: Vec3::ONE,
+                },
+                rng: *rng,
+                l: Vec3::ZERO,
+                pending: Vec::new(),
+            });
+            b.ready.push(k as u32);
+        }
+        while !b.ready.is_empty() {
+            b.next.clear();
+            b.bouncing.clear();
+            b.rays.clear();
+            b.shadows.clear();
+            b.owners.clear();
+            for &k in &b.ready {
+                let lane = &mut b.lanes[k as usize];
+                let (shadows, owners) = (&mut b.shadows, &mut b.owners);
+                let (found, goes_on) = self.path_vertex(
+                    &mut lane.v,
+                    &mut lane.pending,
+                    &mut lane.rng,
+                    |r| {
+                        shadows.push(r);
+                        owners.push(k);
+                    },
+                    counts,
+                );
+                lane.l += found;
+                if goes_on {
+                    b.bouncing.push(k);
+                    b.rays.push(lane.v.ray);
+                } else if let Some(p) = lane.pending.pop() {
+                    lane.v = p;
+                    b.next.push(k);
                 }
             }
+            self.shadow_batch(&b.shadows, &mut b.passes, counts);
+            for ((r, &k), pass) in b.shadows.iter().zip(&b.owners).zip(&b.passes) {
+                b.lanes[k as usize].l += r.light * *pass;
+            }
+            b.hits.resize(b.rays.len(), None);
+            // Drawn at random: neighbouring paths' bounces take other paths through the tree.
+            self.bvh.intersect_batch(&b.rays, &mut b.hits);
+            for (&k, hit) in b.bouncing.iter().zip(&b.hits) {
+                b.lanes[k as usize].v.hit = *hit;
+                b.next.push(k);
+            }
+            std::mem::swap(&mut b.ready, &mut b.next);
         }
+        for (o, lane) in out.iter_mut().zip(&b.lanes) {
+            *o = lane.l;
+        }
+    }
+
+    /// The light that passes each light sample's shadow ray into `passes`: per channel through
+    /// transparent surfaces where the plan says so, else all or nothing.
+    fn shadow_batch(&self, shadows: &[ShadowRay], passes: &mut Vec<Vec3>, counts: &mut RayCounts) {
+        passes.clear();
+        if !self.plan.shadows || self.plan.transparent_shadows {
+            passes.extend(
+                shadows
+                    .iter()
+                    .map(|r| self.shadow(r.origin, r.to, r.t_max, counts)),
+            );
+            return;
+        }
+        counts.shadow += shadows.len() as u64;
+        let mut rays = Vec::with_capacity(shadows.len());
+        rays.extend(shadows.iter().map(|r| (Ray::new(r.origin, r.to), r.t_max)));
+        let mut blocked = vec![false; shadows.len()];
+        self.bvh.occluded_batch(&rays, &mut blocked);
+        passes.extend(
+            blocked
+                .iter()
+                .map(|&b| if b { Vec3::ZERO } else { Vec3::ONE }),
+        );
     }
 
     /// One step of the path integrator: the light the path gathers at `v` (emission found,
     /// next-event estimation) times the path's throughput, and whether its bounce carries it
-    /// on (then `v` is the vertex the bounce reaches; updated in place, as moving it costs
-    /// time). The vertices its mirror and transmission carry it on to are pushed onto
-    /// `pending` (the one to be met first last).
+    /// on. The light samples' shadow rays go to `shadow`, with the light each brings (the
+    /// throughput applied) when nothing blocks it. When the bounce carries the path on, `v`
+    /// is the vertex it reaches (updated in place, as moving it costs time) with its ray set
+    /// and its hit still to be found. The vertices its mirror and transmission carry it on to
+    /// are pushed onto `pending` (the one to be met first last).
     pub(in crate::render) fn path_vertex(
         &self,
         v: &mut Vertex,
         pending: &mut Vec<Vertex>,
         rng: &mut PathSampler,
+        mut shadow: impl FnMut(ShadowRay),
         counts: &mut RayCounts,
     ) -> (Vec3, bool) {
         let ray = &v.ray;
@@ -138,9 +263,15 @@ impl Tracer<'_> {
         if v.depth > self.max_depth {
             return (beta * l, false);
         }
-        l += alpha * self.lights_at(&s, wo, v.depth, rng, counts);
-        let (found, bounce) = self.bounce(&s, wo, v.depth, beta * alpha, rng, counts);
-        l += alpha * found;
+        let scale = beta * alpha;
+        let mut scaled = |r: ShadowRay| {
+            shadow(ShadowRay {
+                light: r.light * scale,
+                ..r
+            })
+        };
+        self.lights_at(&s, wo, v.depth, rng, &mut scaled);
+        let bounce = self.bounce(&s, wo, v.depth, scale, rng, &mut scaled);
         // Pushed in reverse, so that the mirror's path is met before the transmitted one.
         let onward = self.onward(ray, &s, alpha, wo, counts);
         for c in onward.into_iter().rev().flatten() {
@@ -175,15 +306,14 @@ impl Tracer<'_> {
         };
         counts.bounce += 1;
         v.ray = Ray::new(s.origin, b.wi);
-        // Drawn at random: neighbouring paths' bounces take other paths through the tree.
-        v.hit = self.bvh.intersect_incoherent(&v.ray, f32::INFINITY);
+        v.hit = None;
         v.arrival = Arrival::Bounce {
             pdf: b.pdf,
             from: v.depth,
             travelled: 0.0,
         };
         v.depth += 1;
-        v.beta = beta * alpha * b.weight;
+        v.beta = scale * b.weight;
         (beta * l, true)
     }
 
@@ -252,51 +382,63 @@ impl Tracer<'_> {
     }
 
     /// Next-event estimation at `s`: every point and rectangle light, and one sample of the
-    /// emissive triangles, each weighted against the bounce that could find it.
+    /// emissive triangles, each weighted against the bounce that could find it, given to `out`
+    /// with its shadow ray.
     pub(in crate::render) fn lights_at(
         &self,
         s: &Surface,
         wo: Vec3,
         depth: u32,
         rng: &mut PathSampler,
-        counts: &mut RayCounts,
-    ) -> Vec3 {
+        mut out: impl FnMut(ShadowRay),
+    ) {
         let m = s.material;
         if !m.reflects() {
-            return Vec3::ZERO;
+            return;
         }
         let bsdf = s.bsdf();
         // Only the rectangle lights no triangles cover need it.
         let glossy = self.lights.hidden_rects && bsdf.gloss_probability(wo) > 0.0;
-        let mut sum = Vec3::ZERO;
         for (i, light) in self.scene.lights.iter().enumerate() {
             let Some(rect) = RectLight::of(light, |n| self.rect_samples(n, depth)) else {
-                sum += self.point_light(s, wo, light, counts);
+                if let Some(r) = self.point_light(s, wo, light) {
+                    out(r);
+                }
                 continue;
             };
             let n = rect.samples as f32;
             // Bounces find the light when its triangles cover it; on a glossy surface they
             // look for it by its rectangle when they do not.
             let weighted = self.lights.visible[i] || glossy;
-            sum += self.rect_light(s, wo, &rect, rng, counts, |sample, _, area| {
-                if weighted {
-                    let p_light = sample.d2 / (sample.cos_l * area);
-                    power(n, p_light, bsdf.pdf(sample.wi, wo))
-                } else {
-                    1.0
-                }
+            self.rect_light(
+                s,
+                wo,
+                &rect,
+                rng,
+                |sample, _, area| {
+                    if weighted {
+                        let p_light = sample.d2 / (sample.cos_l * area);
+                        power(n, p_light, bsdf.pdf(sample.wi, wo))
+                    } else {
+                        1.0
+                    }
+                },
+                &mut out,
+            );
+        }
+        if let Some(e) = self.emissive_sample(s, wo, rng) {
+            let w = power(1.0, e.p_light, bsdf.pdf(e.wi, wo));
+            out(ShadowRay {
+                light: e.shadow.light * w,
+                ..e.shadow
             });
         }
-        if let Some(e) = self.emissive_sample(s, wo, rng, counts) {
-            sum += e.value * power(1.0, e.p_light, bsdf.pdf(e.wi, wo));
-        }
-        sum
     }
 
-    /// The bounce from `s`, sampled from its lobes: the light of the rectangle lights it finds
-    /// by their rectangles (weighted by the surface's reflectance over the sampling density),
-    /// and the bounce itself, unless the path ends here. `beta` is the
-    /// path's throughput at `s` (for Russian roulette).
+    /// The bounce from `s`, sampled from its lobes, unless the path ends here; the rectangle
+    /// lights it finds by their rectangles (weighted by the surface's reflectance over the
+    /// sampling density) go to `out` with their shadow rays. `beta` is the path's throughput
+    /// at `s` (for Russian roulette).
     pub(in crate::render) fn bounce(
         &self,
         s: &Surface,
@@ -304,11 +446,11 @@ impl Tracer<'_> {
         depth: u32,
         beta: Vec3,
         rng: &mut PathSampler,
-        counts: &mut RayCounts,
-    ) -> (Vec3, Option<Bounce>) {
+        mut out: impl FnMut(ShadowRay),
+    ) -> Option<Bounce> {
         let m = s.material;
         if !m.reflects() {
-            return (Vec3::ZERO, None);
+            return None;
         }
         let bsdf = s.bsdf();
         // On a glossy surface the bounce also looks for the rectangle lights no triangles
@@ -317,34 +459,40 @@ impl Tracer<'_> {
         let nothing_to_find = self.lights.owner.is_empty() && !self.plan.environment;
         if depth == self.max_depth && nothing_to_find && !glossy {
             // The last bounce only collects emission, and there is none to find.
-            return (Vec3::ZERO, None);
+            return None;
         }
         let u = rng.next_2d();
-        let Some(Sample { wi, pdf }) = bsdf.sample(wo, u) else {
-            return (Vec3::ZERO, None);
-        };
+        let Sample { wi, pdf } = bsdf.sample(wo, u)?;
         let cos = s.n().dot(wi);
         if cos <= 0.0 || wi.dot(s.ng) <= 0.0 || pdf <= 0.0 {
-            return (Vec3::ZERO, None);
+            return None;
         }
         let mut weight = bsdf.eval(wi, wo) * cos / pdf;
-        let mut found = Vec3::ZERO;
         if glossy {
-            found = weight
-                * self.rects_along(s, wi, pdf, 1, counts, |i, samples| {
-                    (!self.lights.visible[i]).then(|| self.rect_samples(samples, depth))
-                });
+            self.rects_along(
+                s,
+                wi,
+                pdf,
+                1,
+                |i, samples| (!self.lights.visible[i]).then(|| self.rect_samples(samples, depth)),
+                |r| {
+                    out(ShadowRay {
+                        light: r.light * weight,
+                        ..r
+                    })
+                },
+            );
         }
         if depth == self.max_depth && nothing_to_find {
-            return (found, None);
+            return None;
         }
         if depth >= ROULETTE_DEPTH {
             let survive = (beta * weight).max_element().min(MAX_SURVIVAL);
             if rng.next_2d().x >= survive {
-                return (found, None);
+                return None;
             }
             weight /= survive;
         }
-        (found, Some(Bounce { wi, pdf, weight }))
+        Some(Bounce { wi, pdf, weight })
     }
 }
