@@ -102,6 +102,9 @@ pub struct PathBatch {
     shadows: Vec<ShadowRay>,
     owners: Vec<u32>,
     passes: Vec<Vec3>,
+    /// The shadow rays as the batch query takes them, and its answers.
+    shadow_rays: Vec<(Ray, f32)>,
+    blocked: Vec<bool>,
 }
 
 impl Tracer<'_> {
@@ -192,7 +195,12 @@ impl Tracer<'_> {
                     b.next.push(k);
                 }
             }
-            self.shadow_batch(&b.shadows, &mut b.passes, counts);
+            self.shadow_batch(
+                &b.shadows,
+                (&mut b.shadow_rays, &mut b.blocked),
+                &mut b.passes,
+                counts,
+            );
             for ((r, &k), pass) in b.shadows.iter().zip(&b.owners).zip(&b.passes) {
                 b.lanes[k as usize].l += r.light * *pass;
             }
@@ -211,8 +219,15 @@ impl Tracer<'_> {
     }
 
     /// The light that passes each light sample's shadow ray into `passes`: per channel through
-    /// transparent surfaces where the plan says so, else all or nothing.
-    fn shadow_batch(&self, shadows: &[ShadowRay], passes: &mut Vec<Vec3>, counts: &mut RayCounts) {
+    /// transparent surfaces where the plan says so, else all or nothing (the rays traced as one
+    /// batch, `rays` and `blocked` its working space).
+    fn shadow_batch(
+        &self,
+        shadows: &[ShadowRay],
+        (rays, blocked): (&mut Vec<(Ray, f32)>, &mut Vec<bool>),
+        passes: &mut Vec<Vec3>,
+        counts: &mut RayCounts,
+    ) {
         passes.clear();
         if !self.plan.shadows || self.plan.transparent_shadows {
             passes.extend(
@@ -223,10 +238,10 @@ impl Tracer<'_> {
             return;
         }
         counts.shadow += shadows.len() as u64;
-        let mut rays = Vec::with_capacity(shadows.len());
+        rays.clear();
         rays.extend(shadows.iter().map(|r| (Ray::new(r.origin, r.to), r.t_max)));
-        let mut blocked = vec![false; shadows.len()];
-        self.bvh.occluded_batch(&rays, &mut blocked);
+        blocked.resize(shadows.len(), false);
+        self.bvh.occluded_batch(rays, blocked);
         passes.extend(
             blocked
                 .iter()
@@ -273,7 +288,11 @@ impl Tracer<'_> {
         self.lights_at(&s, wo, v.depth, rng, &mut scaled);
         let bounce = self.bounce(&s, wo, v.depth, scale, rng, &mut scaled);
         // Pushed in reverse, so that the mirror's path is met before the transmitted one.
-        let onward = self.onward(ray, &s, alpha, wo, counts);
+        let onward = if alpha < 1.0 || s.is_mirror() {
+            self.onward(ray, &s, alpha, wo, counts)
+        } else {
+            [None, None]
+        };
         for c in onward.into_iter().rev().flatten() {
             // Shadow rays pass straight through transparent surfaces: light a bounce finds
             // beyond one is weighted as if the bounce had found it directly.
