@@ -249,9 +249,11 @@ pub(super) struct RectSample {
 }
 
 /// The point `u` of the rectangle `corner + u.x edge_u + u.y edge_v` (unit normal `ln`) as seen
-/// from `s`, or `None` when it lies behind the surface or shows the surface its back.
+/// from the surface point `p` (shading normal `n`, geometric normal `ng`), or `None` when it
+/// lies behind the surface or shows the surface its back.
+#[inline]
 pub(super) fn rect_sample(
-    s: &Surface,
+    (p, n, ng): (Vec3, Vec3, Vec3),
     corner: Vec3,
     edge_u: Vec3,
     edge_v: Vec3,
@@ -259,11 +261,11 @@ pub(super) fn rect_sample(
     u: glam::Vec2,
 ) -> Option<RectSample> {
     let q = corner + u.x * edge_u + u.y * edge_v;
-    let to = q - s.p;
+    let to = q - p;
     let d2 = to.length_squared();
     let wi = to / d2.sqrt();
     let cos_l = -ln.dot(wi);
-    if s.n().dot(wi) <= 0.0 || cos_l <= 0.0 || s.ng.dot(to) <= 0.0 {
+    if n.dot(wi) <= 0.0 || cos_l <= 0.0 || ng.dot(to) <= 0.0 {
         return None;
     }
     Some(RectSample { q, wi, d2, cos_l })
@@ -396,7 +398,8 @@ impl Tracer<'_> {
         let ln = normal / area;
         let scale = rect.color * rect.intensity / n as f32;
         for _ in 0..n {
-            let Some(sample) = rect_sample(s, corner, edge_u, edge_v, ln, rng.next_2d()) else {
+            let at = (s.p, s.n(), s.ng);
+            let Some(sample) = rect_sample(at, corner, edge_u, edge_v, ln, rng.next_2d()) else {
                 continue;
             };
             let cos = s.n().dot(sample.wi);

@@ -36,6 +36,33 @@ pub struct Tracer<'a> {
     /// Per material, its look when no texture varies it (the same at every point), found once
     /// instead of at every hit.
     looks: Vec<Option<Look>>,
+    /// Per material, its diffuse colour when the path integrator may take its vertices by the
+    /// short path of a plain Lambertian surface ([`Tracer::plain_vertex`]): an untextured,
+    /// opaque, non-emissive Lambertian lobe and nothing else the plan would look at. Empty
+    /// when the scene's lights need more than that path samples (any but rectangle lights, or
+    /// emissive triangles sampled on their own).
+    pub(super) plain: Vec<Option<Vec3>>,
+}
+
+/// The diffuse colour of `m` (whose look is `look` everywhere) when a path's vertices on it may
+/// take the plain Lambertian path: a Lambertian lobe alone (no glossy lobe, sheen or coat), no
+/// emission, fully opaque and not transparent, no mirror the plan traces, no normal or height
+/// map the plan applies, and something to reflect.
+fn plain(m: &crate::scene::Material, look: &Look, plan: &RenderPlan) -> Option<Vec3> {
+    let lambertian = matches!(look.gloss, super::bsdf::Gloss::None)
+        && !look.sheen.is_some()
+        && look.coat.weight <= 0.0;
+    let alpha = if plan.transmission { look.opacity } else { 1.0 };
+    let flat = !plan.normal_maps || (m.normal_map.is_none() && m.height_map.is_none());
+    let mirror = plan.reflections && look.mirror.max_element() > 0.0;
+    (lambertian
+        && !m.is_emissive()
+        && alpha == 1.0
+        && !m.is_transparent()
+        && !mirror
+        && flat
+        && m.reflects())
+    .then_some(look.diffuse)
 }
 
 impl<'a> Tracer<'a> {
@@ -74,6 +101,22 @@ impl<'a> Tracer<'a> {
             .iter()
             .map(|m| (m.textures().next().is_none()).then(|| textured(scene, m, 0, 0.0, 0.0)))
             .collect();
+        let rects_only = scene
+            .lights
+            .iter()
+            .all(|l| matches!(l, crate::scene::Light::Rect { .. }));
+        let plain = if rects_only && lights.tris.is_empty() {
+            scene
+                .materials
+                .iter()
+                .zip(&looks)
+                .map(|(m, look): (_, &Option<Look>)| {
+                    look.as_ref().and_then(|look| plain(m, look, &plan))
+                })
+                .collect()
+        } else {
+            Vec::new()
+        };
         Self {
             scene,
             bvh,
@@ -82,6 +125,7 @@ impl<'a> Tracer<'a> {
             env,
             lights,
             looks,
+            plain,
         }
     }
 
