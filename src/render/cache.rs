@@ -29,7 +29,7 @@
 use glam::Vec3;
 use rayon::prelude::*;
 
-use super::{BAND, RayCounts, TILE_WIDTH, Tracer};
+use super::{BAND, PathBatch, RayCounts, TILE_WIDTH, Tracer};
 
 mod picture;
 mod reproject;
@@ -374,19 +374,34 @@ impl RenderCache {
                         camera: chunk.len() as u64,
                         ..Default::default()
                     };
+                    // The chunk's paths advance together (`Tracer::radiance_batch`).
+                    let n = rays.len();
+                    let paths: Vec<PathSampler> = chunk
+                        .iter()
+                        .map(|&i| {
+                            PathSampler::new(PixelSampler::new(
+                                SamplerKind::Random,
+                                0x5eed,
+                                i as u64,
+                                index,
+                            ))
+                        })
+                        .collect();
+                    let mut radiance = [Vec3::ZERO; PACKET];
+                    tracer.radiance_batch(
+                        &mut PathBatch::default(),
+                        &rays,
+                        &hits[..n],
+                        &paths,
+                        &mut counts,
+                        &mut radiance[..n],
+                    );
                     let samples = chunk
                         .iter()
                         .zip(rays)
                         .zip(hits)
-                        .map(|((&i, ray), hit)| {
-                            let sampler =
-                                PixelSampler::new(SamplerKind::Random, 0x5eed, i as u64, index);
-                            let l = tracer.radiance_from_hit(
-                                &ray,
-                                hit,
-                                &mut PathSampler::new(sampler),
-                                &mut counts,
-                            );
+                        .zip(radiance)
+                        .map(|(((&i, ray), hit), l)| {
                             let point = hit.map_or(ray.origin + ray.dir * FAR, |h| ray.at(h.t));
                             let normal = hit.map_or(NO_NORMAL, |h| {
                                 let tri = &tracer.scene.mesh.triangles[h.prim as usize];
