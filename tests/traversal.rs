@@ -24,6 +24,56 @@ fn occluded_agrees_with_brute_force() {
     }
 }
 
+/// The batch queries a path tracer's rounds use give each ray what brute force gives it: the
+/// closest hit (the same triangle and distance) and, for shadow rays each with its own
+/// `t_max`, whether anything lies on the segment; on every kernel and both builders, in
+/// batches of every size up to a few hundred rays.
+#[test]
+fn batch_queries_agree_with_brute_force() {
+    let tris = shapes::random_soup(1500, 0.15, 8);
+    let bf = BruteForce::new(&tris);
+    let rays = common::random_rays(&tris, 3000, 9);
+    let t_maxes: Vec<f32> = (0..rays.len())
+        .map(|i| 0.05 + (i % 7) as f32 * 0.15)
+        .collect();
+    for (name, bvh) in common::all_bvhs(&tris) {
+        let mut start = 0;
+        for size in [1usize, 2, 7, 64, 65, 300].iter().cycle() {
+            if start >= rays.len() {
+                break;
+            }
+            let end = (start + size).min(rays.len());
+            let batch = &rays[start..end];
+            let mut hits = vec![None; batch.len()];
+            bvh.intersect_batch(batch, &mut hits);
+            let shadow: Vec<(Ray, f32)> = batch
+                .iter()
+                .zip(&t_maxes[start..end])
+                .map(|(r, &t)| (*r, t))
+                .collect();
+            let mut blocked = vec![false; batch.len()];
+            bvh.occluded_batch(&shadow, &mut blocked);
+            for (k, r) in batch.iter().enumerate() {
+                let want = bf.closest(r, f32::INFINITY);
+                assert_eq!(
+                    hits[k].map(|h| (h.prim, h.t)),
+                    want.map(|h| (h.prim, h.t)),
+                    "{name}, ray {}",
+                    start + k
+                );
+                let t_max = t_maxes[start + k];
+                assert_eq!(
+                    blocked[k],
+                    !bf.all_hits(r, t_max).is_empty(),
+                    "{name}, shadow ray {}",
+                    start + k
+                );
+            }
+            start = end;
+        }
+    }
+}
+
 #[test]
 fn for_each_hit_reports_every_hit_once() {
     let tris = shapes::random_soup(1500, 0.2, 5);
