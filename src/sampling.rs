@@ -82,27 +82,43 @@ impl PixelSampler {
 
     /// The 2D point of dimension pair `dim`, in `[0, 1)^2`.
     pub fn get_2d(&self, dim: u32) -> glam::Vec2 {
-        let h = mix64(self.seed ^ (dim as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15));
-        match self.kind {
-            SamplerKind::Random => {
-                let r = mix64(h ^ (self.index as u64).wrapping_mul(0xD1B5_4A32_D192_ED03));
-                glam::Vec2::new(unit((r >> 32) as u32), unit(r as u32))
-            }
-            SamplerKind::Sobol => {
-                // Shuffle the index (decorrelates dimension pairs), then scramble each axis:
-                // with `i` the shuffled index, `x = nested_uniform_scramble(i.reverse_bits(),
-                // sx)` and `y = nested_uniform_scramble(sobol_dim1(i), sy)`. Computed on the
-                // reversed bits throughout, where the scrambles work (`i` reversed is `w`, and
-                // `sobol_dim1(i)` reversed is a table lookup of `w`): two bit reversals a point
-                // instead of seven, the same bits (`tests/sampling.rs`). The second reverses
-                // both axes side by side in 64 bits: `x` in the high half comes back reversed
-                // in the low half, `y` the other way round.
-                let w = laine_karras(self.index_rev, h as u32);
-                let x = laine_karras(w.reverse_bits(), (h >> 32) as u32 ^ 0x68bc_21eb);
-                let y = laine_karras(sobol_dim1_reversed(w), (h >> 16) as u32 ^ 0x02e5_be93);
-                let both = ((x as u64) << 32 | y as u64).reverse_bits();
-                glam::Vec2::new(unit(both as u32), unit((both >> 32) as u32))
-            }
+        let (x, y) = point(self.kind, self.seed, self.index, self.index_rev, dim);
+        glam::Vec2::new(x, y)
+    }
+}
+
+/// The 2D point of dimension pair `dim` for the sample `index` (bit-reversed: `index_rev`) of a
+/// pixel whose stream is `seed`: what [`PixelSampler::get_2d`] returns, as a function of plain
+/// numbers, so that many paths' points can be computed side by side
+/// ([`PathSampler::parts`]).
+#[inline(always)]
+pub(crate) fn point(
+    kind: SamplerKind,
+    seed: u64,
+    index: u32,
+    index_rev: u32,
+    dim: u32,
+) -> (f32, f32) {
+    let h = mix64(seed ^ (dim as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15));
+    match kind {
+        SamplerKind::Random => {
+            let r = mix64(h ^ (index as u64).wrapping_mul(0xD1B5_4A32_D192_ED03));
+            (unit((r >> 32) as u32), unit(r as u32))
+        }
+        SamplerKind::Sobol => {
+            // Shuffle the index (decorrelates dimension pairs), then scramble each axis:
+            // with `i` the shuffled index, `x = nested_uniform_scramble(i.reverse_bits(),
+            // sx)` and `y = nested_uniform_scramble(sobol_dim1(i), sy)`. Computed on the
+            // reversed bits throughout, where the scrambles work (`i` reversed is `w`, and
+            // `sobol_dim1(i)` reversed is a table lookup of `w`): two bit reversals a point
+            // instead of seven, the same bits (`tests/sampling.rs`). The second reverses
+            // both axes side by side in 64 bits: `x` in the high half comes back reversed
+            // in the low half, `y` the other way round.
+            let w = laine_karras(index_rev, h as u32);
+            let x = laine_karras(w.reverse_bits(), (h >> 32) as u32 ^ 0x68bc_21eb);
+            let y = laine_karras(sobol_dim1_reversed(w), (h >> 16) as u32 ^ 0x02e5_be93);
+            let both = ((x as u64) << 32 | y as u64).reverse_bits();
+            (unit(both as u32), unit((both >> 32) as u32))
         }
     }
 }
@@ -262,5 +278,19 @@ impl PathSampler {
         let v = self.pixel.get_2d(self.next);
         self.next += 1;
         v
+    }
+
+    /// What [`point`] needs to give this path's samples: the sampler kind, the pixel's stream,
+    /// the sample index and its bits reversed, and the next dimension pair.
+    #[inline(always)]
+    pub(crate) fn parts(&self) -> (SamplerKind, u64, u32, u32, u32) {
+        let p = &self.pixel;
+        (p.kind, p.seed, p.index, p.index_rev, self.next)
+    }
+
+    /// Moves on to dimension pair `next` (after [`point`] gave the ones before it).
+    #[inline(always)]
+    pub(crate) fn set_next(&mut self, next: u32) {
+        self.next = next;
     }
 }

@@ -42,6 +42,9 @@ pub struct Tracer<'a> {
     /// when the scene's lights need more than that path samples (any but rectangle lights, or
     /// emissive triangles sampled on their own).
     pub(super) plain: Vec<Option<Vec3>>,
+    /// The vector unit the plain vertices are stepped with (see
+    /// `integrator::plain_x86::level`).
+    pub(super) plain_level: u8,
 }
 
 /// The diffuse colour of `m` (whose look is `look` everywhere) when a path's vertices on it may
@@ -126,6 +129,7 @@ impl<'a> Tracer<'a> {
             lights,
             looks,
             plain,
+            plain_level: super::integrator::plain_level(),
         }
     }
 

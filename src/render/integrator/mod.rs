@@ -5,6 +5,10 @@
 
 pub(super) mod direct;
 pub mod path;
+mod plain;
+pub(in crate::render) mod plain_x86;
+
+pub(in crate::render) use plain_x86::level as plain_level;
 
 use glam::Vec3;
 

@@ -16,28 +16,25 @@
 //! vertex ([`Tracer::path_vertex`]), which multiplies the light found there by the path's
 //! throughput: the unit a renderer that advances many paths together would run over batches.
 
-use std::f32::consts::FRAC_1_PI;
-
 use glam::Vec3;
 
 use super::Onward;
 use crate::bvh::Hit;
 use crate::geometry::Ray;
-use crate::geometry::{interpolation_error, offset_ray_origin};
 use crate::render::RayCounts;
 use crate::render::Tracer;
 use crate::render::bsdf::Sample;
-use crate::render::light::{Owner, RectLight, ShadowRay, power, rect_sample};
+use crate::render::light::{Owner, RectLight, ShadowRay, power};
 use crate::render::surface::Surface;
-use crate::sampling::{PathSampler, cosine_direction};
+use crate::sampling::PathSampler;
 use crate::scene::{Light, face_normal};
 
 /// Bounce depth from which Russian roulette may end a path.
-const ROULETTE_DEPTH: u32 = 3;
+pub(super) const ROULETTE_DEPTH: u32 = 3;
 
 /// Highest survival probability of Russian roulette (some paths always end, so no path runs
 /// on forever between mirrors).
-const MAX_SURVIVAL: f32 = 0.95;
+pub(super) const MAX_SURVIVAL: f32 = 0.95;
 
 /// How the ray that reached a surface was chosen: says how emission found there counts.
 #[derive(Clone, Copy, Debug)]
@@ -80,12 +77,12 @@ pub(in crate::render) struct Bounce {
 
 /// One path of a batch: the vertex it has reached, its random numbers, the light it has
 /// gathered so far and the vertices its mirrors and transparent surfaces left waiting.
-struct Lane {
-    v: Vertex,
-    rng: PathSampler,
-    l: Vec3,
+pub(super) struct Lane {
+    pub(super) v: Vertex,
+    pub(super) rng: PathSampler,
+    pub(super) l: Vec3,
     /// Empty until a mirror or a transparent surface is met: no allocation on most paths.
-    pending: Vec<Vertex>,
+    pub(super) pending: Vec<Vertex>,
 }
 
 /// The working space of a batch of paths ([`Tracer::paths`]): kept from one batch to the next,
@@ -105,6 +102,8 @@ pub struct PathBatch {
     shadows: Vec<ShadowRay>,
     owners: Vec<u32>,
     passes: Vec<Vec3>,
+    /// The paths whose vertex lies on a plain Lambertian surface ([`Tracer::plain_round`]).
+    plain: Vec<u32>,
     /// The shadow rays as the batch query takes them, and its answers.
     shadow_rays: Vec<(Ray, f32)>,
     blocked: Vec<bool>,
@@ -176,25 +175,20 @@ impl Tracer<'_> {
             b.rays.clear();
             b.shadows.clear();
             b.owners.clear();
+            b.plain.clear();
             for &k in &b.ready {
                 let lane = &mut b.lanes[k as usize];
+                if self.plain_at(lane).is_some() {
+                    b.plain.push(k);
+                    continue;
+                }
                 let (shadows, owners) = (&mut b.shadows, &mut b.owners);
                 let push = |r| {
                     shadows.push(r);
                     owners.push(k);
                 };
-                let (found, goes_on) = match self.plain_at(&lane.v) {
-                    Some((hit, diffuse)) => {
-                        self.plain_vertex(&mut lane.v, hit, diffuse, &mut lane.rng, push, counts)
-                    }
-                    None => self.path_vertex(
-                        &mut lane.v,
-                        &mut lane.pending,
-                        &mut lane.rng,
-                        push,
-                        counts,
-                    ),
-                };
+                let (found, goes_on) =
+                    self.path_vertex(&mut lane.v, &mut lane.pending, &mut lane.rng, push, counts);
                 lane.l += found;
                 if goes_on {
                     b.bouncing.push(k);
@@ -204,6 +198,13 @@ impl Tracer<'_> {
                     b.next.push(k);
                 }
             }
+            self.plain_round(
+                &mut b.lanes,
+                &b.plain,
+                (&mut b.shadows, &mut b.owners),
+                (&mut b.bouncing, &mut b.rays, &mut b.next),
+                counts,
+            );
             self.shadow_batch(
                 &b.shadows,
                 (&mut b.shadow_rays, &mut b.blocked),
@@ -343,129 +344,6 @@ impl Tracer<'_> {
         v.depth += 1;
         v.beta = scale * b.weight;
         (beta * l, true)
-    }
-
-    /// The hit of `v` and the diffuse colour of its surface when it lies on a plain Lambertian
-    /// surface ([`Tracer::plain_vertex`] takes it), else `None`.
-    #[inline]
-    fn plain_at(&self, v: &Vertex) -> Option<(Hit, Vec3)> {
-        let hit = v.hit?;
-        let id = self.scene.mesh.material_ids[hit.prim as usize];
-        let diffuse = (*self.plain.get(id as usize)?)?;
-        Some((hit, diffuse))
-    }
-
-    /// [`Tracer::path_vertex`] at a vertex on a plain Lambertian surface of colour `diffuse`
-    /// (untextured, opaque, not emissive, no glossy lobe, sheen, coat, mirror or map, in a
-    /// scene lit by rectangle lights only: see `Tracer::plain`): the same light samples,
-    /// bounce and random numbers, the same bits, by the short path such a surface allows,
-    /// without the general surface's look, lobes and layers.
-    fn plain_vertex(
-        &self,
-        v: &mut Vertex,
-        hit: Hit,
-        diffuse: Vec3,
-        rng: &mut PathSampler,
-        mut shadow: impl FnMut(ShadowRay),
-        counts: &mut RayCounts,
-    ) -> (Vec3, bool) {
-        let mesh = &self.scene.mesh;
-        let (tri, ns) = (
-            &mesh.triangles[hit.prim as usize],
-            &mesh.normals[hit.prim as usize],
-        );
-        // The surface, as `Tracer::surface` finds it where no map bends the normal.
-        let (u, w) = (hit.u, hit.v);
-        let b = [1.0 - u - w, u, w];
-        let p = tri[0] * b[0] + tri[1] * b[1] + tri[2] * b[2];
-        let p_err = interpolation_error(tri, b);
-        let outward = face_normal(tri);
-        let ng = if outward.dot(v.ray.dir) < 0.0 {
-            outward
-        } else {
-            -outward
-        };
-        let interpolated = ns[0] * (1.0 - u - w) + ns[1] * u + ns[2] * w;
-        let mut n = interpolated.try_normalize().unwrap_or(ng);
-        n *= if n.dot(ng) < 0.0 { -1.0 } else { 1.0 };
-        let origin = offset_ray_origin(p, p_err, ng);
-        // Opaque and not emissive: the throughput is unchanged and no light is found here.
-        let beta = v.beta;
-        if v.depth > self.max_depth {
-            return (beta * Vec3::ZERO, false);
-        }
-        // Next-event estimation: the rectangle lights' samples, as `Tracer::rect_light` takes
-        // them, weighted against the cosine-weighted bounce.
-        let f = diffuse * FRAC_1_PI;
-        let pdf_of = |wi: Vec3| {
-            let cos = n.dot(wi);
-            if cos > 0.0 { cos * FRAC_1_PI } else { 0.0 }
-        };
-        for (i, light) in self.scene.lights.iter().enumerate() {
-            let Some(rect) = RectLight::of(light, |m| self.rect_samples(m, v.depth)) else {
-                continue;
-            };
-            let (count, weighted) = (rect.samples as f32, self.lights.visible[i]);
-            let normal = rect.edge_u.cross(rect.edge_v);
-            let area = normal.length();
-            let ln = normal / area;
-            let scale = rect.color * rect.intensity / count;
-            for _ in 0..rect.samples {
-                let at = (p, n, ng);
-                let u = rng.next_2d();
-                let Some(sample) = rect_sample(at, rect.corner, rect.edge_u, rect.edge_v, ln, u)
-                else {
-                    continue;
-                };
-                let cos = n.dot(sample.wi);
-                let w = if weighted {
-                    let p_light = sample.d2 / (sample.cos_l * area);
-                    power(count, p_light, pdf_of(sample.wi))
-                } else {
-                    1.0
-                };
-                if w == 0.0 {
-                    continue;
-                }
-                let light = f * cos * sample.cos_l * area / sample.d2 * w * scale;
-                shadow(ShadowRay {
-                    origin,
-                    to: sample.q - origin,
-                    t_max: 1.0 - 1e-4,
-                    light: light * beta,
-                });
-            }
-        }
-        // The bounce, as `Tracer::bounce` draws it from a Lambertian lobe.
-        let nothing_to_find = self.lights.owner.is_empty() && !self.plan.environment;
-        if v.depth == self.max_depth && nothing_to_find {
-            return (beta * Vec3::ZERO, false);
-        }
-        let wi = cosine_direction(n, rng.next_2d());
-        let pdf = n.dot(wi).max(0.0) * FRAC_1_PI;
-        let cos = n.dot(wi);
-        if cos <= 0.0 || wi.dot(ng) <= 0.0 || pdf <= 0.0 {
-            return (beta * Vec3::ZERO, false);
-        }
-        let mut weight = f * cos / pdf;
-        if v.depth >= ROULETTE_DEPTH {
-            let survive = (beta * weight).max_element().min(MAX_SURVIVAL);
-            if rng.next_2d().x >= survive {
-                return (beta * Vec3::ZERO, false);
-            }
-            weight /= survive;
-        }
-        counts.bounce += 1;
-        v.ray = Ray::new(origin, wi);
-        v.hit = None;
-        v.arrival = Arrival::Bounce {
-            pdf,
-            from: v.depth,
-            travelled: 0.0,
-        };
-        v.depth += 1;
-        v.beta = beta * weight;
-        (beta * Vec3::ZERO, true)
     }
 
     /// Emission `le` of the triangle `hit` found, weighted for how the ray was chosen.
@@ -671,9 +549,10 @@ mod tests {
         rows
     }
 
-    /// The plain Lambertian vertices' short path gives the general path's light, bit for bit:
-    /// the same pixels with it and without it (the tracer's list of plain materials emptied),
-    /// in scenes where most vertices take it and where some do not (a mirror, glass).
+    /// The plain Lambertian vertices' step gives the general step's light, bit for bit: the
+    /// same pixels with it, at every vector width the CPU runs, and without it (the tracer's
+    /// list of plain materials emptied), in scenes where most vertices take it and where some
+    /// do not (a mirror, glass).
     #[test]
     fn plain_lambertian_vertices_give_the_general_paths_bits() {
         for path in [
@@ -692,25 +571,27 @@ mod tests {
             };
             let plan = RenderPlan::new(&scene, &settings);
             let env = EnvironmentMap::load(&scene.environment, plan.environment).unwrap();
-            let fast = Tracer::new(&scene, &bvh, plan, settings.max_depth, &env);
-            assert!(
-                fast.plain.iter().any(|d| d.is_some()),
-                "{path}: no plain material, nothing tested"
-            );
             let mut general = Tracer::new(&scene, &bvh, plan, settings.max_depth, &env);
             general.plain.clear();
             let cam = CameraRays::new(&scene.camera, settings.width, settings.height);
-            let (a, b) = (
-                band(&fast, &cam, &settings),
-                band(&general, &cam, &settings),
-            );
-            assert!(a.iter().any(|l| *l != Vec3::ZERO), "{path}: a black band");
-            for (k, (a, b)) in a.iter().zip(&b).enumerate() {
-                assert_eq!(
-                    a.to_array().map(f32::to_bits),
-                    b.to_array().map(f32::to_bits),
-                    "{path}: pixel {k}"
+            let b = band(&general, &cam, &settings);
+            // Every vector width this CPU runs: the baseline's, AVX2's, AVX-512's.
+            for level in crate::render::integrator::plain_x86::levels() {
+                let mut fast = Tracer::new(&scene, &bvh, plan, settings.max_depth, &env);
+                fast.plain_level = level;
+                assert!(
+                    fast.plain.iter().any(|d| d.is_some()),
+                    "{path}: no plain material, nothing tested"
                 );
+                let a = band(&fast, &cam, &settings);
+                assert!(a.iter().any(|l| *l != Vec3::ZERO), "{path}: a black band");
+                for (k, (a, b)) in a.iter().zip(&b).enumerate() {
+                    assert_eq!(
+                        a.to_array().map(f32::to_bits),
+                        b.to_array().map(f32::to_bits),
+                        "{path}, vector level {level}: pixel {k}"
+                    );
+                }
             }
         }
     }
