@@ -99,7 +99,7 @@ impl<'a> Tracer<'a> {
         env: &'a EnvironmentMap,
         lights: std::sync::Arc<LightSet>,
     ) -> Self {
-        let looks = scene
+        let looks: Vec<Option<Look>> = scene
             .materials
             .iter()
             .map(|m| (m.textures().next().is_none()).then(|| textured(scene, m, 0, 0.0, 0.0)))
@@ -113,9 +113,7 @@ impl<'a> Tracer<'a> {
                 .materials
                 .iter()
                 .zip(&looks)
-                .map(|(m, look): (_, &Option<Look>)| {
-                    look.as_ref().and_then(|look| plain(m, look, &plan))
-                })
+                .map(|(m, look)| look.as_ref().and_then(|look| plain(m, look, &plan)))
                 .collect()
         } else {
             Vec::new()
