@@ -37,7 +37,7 @@ pub struct Tracer<'a> {
     /// instead of at every hit.
     looks: Vec<Option<Look>>,
     /// Per material, its diffuse colour when the path integrator may take its vertices by the
-    /// short path of a plain Lambertian surface ([`Tracer::plain_vertex`]): an untextured,
+    /// short path of a plain Lambertian surface (`Tracer::plain_round`): an untextured,
     /// opaque, non-emissive Lambertian lobe and nothing else the plan would look at. Empty
     /// when the scene's lights need more than that path samples (any but rectangle lights, or
     /// emissive triangles sampled on their own).
