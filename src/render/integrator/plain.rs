@@ -19,10 +19,9 @@ use glam::Vec3;
 use super::path::{Arrival, Lane, MAX_SURVIVAL, ROULETTE_DEPTH};
 use crate::bvh::Hit;
 use crate::geometry::{Ray, gamma, offset_ray_origin};
-use crate::render::light::{ShadowRay, power};
+use crate::render::light::{RectLight, ShadowRay, power};
 use crate::render::{RayCounts, Tracer};
 use crate::sampling::{SamplerKind, point};
-use crate::scene::Light;
 
 /// Lanes of a chunk.
 pub(super) const W: usize = 16;
@@ -306,14 +305,14 @@ fn draw(c: &mut Chunk, take: &[bool; W]) -> (F, F) {
 fn lights(t: &Tracer, c: &mut Chunk, shadows: &mut Vec<ShadowRay>, owners: &mut Vec<u32>) {
     let live: [bool; W] = std::array::from_fn(|j| j < c.n);
     for (i, light) in t.scene.lights.iter().enumerate() {
-        let Light::Rect {
+        let Some(RectLight {
             corner,
             edge_u,
             edge_v,
             color,
             intensity,
             samples,
-        } = *light
+        }) = RectLight::of(light, |n| n)
         else {
             continue;
         };
