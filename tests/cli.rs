@@ -759,3 +759,62 @@ fn report_scaling_prints_each_builders_speed_up_from_one_thread_to_all() {
         );
     }
 }
+
+/// `--times A..B --fps F` renders the frames `A + i / F` below `B`, each to the output name
+/// with its `#`s replaced by the frame number; an output name without `#` is refused.
+#[test]
+fn render_times_writes_one_numbered_picture_per_frame() {
+    let Some(skin) = common::external("gltf/simple_skin/simple_skin.gltf") else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let pattern = dir.path().join("frames/f_###.png");
+    let small = ["--width", "16", "--height", "12", "--spp", "1"];
+    let mut args = vec![
+        "render",
+        skin.to_str().unwrap(),
+        "--times",
+        "0..1",
+        "--fps",
+        "3",
+        "-o",
+        pattern.to_str().unwrap(),
+    ];
+    args.extend(small);
+    let o = tracery(&args);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    assert!(
+        text(&o.stdout).contains("rendered 3 frames"),
+        "{}",
+        text(&o.stdout)
+    );
+    for i in 0..3 {
+        assert!(dir.path().join(format!("frames/f_{i:03}.png")).is_file());
+    }
+    assert!(!dir.path().join("frames/f_003.png").exists());
+    // The skin bends between the first frame and the second.
+    let frame = |i: usize| {
+        image::open(dir.path().join(format!("frames/f_{i:03}.png")))
+            .unwrap()
+            .to_rgb8()
+    };
+    assert_ne!(frame(0), frame(1));
+
+    let plain = dir.path().join("frame.png");
+    let mut args = vec![
+        "render",
+        skin.to_str().unwrap(),
+        "--times",
+        "0..1",
+        "-o",
+        plain.to_str().unwrap(),
+    ];
+    args.extend(small);
+    let o = tracery(&args);
+    assert!(!o.status.success());
+    assert!(
+        text(&o.stderr).contains("frame.png") && text(&o.stderr).contains('#'),
+        "{}",
+        text(&o.stderr)
+    );
+}

@@ -17,6 +17,7 @@ use tracery::render::{
     render_with_plan,
 };
 use tracery::sampling::SamplerKind;
+use tracery::scene::{Format, Scene};
 
 use super::{BvhArgs, ensure_parent, load_scene, set_threads};
 
@@ -78,6 +79,58 @@ pub struct RenderArgs {
     /// With --denoise: also write the picture as rendered, to `<output>.noisy.<ext>`.
     #[arg(long, requires = "denoise")]
     keep_noisy: bool,
+    /// Play the glTF animations (of a glTF, or of a scene file's glTF meshes) to this time in
+    /// seconds and render that instant; without it the scene stands as the file places it.
+    #[arg(long, conflicts_with = "times")]
+    time: Option<f64>,
+    /// Render an animation: one frame every 1/--fps seconds from A up to, not including, B
+    /// (`0..2` at 24 fps: 48 frames), each written to the output name with its run of `#`
+    /// replaced by the frame number counted from 0 (`-o out/frame_####.png`).
+    #[arg(long, value_name = "A..B", value_parser = parse_times)]
+    times: Option<(f64, f64)>,
+    /// Frames per second of --times [default: 24].
+    #[arg(long, requires = "times")]
+    fps: Option<f64>,
+}
+
+/// Most frames one `--times` run renders.
+const MAX_FRAMES: usize = 1_000_000;
+
+/// `A..B` with finite `A < B` (seconds).
+fn parse_times(s: &str) -> Result<(f64, f64), String> {
+    let (a, b) = s
+        .split_once("..")
+        .ok_or_else(|| format!("`{s}`: expected a range of seconds A..B, such as 0..2.5"))?;
+    let num = |x: &str| {
+        x.trim()
+            .parse::<f64>()
+            .ok()
+            .filter(|v| v.is_finite())
+            .ok_or_else(|| format!("`{s}`: `{x}` is not a number of seconds"))
+    };
+    let (a, b) = (num(a)?, num(b)?);
+    if a >= b {
+        return Err(format!("`{s}`: the range is empty (A must be less than B)"));
+    }
+    Ok((a, b))
+}
+
+/// The frames of `A..B` at `fps`: the times `A + i / fps` below `B`, with their numbers `i`.
+pub fn frame_times((a, b): (f64, f64), fps: f64) -> Vec<(usize, f64)> {
+    (0..)
+        .map(|i| (i, a + i as f64 / fps))
+        .take_while(|&(_, t)| t < b)
+        .collect()
+}
+
+/// `pattern` with its last run of `#` replaced by `frame`, zero-padded to the run's length.
+pub fn frame_path(pattern: &Path, frame: usize) -> Option<PathBuf> {
+    let name = pattern.file_name()?.to_str()?;
+    let end = name.rfind('#')? + 1;
+    let start = name[..end].trim_end_matches('#').len();
+    let width = end - start;
+    let numbered = format!("{}{frame:0width$}{}", &name[..start], &name[end..]);
+    Some(pattern.with_file_name(numbered))
 }
 
 /// `out/render.png` with `tag` and `ext`: `out/render.<tag>.<ext>`.
@@ -92,6 +145,47 @@ fn beside(path: &Path, tag: &str, ext: &str) -> PathBuf {
 
 pub fn run(a: RenderArgs) -> Result<()> {
     set_threads(a.threads)?;
+    let Some(range) = a.times else {
+        return render_frame(&a, a.time, &a.output, true);
+    };
+    let fps = a.fps.unwrap_or(24.0);
+    if !(fps.is_finite() && fps > 0.0) {
+        anyhow::bail!("--fps {fps}: expected a positive number of frames per second");
+    }
+    if frame_path(&a.output, 0).is_none() {
+        anyhow::bail!(
+            "{}: --times writes one picture per frame: give the output name a run of # for the frame number (out/frame_####.png)",
+            a.output.display()
+        );
+    }
+    let count = (range.1 - range.0) * fps;
+    if count > MAX_FRAMES as f64 {
+        anyhow::bail!(
+            "--times {}..{} at {fps} fps makes {count:.0} frames; at most {MAX_FRAMES} are rendered in one run",
+            range.0,
+            range.1
+        );
+    }
+    let frames = frame_times(range, fps);
+    let n = frames.len();
+    let start = Instant::now();
+    for (i, t) in frames {
+        let path = frame_path(&a.output, i).expect("checked above");
+        eprintln!("frame {}/{n}: t = {t:.4} s", i + 1);
+        render_frame(&a, Some(t), &path, i == 0)?;
+    }
+    println!(
+        "rendered {n} frames ({:.3} to {:.3} s at {fps} fps) in {:.1} s",
+        range.0,
+        range.1,
+        start.elapsed().as_secs_f64()
+    );
+    Ok(())
+}
+
+/// Renders the scene at `time` (its glTF animations played to it, if given) to `output`;
+/// load warnings printed when `warn`.
+fn render_frame(a: &RenderArgs, time: Option<f64>, output: &Path, warn: bool) -> Result<()> {
     let settings = RenderSettings {
         width: a.width,
         height: a.height,
@@ -102,9 +196,29 @@ pub fn run(a: RenderArgs) -> Result<()> {
         soft_terminator: !a.hard_terminator,
     };
     settings.validate().map_err(anyhow::Error::msg)?;
-    tracery::film::OutputKind::of(&a.output)?;
+    tracery::film::OutputKind::of(output)?;
     let options = a.bvh.options()?;
-    let mut scene = load_scene(a.scene.as_deref())?;
+    let mut scene = match (&a.scene, time) {
+        (Some(p), Some(t)) => {
+            let scene = Scene::load_at(p, Some(t))?;
+            if warn {
+                for w in &scene.warnings {
+                    eprintln!("warning: {w}");
+                }
+                if matches!(Format::of(p), Some(Format::Obj | Format::Ply)) {
+                    eprintln!(
+                        "warning: {}: has no animation; a time changes nothing",
+                        p.display()
+                    );
+                }
+            }
+            scene
+        }
+        (None, Some(_)) => anyhow::bail!(
+            "--time and --times need a scene with animations (a glTF, or a scene file with glTF meshes)"
+        ),
+        (p, None) => load_scene(p.as_deref())?,
+    };
     if let Some(i) = a.integrator {
         scene.integrator = i;
     }
@@ -148,7 +262,7 @@ pub fn run(a: RenderArgs) -> Result<()> {
     let out = render_with_plan(&scene, &bvh, &env, &settings, plan, &|_| bar.inc(1));
     let took = start.elapsed();
     bar.finish_and_clear();
-    let path = ensure_parent(&a.output)?;
+    let path = ensure_parent(output)?;
     let mut written = a.aov.clone();
     written.sort();
     written.dedup();

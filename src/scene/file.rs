@@ -223,10 +223,16 @@ type ReadFn<'a> = &'a dyn Fn(&Path) -> Result<Vec<u8>>;
 
 /// Loads a scene file from disk.
 pub fn load(path: &Path) -> Result<Scene> {
+    load_at(path, None)
+}
+
+/// Loads a scene file from disk, its glTF meshes' animations played to `time` (seconds; see
+/// [`super::gltf::load_from`]).
+pub fn load_at(path: &Path, time: Option<f64>) -> Result<Scene> {
     let bytes = read_file(path)?;
     let text =
         String::from_utf8(bytes).map_err(|_| anyhow!("{}: not UTF-8 text", path.display()))?;
-    parse(path, &text, &|p: &Path| read_file(p), true)
+    parse_at(path, &text, &|p: &Path| read_file(p), true, time)
 }
 
 const CORNELL_TOML: &str = include_str!("../../assets/scenes/cornell_box.toml");
@@ -260,6 +266,8 @@ struct Ctx<'a> {
     dir: PathBuf,
     read: ReadFn<'a>,
     check_files: bool,
+    /// The instant the glTF meshes' animations are played to, if any.
+    time: Option<f64>,
 }
 
 impl Ctx<'_> {
@@ -503,7 +511,7 @@ impl Ctx<'_> {
                     Some(a) => Some(NormalRule::Crease(*a.get_ref())),
                     None => None,
                 };
-                let loaded = load_mesh_file(&file, self.read, rule).map_err(|e| {
+                let loaded = load_mesh_file(&file, self.read, rule, self.time).map_err(|e| {
                     self.at(p.span().start, format!("mesh `{}`: {e:#}", p.get_ref()))
                 })?;
                 warnings.extend(loaded.warnings);
@@ -597,6 +605,17 @@ impl Ctx<'_> {
 
 /// Parses scene text named `path`. `check_files` verifies environment images exist.
 pub fn parse(path: &Path, text: &str, read: ReadFn, check_files: bool) -> Result<Scene> {
+    parse_at(path, text, read, check_files, None)
+}
+
+/// [`parse`], the glTF meshes' animations played to `time` (seconds) when one is given.
+pub fn parse_at(
+    path: &Path,
+    text: &str,
+    read: ReadFn,
+    check_files: bool,
+    time: Option<f64>,
+) -> Result<Scene> {
     let def: SceneDef = toml::from_str(text).map_err(|e| match e.span() {
         Some(span) => anyhow!(
             "{}:{}: {}",
@@ -612,6 +631,7 @@ pub fn parse(path: &Path, text: &str, read: ReadFn, check_files: bool) -> Result
         dir: path.parent().unwrap_or(Path::new("")).to_path_buf(),
         read,
         check_files,
+        time,
     };
     let (mut materials, by_name) = ctx.materials(&def.materials)?;
     let (mut mesh, warnings) = ctx.meshes(&def.meshes, &mut materials, &by_name)?;
@@ -645,6 +665,18 @@ pub fn parse(path: &Path, text: &str, read: ReadFn, check_files: bool) -> Result
                 focus_distance: c.focus_distance.unwrap_or(distance),
             }
         }
+        // Framed by the bounds: at rest when an instant of an animation is asked for, so
+        // that every instant is seen from one place.
+        None if ctx.time.is_some() => {
+            let rest = Ctx {
+                time: None,
+                dir: ctx.dir.clone(),
+                ..ctx
+            };
+            let mut m = materials.clone();
+            let (rest, _) = rest.meshes(&def.meshes, &mut m, &by_name)?;
+            Camera::canonical(&rest.bounds_around(origin))
+        }
         None => Camera::canonical(&bounds),
     };
 
@@ -666,11 +698,16 @@ pub fn parse(path: &Path, text: &str, read: ReadFn, check_files: bool) -> Result
 
 /// Loads an OBJ, PLY or glTF through `read` (a glTF's own camera and lights are not used: the
 /// scene file gives them).
-fn load_mesh_file(file: &Path, read: ReadFn, rule: Option<NormalRule>) -> Result<MeshFile> {
+fn load_mesh_file(
+    file: &Path,
+    read: ReadFn,
+    rule: Option<NormalRule>,
+    time: Option<f64>,
+) -> Result<MeshFile> {
     if !Format::of(file).is_some_and(Format::is_mesh) {
         bail!("unknown mesh type (expected {})", Format::expected(true));
     }
-    format::load_mesh(file, &read(file)?, read, rule)
+    format::load_mesh(file, &read(file)?, read, rule, time)
 }
 
 /// The mesh entry's transform in f64 (a translation of 1e6 keeps its last digits).

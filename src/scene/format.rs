@@ -94,12 +94,14 @@ impl MeshFile {
 
 /// Loads the mesh file `path` from its bytes, reading the files it names (an OBJ's MTL and
 /// textures, a glTF's buffers and images) through `read`, relative to its folder. Normals the
-/// file does not give follow `rule`, or the format's default when it is `None`.
+/// file does not give follow `rule`, or the format's default when it is `None`. A glTF's
+/// animations are played to `time` (seconds) when one is given; other formats have none.
 pub fn load_mesh(
     path: &Path,
     bytes: &[u8],
     read: &dyn Fn(&Path) -> Result<Vec<u8>>,
     rule: Option<NormalRule>,
+    time: Option<f64>,
 ) -> Result<MeshFile> {
     let dir = path.parent().unwrap_or(Path::new("")).to_path_buf();
     let beside = |p: &Path| read(&dir.join(p));
@@ -110,7 +112,7 @@ pub fn load_mesh(
             vec![Material::default()],
             Vec::new(),
         )),
-        Some(Format::Gltf) => gltf::load_from(path, bytes, &beside, rule),
+        Some(Format::Gltf) => gltf::load_from(path, bytes, &beside, rule, time),
         Some(Format::SceneFile) | None => {
             bail!("unknown mesh type (expected {})", Format::expected(true))
         }

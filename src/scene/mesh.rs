@@ -224,6 +224,13 @@ impl Mesh {
     pub fn bounds(&self) -> Aabb {
         Aabb::of_finite_points(self.triangles.iter().flatten().copied())
     }
+
+    /// The bounding box in the frame of another local origin `origin` (world coordinates):
+    /// where this mesh lies as seen by a mesh placed at `origin`.
+    pub fn bounds_around(&self, origin: DVec3) -> Aabb {
+        let shift = (self.origin - origin).as_vec3();
+        Aabb::of_finite_points(self.triangles.iter().flatten().map(|&v| v + shift))
+    }
 }
 
 /// Unit normal of a triangle (`+z` for a degenerate one).

@@ -25,6 +25,8 @@ use std::path::Path;
 use anyhow::{Context, Result, bail};
 use glam::Vec3;
 
+use crate::geometry::Aabb;
+
 pub use camera::{Camera, Environment};
 pub use format::{Format, MeshFile};
 pub use light::{Light, spot_falloff};
@@ -93,15 +95,56 @@ pub struct Scene {
     pub warnings: Vec<String>,
 }
 
+/// The view of a bare mesh of bounds `b`: the canonical camera, and a point light above and
+/// behind it.
+fn default_view(b: &Aabb) -> (Camera, Light) {
+    let camera = Camera::canonical(b);
+    let r = (camera.position - camera.look_at).length() / 2.2;
+    let position = camera.position + Vec3::new(r, 2.0 * r, 0.0);
+    let d2 = (position - camera.look_at).length_squared();
+    let light = Light::Point {
+        position,
+        color: Vec3::ONE,
+        intensity: std::f32::consts::PI * d2,
+    };
+    (camera, light)
+}
+
 impl Scene {
     /// Loads a scene file (`.toml`), an OBJ (`.obj`, with its MTL), a PLY (`.ply`) or a glTF
     /// (`.gltf`, `.glb`).
     pub fn load(path: &Path) -> Result<Scene> {
+        Self::load_at(path, None)
+    }
+
+    /// [`Scene::load`], with the glTF animations (of a glTF, or of a scene file's glTF meshes)
+    /// played to `time` in seconds when one is given; without, as the file places its nodes.
+    pub fn load_at(path: &Path, time: Option<f64>) -> Result<Scene> {
         match Format::of(path) {
-            Some(Format::SceneFile) => file::load(path),
-            Some(_) => read_file(path)
-                .and_then(|bytes| format::load_mesh(path, &bytes, &|p: &Path| read_file(p), None))
-                .map(|d| gltf::scene_of(name_of(path), d)),
+            Some(Format::SceneFile) => file::load_at(path, time),
+            Some(_) => read_file(path).and_then(|bytes| {
+                let read = |p: &Path| read_file(p);
+                let d = format::load_mesh(path, &bytes, &read, None, time)?;
+                // A file without a camera is framed by its bounds: at rest, when an instant of
+                // its animation is asked for, so that every instant is seen from one place.
+                let rest = match time {
+                    Some(_) if d.camera.is_none() => {
+                        let rest = format::load_mesh(path, &bytes, &read, None, None)?.mesh;
+                        Some(rest.bounds_around(d.mesh.origin))
+                    }
+                    _ => None,
+                };
+                let own_lights = !d.lights.is_empty();
+                let mut scene = gltf::scene_of(name_of(path), d);
+                if let Some(b) = rest {
+                    let (camera, light) = default_view(&b);
+                    scene.camera = camera;
+                    if !own_lights {
+                        scene.lights = vec![light];
+                    }
+                }
+                Ok(scene)
+            }),
             None => bail!(
                 "{}: unknown file type (expected {})",
                 path.display(),
@@ -122,11 +165,7 @@ impl Scene {
     /// A scene for a bare mesh: the canonical camera, a point light above and behind the
     /// camera, and the procedural sky.
     pub fn from_mesh(name: String, mesh: Mesh, materials: Vec<Material>) -> Scene {
-        let b = mesh.bounds();
-        let camera = Camera::canonical(&b);
-        let r = (camera.position - camera.look_at).length() / 2.2;
-        let position = camera.position + Vec3::new(r, 2.0 * r, 0.0);
-        let d2 = (position - camera.look_at).length_squared();
+        let (camera, light) = default_view(&mesh.bounds());
         let materials = if materials.is_empty() {
             vec![Material::default()]
         } else {
@@ -136,11 +175,7 @@ impl Scene {
             name,
             mesh,
             materials,
-            lights: vec![Light::Point {
-                position,
-                color: Vec3::ONE,
-                intensity: std::f32::consts::PI * d2,
-            }],
+            lights: vec![light],
             camera,
             environment: Environment::Sky {
                 intensity: 0.3,

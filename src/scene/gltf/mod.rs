@@ -25,8 +25,11 @@
 //!   times their inverse bind matrices, blended by `WEIGHTS_n`; the skinned node's own
 //!   transform ignored, as the specification asks).
 //!
-//! Ignored: animations (not played, with a warning: the scene is drawn as its nodes place it),
-//! orthographic cameras, texture coordinate sets past 1 (read as set 0, with a warning), and
+//! - Animations, played to a given time ([`animation`]: node translations, rotations, scales
+//!   and morph weights, with the three interpolations; skins follow their animated joints).
+//!   Without a time the scene is drawn as its nodes place it, with a warning.
+//!
+//! Ignored: orthographic cameras, texture coordinate sets past 1 (read as set 0, with a warning), and
 //! the material extensions not named above.
 //! `KHR_texture_transform` is applied to the texture's lookups (its `texCoord` replaces the
 //! texture's own set).
@@ -50,6 +53,7 @@ use super::meshopt::{self, Buffer};
 use super::pbr::{Clearcoat, SheenLayer};
 use super::{Camera, Environment, Light, Material, Mesh, NormalRule, Scene, Texture, Wrap};
 
+mod animation;
 mod buffers;
 mod materials;
 mod nodes;
@@ -175,12 +179,15 @@ pub fn scene_of(name: String, d: MeshFile) -> Scene {
 
 /// Loads glTF bytes named `path` (for messages), reading external buffers and images through
 /// `read` (paths relative to the file's folder). Primitives without normals are flat, or
-/// follow `rule` when one is given (a scene file's `crease_angle`).
+/// follow `rule` when one is given (a scene file's `crease_angle`). With a `time` (seconds),
+/// the file's animations are played to that instant ([`animation`]); without, the nodes,
+/// skins and morph weights stand as the file places them.
 pub fn load_from(
     path: &Path,
     bytes: &[u8],
     read: &dyn Fn(&Path) -> Result<Vec<u8>>,
     rule: Option<NormalRule>,
+    time: Option<f64>,
 ) -> Result<MeshFile> {
     let name = path.display().to_string();
     let doc = match ::gltf::Gltf::from_slice_without_validation(bytes) {
@@ -247,6 +254,7 @@ pub fn load_from(
         any_uvs: false,
         any_uvs1: false,
         visits: 0,
+        pose: animation::Pose::default(),
     };
 
     let roots: Vec<usize> = match doc.default_scene().or_else(|| doc.scenes().next()) {
@@ -269,10 +277,20 @@ pub fn load_from(
         }
     };
     let animations = doc.animations().len();
-    if animations > 0 {
-        loader.warnings.push(format!(
-            "{name}: {animations} animation(s) not played: drawn as the nodes, skins and morph weights place it"
-        ));
+    match time {
+        Some(t) if animations > 0 => {
+            if !t.is_finite() {
+                bail!("{name}: the time to play the animations to is {t}, not a number of seconds");
+            }
+            loader.pose = loader.pose_at(&doc, t)?.0;
+        }
+        Some(_) => loader.warnings.push(format!(
+            "{name}: has no animation; a time changes nothing"
+        )),
+        None if animations > 0 => loader.warnings.push(format!(
+            "{name}: {animations} animation(s) not played: drawn as the nodes, skins and morph weights place it (give a time to play them)"
+        )),
+        None => {}
     }
     let mut on_path = vec![false; doc.nodes().len()];
     for root in roots {
@@ -375,6 +393,8 @@ struct Loader<'a> {
     any_uvs1: bool,
     /// Nodes placed so far (see [`MAX_NODE_VISITS`]).
     visits: usize,
+    /// The animations' nodes at the time asked for (empty without a time).
+    pose: animation::Pose,
 }
 
 impl Loader<'_> {

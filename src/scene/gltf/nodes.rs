@@ -65,14 +65,21 @@ impl Loader<'_> {
         let Some(node) = self.nodes.get(index).cloned() else {
             bail!("{}: nodes[{index}] does not exist", self.name);
         };
-        let local = DMat4::from_cols_array_2d(&node.transform().matrix().map(|c| c.map(f64::from)));
+        let local = self.pose.local(index, &node);
         let world = parent * local;
         if !world.is_finite() {
             bail!("{}: nodes[{index}]: its transform is not finite", self.name);
         }
         if let Some(mesh) = node.mesh() {
-            // Morph targets at the node's weights, else the mesh's (no animation is played).
-            let weights = node.weights().or(mesh.weights()).unwrap_or(&[]);
+            // Morph targets at the animated weights, else the node's, else the mesh's.
+            let weights = self
+                .pose
+                .weights(index)
+                .or(node.weights())
+                .or(mesh.weights())
+                .unwrap_or(&[])
+                .to_vec();
+            let weights = &weights[..];
             // A skinned mesh is placed by its joints; the node's own transform is ignored,
             // as the specification asks.
             let skin = match node.skin() {
@@ -291,7 +298,7 @@ impl Loader<'_> {
             let Some(n) = self.nodes.get(i) else {
                 bail!("{}: nodes[{i}] does not exist", self.name);
             };
-            m = DMat4::from_cols_array_2d(&n.transform().matrix().map(|c| c.map(f64::from))) * m;
+            m = self.pose.local(i, n) * m;
             match self.parents[i] {
                 Some(p) => i = p,
                 None => return Ok(m),
