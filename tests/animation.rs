@@ -363,6 +363,9 @@ fn a_time_is_needed_to_play_and_is_said_when_there_is_nothing_to_play() {
         "{:?}",
         s.warnings
     );
+    // The length of the animation is known without playing it (the last keyframe).
+    assert_eq!(s.animation, Some(3.0));
+    assert_eq!(Scene::load_at(&p, Some(0.5)).unwrap().animation, Some(3.0));
     assert!((corner(&s, 0, 1) - DVec3::new(1.0, 0.0, 5.0)).length() < 1e-9);
     let mut still = d.clone();
     still.as_object_mut().unwrap().remove("animations");
@@ -373,6 +376,7 @@ fn a_time_is_needed_to_play_and_is_said_when_there_is_nothing_to_play() {
         "{:?}",
         s.warnings
     );
+    assert_eq!(s.animation, None);
 }
 
 /// A file without a camera is framed at rest, so every instant of its animation is seen from

@@ -1127,6 +1127,7 @@ fn quad_over_floor(top: tracery::scene::Material, uv: impl Fn(Vec3) -> Vec2, lig
         integrator: tracery::scene::Integrator::Direct,
         energy_compensation: false,
         warnings: Vec::new(),
+        animation: None,
     }
 }
 

@@ -27,6 +27,7 @@ fn scene(parts: Vec<(Vec<[Vec3; 3]>, Material)>, lights: Vec<Light>, camera: Cam
         integrator: Integrator::Path,
         energy_compensation: true,
         warnings: Vec::new(),
+        animation: None,
     }
 }
 

@@ -423,6 +423,7 @@ fn cube_on_floor(offset: Vec3) -> Scene {
         integrator: tracery::scene::Integrator::Direct,
         energy_compensation: true,
         warnings: Vec::new(),
+        animation: None,
     }
 }
 

@@ -30,6 +30,7 @@ fn scene(parts: Vec<(Vec<[Vec3; 3]>, Material)>, lights: Vec<Light>, env: Enviro
         integrator: tracery::scene::Integrator::Direct,
         energy_compensation: false,
         warnings: Vec::new(),
+        animation: None,
     }
 }
 

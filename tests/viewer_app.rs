@@ -6,6 +6,8 @@
 //! denoised still picture is the headless render denoised.
 #![cfg(feature = "viewer")]
 
+mod common;
+
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
@@ -634,4 +636,51 @@ fn the_denoised_still_picture_is_the_headless_render_denoised() {
         against_plain > 2.0,
         "the shown picture is only {against_plain:.2} levels from the picture as traced"
     );
+}
+
+/// A glTF's animation plays in the viewer: the file opens at the timeline's start, scrubbing
+/// shows the instant asked for (the scene at that time, its BVH rebuilt, the camera left
+/// where it is), and playing moves the time on and loads the instants it reaches.
+#[test]
+fn the_timeline_shows_and_plays_the_animation() {
+    use tracery::viewer::animation::Timeline;
+    let Some(skin) = common::external("gltf/simple_skin/simple_skin.gltf") else {
+        return;
+    };
+    let mut app = app(Some(skin.to_str().unwrap()));
+    settle(&mut app, "the first instant", |w| {
+        w.resource::<CurrentScene>().time == Some(0.0) && idle(w)
+    });
+    let at = |app: &App| app.world().resource::<CurrentScene>().scene.clone();
+    let start = at(&app);
+    assert_eq!(start.animation, Some(5.5));
+    assert_eq!(
+        start.mesh.triangles,
+        Scene::load_at(&skin, Some(0.0)).unwrap().mesh.triangles
+    );
+
+    app.world_mut().resource_mut::<Timeline>().time = 1.25;
+    settle(&mut app, "the instant scrubbed to", |w| {
+        w.resource::<CurrentScene>().time == Some(1.25) && idle(w)
+    });
+    let current = app.world().resource::<CurrentScene>();
+    assert!(!current.reframe, "another instant keeps the camera");
+    assert_eq!(
+        current.scene.mesh.triangles,
+        Scene::load_at(&skin, Some(1.25)).unwrap().mesh.triangles
+    );
+    assert_ne!(current.scene.mesh.triangles, start.mesh.triangles);
+    let generation = current.generation;
+    settle(&mut app, "the BVH of the instant", |w| {
+        w.resource::<SceneBvh>().for_scene(generation).is_some()
+    });
+
+    {
+        let mut t = app.world_mut().resource_mut::<Timeline>();
+        t.playing = true;
+        t.speed = 4.0;
+    }
+    settle(&mut app, "playing on", |w| {
+        w.resource::<CurrentScene>().time.is_some_and(|t| t != 1.25)
+    });
 }

@@ -61,6 +61,13 @@ pub struct ViewArgs {
     /// Hide the inspector and status line (Tab shows them).
     #[arg(long)]
     no_ui: bool,
+    /// Open a glTF's animations at this time, in seconds (the inspector's timeline scrubs
+    /// them).
+    #[arg(long, default_value_t = 0.0)]
+    time: f64,
+    /// Play the animations from the start (Space plays and pauses).
+    #[arg(long)]
+    play: bool,
     /// Show the still picture as traced, not denoised (N toggles it; the default in builds
     /// with the denoiser is on).
     #[arg(long)]
@@ -151,6 +158,9 @@ pub fn run(a: ViewArgs) -> Result<()> {
     if a.width == 0 || a.height == 0 {
         bail!("window size {}x{} has no pixels", a.width, a.height);
     }
+    if !a.time.is_finite() {
+        bail!("--time {}: expected a number of seconds", a.time);
+    }
     if a.spp == 0 {
         bail!("--spp must be at least 1");
     }
@@ -223,5 +233,6 @@ pub fn run(a: ViewArgs) -> Result<()> {
             orbit_frames: a.orbit,
             orbit_pictures: a.orbit_pictures.clone(),
         }),
+        animation: (a.time, a.play),
     })
 }

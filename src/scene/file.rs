@@ -422,9 +422,11 @@ impl Ctx<'_> {
         defs: &[Spanned<MeshDef>],
         materials: &mut Vec<Material>,
         by_name: &BTreeMap<String, u32>,
-    ) -> Result<(Mesh, Vec<String>)> {
+    ) -> Result<(Mesh, Vec<String>, Option<f32>)> {
         let mut mesh = Mesh::default();
         let mut warnings = Vec::new();
+        // The longest animation of the glTF meshes, if any has one.
+        let mut animation: Option<f32> = None;
         for m in defs {
             let span = m.span();
             let m = m.get_ref();
@@ -441,7 +443,8 @@ impl Ctx<'_> {
                 })?),
                 None => None,
             };
-            let (mut part, part_materials) = self.mesh_part(m, &span, &mut warnings)?;
+            let (mut part, part_materials) =
+                self.mesh_part(m, &span, &mut warnings, &mut animation)?;
             if let Some(id) = override_id
                 && materials[id as usize].has_height_map()
                 && part.uvs.is_empty()
@@ -488,15 +491,17 @@ impl Ctx<'_> {
                 }
             }
         }
-        Ok((mesh, warnings))
+        Ok((mesh, warnings, animation))
     }
 
-    /// One mesh entry's triangles, as its file or shape gives them, and their materials.
+    /// One mesh entry's triangles, as its file or shape gives them, and their materials;
+    /// `animation` raised to the length of the file's animations, if longer.
     fn mesh_part(
         &self,
         m: &MeshDef,
         span: &std::ops::Range<usize>,
         warnings: &mut Vec<String>,
+        animation: &mut Option<f32>,
     ) -> Result<(Mesh, Vec<Material>)> {
         Ok(match (&m.path, m.shape) {
             (Some(p), None) => {
@@ -515,6 +520,9 @@ impl Ctx<'_> {
                     self.at(p.span().start, format!("mesh `{}`: {e:#}", p.get_ref()))
                 })?;
                 warnings.extend(loaded.warnings);
+                if let Some(a) = loaded.animation {
+                    *animation = Some(animation.map_or(a, |b| b.max(a)));
+                }
                 (loaded.mesh, loaded.materials)
             }
             (None, Some(shape)) => {
@@ -634,7 +642,7 @@ pub fn parse_at(
         time,
     };
     let (mut materials, by_name) = ctx.materials(&def.materials)?;
-    let (mut mesh, warnings) = ctx.meshes(&def.meshes, &mut materials, &by_name)?;
+    let (mut mesh, warnings, animation) = ctx.meshes(&def.meshes, &mut materials, &by_name)?;
     if materials.is_empty() {
         materials.push(Material::default());
     }
@@ -674,7 +682,7 @@ pub fn parse_at(
                 ..ctx
             };
             let mut m = materials.clone();
-            let (rest, _) = rest.meshes(&def.meshes, &mut m, &by_name)?;
+            let (rest, ..) = rest.meshes(&def.meshes, &mut m, &by_name)?;
             Camera::canonical(&rest.bounds_around(origin))
         }
         None => Camera::canonical(&bounds),
@@ -693,6 +701,7 @@ pub fn parse_at(
         integrator: render.integrator.unwrap_or(Integrator::Direct),
         energy_compensation: render.energy_compensation.unwrap_or(true),
         warnings,
+        animation,
     })
 }
 

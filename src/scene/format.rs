@@ -77,6 +77,8 @@ pub struct MeshFile {
     pub lights: Vec<GltfLight>,
     /// Problems worth telling the user that did not stop the load (a missing MTL file, say).
     pub warnings: Vec<String>,
+    /// How long the file's animations run, in seconds (glTF only; `None` without any).
+    pub animation: Option<f32>,
 }
 
 impl MeshFile {
@@ -88,6 +90,7 @@ impl MeshFile {
             camera: None,
             lights: Vec::new(),
             warnings,
+            animation: None,
         }
     }
 }

@@ -93,6 +93,9 @@ pub struct Scene {
     pub energy_compensation: bool,
     /// Problems found while loading that did not stop it (a missing MTL file, say).
     pub warnings: Vec<String>,
+    /// How long the scene's glTF animations run, in seconds (their last keyframe); `None`
+    /// when it has none. [`Scene::load_at`] plays them to an instant.
+    pub animation: Option<f32>,
 }
 
 /// The view of a bare mesh of bounds `b`: the canonical camera, and a point light above and
@@ -184,6 +187,7 @@ impl Scene {
             integrator: Integrator::Direct,
             energy_compensation: true,
             warnings: Vec::new(),
+            animation: None,
         }
     }
 

@@ -55,7 +55,8 @@ fn place_at_scene_camera(
     mut cameras: Query<(Entity, &mut Transform, &mut Projection), With<FlyCamera>>,
     added: Query<(), Added<FlyCamera>>,
 ) {
-    if !current.is_changed() && added.is_empty() {
+    // Another instant of the same file keeps the camera where the user has it.
+    if !(current.is_changed() && current.reframe) && added.is_empty() {
         return;
     }
     let (transform, projection) = pose_of(&current.scene.camera);

@@ -8,6 +8,7 @@ use bevy::prelude::*;
 use bevy_egui::input::EguiWantsInput;
 use bevy_egui::{EguiContexts, EguiPrimaryContextPass, egui};
 
+use super::animation::Timeline;
 use super::bvh::{BvhBuilding, BvhSettings, SceneBvh};
 use super::capture::SavePng;
 use super::debug_ray::{DebugRay, DebugRayGizmos, FocusPicking};
@@ -100,6 +101,7 @@ pub const KEYS: &[(&str, &str)] = &[
     ("H", "traversal cost heatmap"),
     ("G", "where the samples go (work heatmap)"),
     ("N", "denoise the still picture on / off"),
+    ("Space", "play / pause the animation"),
     ("P", "save the full-resolution image as PNG"),
     ("Tab", "show / hide the inspector"),
     ("F1", "this help"),
@@ -267,7 +269,7 @@ fn inspector(
     mut picking: ResMut<FocusPicking>,
     stats: Res<TraceStats>,
     (mut load, mut save): (MessageWriter<LoadScene>, MessageWriter<SavePng>),
-    (mut panel, line): (ResMut<PanelWidth>, Res<StatusLine>),
+    (mut panel, line, mut timeline): (ResMut<PanelWidth>, Res<StatusLine>, ResMut<Timeline>),
 ) -> Result {
     if !state.visible {
         panel.set_if_neq(PanelWidth(0));
@@ -293,6 +295,9 @@ fn inspector(
             egui::ScrollArea::vertical().show(ui, |ui| {
                 ui.heading("Inspector");
                 scene_section(ui, &state, &current, &status, &mut load);
+                if let Some(t) = super::animation::section(ui, &timeline, &current) {
+                    *timeline = t;
+                }
                 render_section(ui, &mut s, &stats, current.scene.integrator);
                 dof_section(ui, &mut s, &mut picking.0);
                 env_section(ui, &mut s, &state);

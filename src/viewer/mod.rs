@@ -5,13 +5,15 @@
 //! [`bvh::BvhPlugin`] (rebuilding the BVH when the scene or its settings change),
 //! [`trace::TracePlugin`] (the ray-trace system), [`display::DisplayPlugin`] (the traced
 //! image on screen), [`camera::FlyCameraPlugin`], [`gizmos::BvhGizmoPlugin`],
-//! [`debug_ray::DebugRayPlugin`], [`inspector::InspectorPlugin`],
+//! [`debug_ray::DebugRayPlugin`], [`animation::AnimationPlugin`] (the glTF animations'
+//! timeline), [`inspector::InspectorPlugin`],
 //! [`pacing::PacingPlugin`] (continuous updates only while something changes),
 //! [`panel_cache::PanelCachePlugin`] (the inspector's pixels reused while it does not change)
 //! and [`capture::CapturePlugin`] (PNG, screenshots, scripted runs). The tracing itself runs on the
 //! trace worker ([`worker`]), off the schedule. [`CorePlugins`] is the part
 //! that needs no window, for tests with `MinimalPlugins`.
 
+pub mod animation;
 pub mod bvh;
 pub mod camera;
 pub mod capture;
@@ -75,6 +77,8 @@ pub struct ViewOptions {
     pub look: Option<(Vec3, Vec3)>,
     /// Scripted run (`--frames`).
     pub script: Option<capture::CaptureScript>,
+    /// Where the animation's timeline starts (seconds), and whether it plays.
+    pub animation: (f64, bool),
 }
 
 /// Which gizmo groups are on at start.
@@ -117,6 +121,9 @@ impl Plugin for CorePlugins {
                     viewport: self.viewport,
                 },
                 debug_ray::DebugRayPlugin {
+                    interactive: self.interactive,
+                },
+                animation::AnimationPlugin {
                     interactive: self.interactive,
                 },
             ));
@@ -196,6 +203,10 @@ pub fn run(options: ViewOptions) -> anyhow::Result<()> {
         panel_cache::PanelCachePlugin,
     ))
     .insert_resource(options.leaves.clone())
+    .insert_resource(animation::Timeline::starting(
+        options.animation.0,
+        options.animation.1,
+    ))
     .insert_resource(StartState {
         gizmos: options.gizmos,
         ray: options.ray,

@@ -22,10 +22,13 @@ impl Plugin for ScenePlugin {
             scene: Arc::new(Scene::cornell_box()),
             source: None,
             generation: 0,
+            time: None,
+            reframe: true,
         })
         .init_resource::<SceneLoading>()
         .init_resource::<ViewerStatus>()
         .add_message::<LoadScene>()
+        .add_message::<ShowInstant>()
         .add_systems(
             PreUpdate,
             (start_loading, finish_loading).chain().in_set(SceneSystems),
@@ -49,26 +52,42 @@ pub struct CurrentScene {
     pub source: Option<PathBuf>,
     /// Counts the scenes installed; anything derived from a scene remembers this.
     pub generation: u64,
+    /// The instant of the file's animations the scene shows (`None`: as the file places its
+    /// nodes).
+    pub time: Option<f64>,
+    /// Whether the last scene installed was a new file (the camera goes to its view), not
+    /// another instant of the same one (the camera stays).
+    pub reframe: bool,
 }
 
 /// Asks for a scene file, OBJ, PLY or glTF to be opened.
 #[derive(Message, Clone, Debug)]
 pub struct LoadScene(pub PathBuf);
 
-/// The load under way, if any.
+/// Asks for the current file at another instant of its animations (seconds): loaded off the
+/// frame like a file, installed as the current scene without moving the camera.
+#[derive(Message, Clone, Copy, Debug, PartialEq)]
+pub struct ShowInstant(pub f64);
+
+/// The load under way, if any: the file, and the instant asked for.
 #[derive(Resource, Default)]
 pub struct SceneLoading {
-    job: Background<PathBuf, anyhow::Result<Scene>>,
+    job: Background<(PathBuf, Option<f64>), anyhow::Result<Scene>>,
     started: Option<Instant>,
 }
 
 impl SceneLoading {
-    /// The file being loaded and how long it has taken so far.
+    /// The file being opened and how long it has taken so far (not another instant of the
+    /// file shown: those load one after another while an animation plays).
     pub fn current(&self) -> Option<(&Path, f32)> {
-        Some((
-            self.job.key()?.as_path(),
-            self.started?.elapsed().as_secs_f32(),
-        ))
+        let (path, time) = self.job.key()?;
+        time.is_none()
+            .then(|| Some((path.as_path(), self.started?.elapsed().as_secs_f32())))?
+    }
+
+    /// Whether a load (of a file, or of an instant) is under way.
+    pub fn busy(&self) -> bool {
+        self.job.is_running()
     }
 }
 
@@ -81,16 +100,27 @@ pub struct ViewerStatus {
     pub notice: Option<String>,
 }
 
-fn start_loading(mut requests: MessageReader<LoadScene>, mut loading: ResMut<SceneLoading>) {
-    // Only the newest request matters.
-    if let Some(LoadScene(path)) = requests.read().last().cloned() {
-        info!("loading {}", path.display());
-        let p = path.clone();
-        loading
-            .job
-            .start(path, "tracery-load", move || Scene::load(&p));
-        loading.started = Some(Instant::now());
-    }
+fn start_loading(
+    mut requests: MessageReader<LoadScene>,
+    mut instants: MessageReader<ShowInstant>,
+    current: Res<CurrentScene>,
+    mut loading: ResMut<SceneLoading>,
+) {
+    // Only the newest request matters; a new file before another instant of the old one.
+    let instant = instants.read().last().copied();
+    let (path, time) = match (requests.read().last().cloned(), instant, &current.source) {
+        (Some(LoadScene(path)), ..) => {
+            info!("loading {}", path.display());
+            (path, None)
+        }
+        (None, Some(ShowInstant(t)), Some(source)) => (source.clone(), Some(t)),
+        _ => return,
+    };
+    let p = path.clone();
+    loading.job.start((path, time), "tracery-load", move || {
+        Scene::load_at(&p, time)
+    });
+    loading.started = Some(Instant::now());
 }
 
 fn finish_loading(
@@ -98,11 +128,21 @@ fn finish_loading(
     mut current: ResMut<CurrentScene>,
     mut status: ResMut<ViewerStatus>,
 ) {
-    let Some((path, result)) = loading.job.poll() else {
+    let Some(((path, time), result)) = loading.job.poll() else {
         return;
     };
     let took = loading.started.take().map(|t| t.elapsed().as_secs_f32());
     match result.map_err(anyhow::Error::msg).and_then(|r| r) {
+        // Another instant of the file shown: the camera stays. (Its warnings are the file's,
+        // less the one that says the animations are not played.)
+        Ok(scene) if time.is_some() && current.source.as_ref() == Some(&path) => {
+            status.error = None;
+            status.notice = (!scene.warnings.is_empty()).then(|| scene.warnings.join("\n"));
+            current.scene = Arc::new(scene);
+            current.generation += 1;
+            current.time = time;
+            current.reframe = false;
+        }
         Ok(scene) => {
             info!(
                 "loaded {} ({} triangles) in {:.2} s",
@@ -115,6 +155,8 @@ fn finish_loading(
             current.scene = Arc::new(scene);
             current.source = Some(path);
             current.generation += 1;
+            current.time = time;
+            current.reframe = true;
         }
         Err(e) => {
             let msg = format!("{e:#}");

@@ -272,6 +272,45 @@ impl Loader<'_> {
         Ok((pose, end))
     }
 
+    /// How long the file's animations run: the latest keyframe time of any sampler (read from
+    /// the input accessor's `max`, which the specification asks for, else from its values).
+    pub(super) fn length(&self, doc: &::gltf::Document) -> Result<f32> {
+        let mut end = 0.0f32;
+        for anim in doc.animations() {
+            for (i, sampler) in anim.samplers().enumerate() {
+                let input = sampler.input();
+                let max = input
+                    .max()
+                    .and_then(|m| m.as_array().and_then(|a| a.first()?.as_f64()));
+                let last = match max {
+                    Some(m) => m as f32,
+                    None => {
+                        let at =
+                            format!("{}: animations[{}].samplers[{i}]", self.name, anim.index());
+                        self.check_accessor(
+                            &at,
+                            "sampler input",
+                            &input,
+                            &[DataType::F32],
+                            Dimensions::Scalar,
+                        )?;
+                        let buffers = self.buffers;
+                        let get = |b: ::gltf::Buffer| {
+                            buffers.get(b.index()).and_then(|d| d.as_deref().ok())
+                        };
+                        read_scalars(&input, get)
+                            .and_then(|t| t.last().copied())
+                            .ok_or_else(|| anyhow!("{at}: sampler input cannot be read"))?
+                    }
+                };
+                if last.is_finite() {
+                    end = end.max(last);
+                }
+            }
+        }
+        Ok(end)
+    }
+
     /// The number of morph targets of node `node`'s mesh (its first primitive's: the
     /// specification asks every primitive of a mesh to have as many).
     fn morph_targets(&self, node: usize) -> usize {

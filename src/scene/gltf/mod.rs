@@ -110,6 +110,7 @@ pub enum LightKind {
 pub fn scene_of(name: String, d: MeshFile) -> Scene {
     let mut scene = Scene::from_mesh(name, d.mesh, d.materials);
     scene.warnings = d.warnings;
+    scene.animation = d.animation;
     let origin = scene.mesh.origin;
     let local = |p: DVec3| (p - origin).as_vec3();
     if let Some(c) = &d.camera {
@@ -277,26 +278,36 @@ pub fn load_from(
         }
     };
     let animations = doc.animations().len();
-    match time {
+    let animation = match time {
         Some(t) if animations > 0 => {
             if !t.is_finite() {
                 bail!("{name}: the time to play the animations to is {t}, not a number of seconds");
             }
-            loader.pose = loader.pose_at(&doc, t)?.0;
+            let (pose, end) = loader.pose_at(&doc, t)?;
+            loader.pose = pose;
+            Some(end)
         }
-        Some(_) => loader.warnings.push(format!(
-            "{name}: has no animation; a time changes nothing"
-        )),
-        None if animations > 0 => loader.warnings.push(format!(
-            "{name}: {animations} animation(s) not played: drawn as the nodes, skins and morph weights place it (give a time to play them)"
-        )),
-        None => {}
-    }
+        Some(_) => {
+            loader
+                .warnings
+                .push(format!("{name}: has no animation; a time changes nothing"));
+            None
+        }
+        None if animations > 0 => {
+            loader.warnings.push(format!(
+                "{name}: {animations} animation(s) not played: drawn as the nodes, skins and morph weights place it (give a time to play them)"
+            ));
+            Some(loader.length(&doc)?)
+        }
+        None => None,
+    };
     let mut on_path = vec![false; doc.nodes().len()];
     for root in roots {
         loader.visit(root, DMat4::IDENTITY, &mut on_path, 0)?;
     }
-    loader.finish()
+    let mut file = loader.finish()?;
+    file.animation = animation;
+    Ok(file)
 }
 
 /// A primitive as read for a placement: mesh, primitive, morph weights (as bits), whether a
@@ -483,6 +494,7 @@ impl Loader<'_> {
             camera: self.camera,
             lights: self.lights,
             warnings: std::mem::take(self.warnings),
+            animation: None,
         })
     }
 }
