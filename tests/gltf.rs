@@ -685,6 +685,93 @@ fn wrong_types_cycles_and_depth_are_errors() {
     assert!(e.contains("GLB"), "{e}");
 }
 
+/// The process's peak resident memory so far (`VmHWM`), in kilobytes.
+fn peak_kb() -> u64 {
+    let status = std::fs::read_to_string("/proc/self/status").unwrap();
+    let line = status.lines().find(|l| l.starts_with("VmHWM:")).unwrap();
+    line.split_whitespace().nth(1).unwrap().parse().unwrap()
+}
+
+/// A 3 KB file whose nodes place a 200-triangle mesh 262,144 times (each node lists the next
+/// twice: 52 million triangles) is refused before anything is placed: in a child process
+/// (this test run again), the load's peak memory grows by no more than a few MB.
+#[test]
+fn a_small_file_that_places_too_many_triangles_is_refused_before_taking_the_memory() {
+    const CHILD: &str = "TRACERY_TEST_PLACEMENT_CHILD";
+    let depth = 18;
+    let mut nodes: Vec<Value> = (0..depth)
+        .map(|i| json!({"children": [i + 1, i + 1]}))
+        .collect();
+    nodes.push(json!({"mesh": 0}));
+    let mut d = doc(Value::Array(nodes), json!({"scenes": [{"nodes": [0]}]}));
+    // 600 indices, all the one triangle's corners: 200 triangles from a 1.2 KB view.
+    let mut bin = f32_bytes(&[0., 0., 0., 1., 0., 0., 0., 1., 0.]);
+    bin.extend(
+        [0u16, 1, 2]
+            .repeat(200)
+            .iter()
+            .flat_map(|i| i.to_le_bytes()),
+    );
+    d["buffers"] = json!([{"byteLength": bin.len(), "uri": data_uri(&bin)}]);
+    d["bufferViews"] = json!([
+        {"buffer": 0, "byteOffset": 0, "byteLength": 36},
+        {"buffer": 0, "byteOffset": 36, "byteLength": 1200}
+    ]);
+    d["accessors"] = json!([
+        {"bufferView": 0, "componentType": 5126, "count": 3, "type": "VEC3"},
+        {"bufferView": 1, "componentType": 5123, "count": 600, "type": "SCALAR"}
+    ]);
+    d["meshes"] = json!([{"primitives": [{"attributes": {"POSITION": 0}, "indices": 1}]}]);
+    if let Some(dir) = std::env::var_os(CHILD) {
+        let path = write(Path::new(&dir), "many.gltf", &d);
+        let before = peak_kb();
+        let e = format!("{:#}", Scene::load(&path).expect_err("too many triangles"));
+        println!("peak growth {} kB", peak_kb().saturating_sub(before));
+        println!("error: {e}");
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let out = std::process::Command::new(std::env::current_exe().unwrap())
+        .args([
+            "a_small_file_that_places_too_many_triangles_is_refused_before_taking_the_memory",
+            "--exact",
+            "--nocapture",
+            "--test-threads=1",
+        ])
+        .env(CHILD, dir.path())
+        .output()
+        .unwrap();
+    let text = String::from_utf8_lossy(&out.stdout).into_owned();
+    assert!(
+        out.status.success(),
+        "{text}{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let growth: u64 = text
+        .lines()
+        .find_map(|l| {
+            l.split("peak growth ")
+                .nth(1)?
+                .strip_suffix(" kB")?
+                .parse()
+                .ok()
+        })
+        .unwrap_or_else(|| panic!("the child reports its peak memory: {text}"));
+    let size = std::fs::metadata(dir.path().join("many.gltf"))
+        .unwrap()
+        .len()
+        / 1024;
+    println!("file {size} kB, peak memory growth {growth} kB");
+    assert!(
+        growth < size + 4096,
+        "the load took {growth} kB for a {size} kB file"
+    );
+    assert!(
+        text.contains("many.gltf") && text.contains("more than 50000000 triangles"),
+        "{text}"
+    );
+}
+
 /// Sparse accessors (glTF 2.0 section 3.6.2.3) substitute some elements of their base, or of
 /// zeros without one; indices that do not rise strictly, run past the accessor, or views too
 /// short for the substitutions are errors that name the accessor.

@@ -301,6 +301,8 @@ pub fn load_from(
         }
         None => None,
     };
+    // The placements and their triangles are counted before anything is read or placed.
+    loader.plan(&roots)?;
     let mut on_path = vec![false; doc.nodes().len()];
     for root in roots {
         loader.visit(root, DMat4::IDENTITY, &mut on_path, 0)?;

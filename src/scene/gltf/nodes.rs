@@ -3,6 +3,22 @@
 
 use super::*;
 
+/// The triangles a primitive makes, from its accessors' counts (nothing is read): its
+/// indices', else its positions', by mode; none for points, lines and a primitive without
+/// positions.
+fn primitive_triangles(p: &::gltf::Primitive) -> u64 {
+    let count = match (p.indices(), p.get(&::gltf::Semantic::Positions)) {
+        (Some(i), _) => i.count(),
+        (None, Some(pos)) => pos.count(),
+        (None, None) => return 0,
+    } as u64;
+    match p.mode() {
+        Mode::Triangles => count / 3,
+        Mode::TriangleStrip | Mode::TriangleFan => count.saturating_sub(2),
+        _ => 0,
+    }
+}
+
 /// Each vertex's transform under a skin: its joints' matrices blended by its weights
 /// (normalised to sum to 1; a vertex with no weight keeps the node's `world`). A joint past
 /// the skin's list is an error.
@@ -36,6 +52,65 @@ pub(super) fn skinning(
 }
 
 impl Loader<'_> {
+    /// Walks the node hierarchy from `roots` as [`Loader::visit`] will, counting placements
+    /// and the triangles they place from the accessors' counts alone, and refuses a file that
+    /// places too many before any of them is read: a small file whose nodes place a mesh many
+    /// times over asks for memory it would take only while placing.
+    pub(super) fn plan(&self, roots: &[usize]) -> Result<()> {
+        let mut per_mesh: HashMap<usize, u64> = HashMap::new();
+        let (mut placements, mut triangles) = (0usize, 0u64);
+        let mut on_path = vec![false; self.nodes.len()];
+        // Depth-first, as `visit` goes: (node, depth, whether its children are done).
+        let mut stack: Vec<(usize, usize, bool)> =
+            roots.iter().rev().map(|&r| (r, 0, false)).collect();
+        while let Some((index, depth, done)) = stack.pop() {
+            if done {
+                on_path[index] = false;
+                continue;
+            }
+            let Some(node) = self.nodes.get(index) else {
+                bail!("{}: nodes[{index}] does not exist", self.name);
+            };
+            if on_path[index] {
+                bail!(
+                    "{}: nodes[{index}]: the node hierarchy has a cycle (nodes[{index}] is its own ancestor)",
+                    self.name
+                );
+            }
+            if depth > MAX_NODE_DEPTH {
+                bail!(
+                    "{}: nodes[{index}]: the node hierarchy is deeper than {MAX_NODE_DEPTH} levels",
+                    self.name
+                );
+            }
+            placements += 1;
+            if placements > MAX_NODE_VISITS {
+                bail!(
+                    "{}: the node hierarchy places more than {MAX_NODE_VISITS} nodes (nodes under several parents?)",
+                    self.name
+                );
+            }
+            if let Some(mesh) = node.mesh() {
+                let n = *per_mesh
+                    .entry(mesh.index())
+                    .or_insert_with(|| mesh.primitives().map(|p| primitive_triangles(&p)).sum());
+                triangles += n;
+                if triangles > MAX_TRIANGLES as u64 {
+                    bail!(
+                        "{}: its nodes place more than {MAX_TRIANGLES} triangles ({placements} placements so far; meshes[{}] has {n}); such a scene is not loaded",
+                        self.name,
+                        mesh.index()
+                    );
+                }
+            }
+            on_path[index] = true;
+            stack.push((index, depth, true));
+            let children: Vec<usize> = node.children().map(|c| c.index()).collect();
+            stack.extend(children.into_iter().rev().map(|c| (c, depth + 1, false)));
+        }
+        Ok(())
+    }
+
     pub(super) fn visit(
         &mut self,
         index: usize,
