@@ -799,6 +799,22 @@ fn render_times_writes_one_numbered_picture_per_frame() {
             .to_rgb8()
     };
     assert_ne!(frame(0), frame(1));
+    // The second frame, traced with the first frame's tree refitted, is the picture of that
+    // instant rendered alone (with a tree built for it).
+    let alone = dir.path().join("alone.png");
+    let third = format!("{}", 1.0f64 / 3.0);
+    let mut args = vec![
+        "render",
+        skin.to_str().unwrap(),
+        "--time",
+        &third,
+        "-o",
+        alone.to_str().unwrap(),
+    ];
+    args.extend(small);
+    let o = tracery(&args);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    assert_eq!(image::open(&alone).unwrap().to_rgb8(), frame(1));
 
     let plain = dir.path().join("frame.png");
     let mut args = vec![

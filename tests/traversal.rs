@@ -503,3 +503,56 @@ fn leaf_triangles_match(tris: &[[Vec3; 3]]) {
         }
     }
 }
+
+/// Trees refitted to moved triangles answer as brute force over the moved triangles does:
+/// closest hits bit for bit and occlusion, on every kernel and both builders, for a sphere
+/// whose vertices each moved by up to 1% of its size and for a soup whose triangles moved far
+/// apart (a large move: the refitted tree is worse, never wrong).
+#[test]
+fn refitted_trees_agree_with_brute_force() {
+    let sphere = shapes::icosphere(4);
+    let soup = shapes::random_soup(1500, 0.1, 4);
+    for (name, tris, reach) in [("sphere", sphere, 0.02f32), ("soup", soup, 0.5)] {
+        // Each vertex moved by a function of its position, so vertices shared by triangles
+        // move together.
+        let moved: Vec<[Vec3; 3]> = tris
+            .iter()
+            .map(|t| {
+                t.map(|v| {
+                    let h = |k: u32| {
+                        let bits = v.x.to_bits()
+                            ^ v.y.to_bits().rotate_left(11)
+                            ^ v.z.to_bits().rotate_left(22)
+                            ^ k.wrapping_mul(0x9e37_79b9);
+                        let x = bits.wrapping_mul(0x85eb_ca6b) ^ (bits >> 13);
+                        (x as f32 / u32::MAX as f32 - 0.5) * reach
+                    };
+                    v + Vec3::new(h(1), h(2), h(3))
+                })
+            })
+            .collect();
+        let rays = common::random_rays(&moved, 4000, 5);
+        let bf = BruteForce::new(&moved);
+        for options in common::both_builders() {
+            let mut bvh = Bvh::build(&tris, &options);
+            let r = bvh.refit(&moved).unwrap();
+            assert!(r.sah_cost.is_finite());
+            for (kernel, k) in common::every_kernel(&bvh) {
+                common::assert_matches_brute_force(
+                    &format!("{name} refitted, {kernel}"),
+                    &moved,
+                    &[&k],
+                    &rays,
+                );
+                for (i, ray) in rays.iter().enumerate().step_by(3) {
+                    let t_max = 0.1 + (i % 9) as f32 * 0.2;
+                    assert_eq!(
+                        k.occluded(ray, t_max),
+                        !bf.all_hits(ray, t_max).is_empty(),
+                        "{name} refitted, {kernel}, shadow ray {i}"
+                    );
+                }
+            }
+        }
+    }
+}

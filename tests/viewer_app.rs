@@ -638,9 +638,19 @@ fn the_denoised_still_picture_is_the_headless_render_denoised() {
     );
 }
 
+fn current_triangles(app: &App) -> Vec<[Vec3; 3]> {
+    app.world()
+        .resource::<CurrentScene>()
+        .scene
+        .mesh
+        .triangles
+        .clone()
+}
+
 /// A glTF's animation plays in the viewer: the file opens at the timeline's start, scrubbing
 /// shows the instant asked for (the scene at that time, its BVH rebuilt, the camera left
-/// where it is), and playing moves the time on and loads the instants it reaches.
+/// where it is; the tree refitted, not built again), and playing moves the time on and loads
+/// the instants it reaches.
 #[test]
 fn the_timeline_shows_and_plays_the_animation() {
     use tracery::viewer::animation::Timeline;
@@ -674,6 +684,21 @@ fn the_timeline_shows_and_plays_the_animation() {
     settle(&mut app, "the BVH of the instant", |w| {
         w.resource::<SceneBvh>().for_scene(generation).is_some()
     });
+    // The instants' trees are the first tree refitted, and answer as trees built for them.
+    let trees = app.world().resource::<SceneBvh>();
+    assert!(trees.refits >= 1, "{} refits", trees.refits);
+    let tree = trees.for_scene(generation).unwrap();
+    let built = Bvh::build(&current_triangles(&app), &BuildOptions::sah());
+    let scene = app.world().resource::<CurrentScene>().scene.clone();
+    for ray in tracery::bench::canonical_rays(&scene.mesh.bounds())
+        .iter()
+        .step_by(97)
+    {
+        assert_eq!(
+            tree.intersect(ray, f32::INFINITY),
+            built.intersect(ray, f32::INFINITY)
+        );
+    }
 
     {
         let mut t = app.world_mut().resource_mut::<Timeline>();

@@ -16,6 +16,7 @@
 
 mod build;
 mod reference;
+mod refit;
 mod stats;
 mod tile;
 mod traverse;
@@ -24,6 +25,7 @@ pub mod wide;
 use glam::{Vec3, Vec3A};
 
 pub use reference::BruteForce;
+pub use refit::{REFIT_SAH_BOUND, Refit, RefitError, Update};
 pub use stats::{BuildPhases, BvhStats};
 pub use tile::{PACKET, RayTile};
 pub use traverse::{Hit, Visit};

@@ -8,7 +8,7 @@ use std::time::Instant;
 use anyhow::Result;
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
-use tracery::bvh::Bvh;
+use tracery::bvh::{Bvh, Update};
 use tracery::denoise::{Denoiser, Inputs};
 use tracery::film::{Film, OutputKind};
 use tracery::render::aov::Aov;
@@ -146,7 +146,7 @@ fn beside(path: &Path, tag: &str, ext: &str) -> PathBuf {
 pub fn run(a: RenderArgs) -> Result<()> {
     set_threads(a.threads)?;
     let Some(range) = a.times else {
-        return render_frame(&a, a.time, &a.output, true);
+        return render_frame(&a, a.time, &a.output, true, &mut None);
     };
     let fps = a.fps.unwrap_or(24.0);
     if !(fps.is_finite() && fps > 0.0) {
@@ -169,10 +169,12 @@ pub fn run(a: RenderArgs) -> Result<()> {
     let frames = frame_times(range, fps);
     let n = frames.len();
     let start = Instant::now();
+    // Each frame's tree, refitted to the next frame's triangles where it can be.
+    let mut tree = None;
     for (i, t) in frames {
         let path = frame_path(&a.output, i).expect("checked above");
         eprintln!("frame {}/{n}: t = {t:.4} s", i + 1);
-        render_frame(&a, Some(t), &path, i == 0)?;
+        render_frame(&a, Some(t), &path, i == 0, &mut tree)?;
     }
     println!(
         "rendered {n} frames ({:.3} to {:.3} s at {fps} fps) in {:.1} s",
@@ -183,9 +185,20 @@ pub fn run(a: RenderArgs) -> Result<()> {
     Ok(())
 }
 
+/// A frame's BVH, kept for the next frame, and the SAH cost it had when last built.
+type Kept = Option<(Bvh, f64)>;
+
 /// Renders the scene at `time` (its glTF animations played to it, if given) to `output`;
-/// load warnings printed when `warn`.
-fn render_frame(a: &RenderArgs, time: Option<f64>, output: &Path, warn: bool) -> Result<()> {
+/// load warnings printed when `warn`. With the previous frame's tree in `kept`, the tree is
+/// refitted to this frame's triangles (or built again when it cannot be, or when refitting
+/// has cost it too much quality: [`Bvh::refit_or_rebuild`]); this frame's is left there.
+fn render_frame(
+    a: &RenderArgs,
+    time: Option<f64>,
+    output: &Path,
+    warn: bool,
+    kept: &mut Kept,
+) -> Result<()> {
     let settings = RenderSettings {
         width: a.width,
         height: a.height,
@@ -226,28 +239,53 @@ fn render_frame(a: &RenderArgs, time: Option<f64>, output: &Path, warn: bool) ->
         let plan = RenderPlan::new(&scene, &settings);
         eprintln!("{}", Explain(&plan, &scene, &settings));
     }
-    let bvh = Bvh::build(&scene.mesh.triangles, &options);
-    let s = &bvh.stats;
-    eprintln!(
-        "{}: {} triangles; BVH ({}, {} bins, leaf {}) built in {:.1} ms: {} levels, {} leaves, SAH cost {:.2}{}",
-        scene.name,
-        scene.triangle_count(),
-        options.split,
-        options.bins,
-        options.max_leaf_size,
-        s.build_ms,
-        s.levels,
-        s.leaves,
-        s.sah_cost,
-        if s.excluded + s.degenerate > 0 {
-            format!(
-                "; left out: {} with non-finite vertices, {} with zero area",
-                s.excluded, s.degenerate
-            )
-        } else {
-            String::new()
+    let (bvh, built_cost, built) = match kept.take() {
+        Some((mut bvh, built_cost)) => {
+            match bvh.refit_or_rebuild(&scene.mesh.triangles, built_cost) {
+                Update::Refitted(r) => {
+                    eprintln!(
+                        "{}: BVH refitted in {:.1} ms: SAH cost {:.2} ({:.2} when built)",
+                        scene.name, r.ms, r.sah_cost, built_cost
+                    );
+                    (bvh, built_cost, false)
+                }
+                Update::Rebuilt(why) => {
+                    eprintln!("{}: BVH built again: {why}", scene.name);
+                    let cost = bvh.stats.sah_cost;
+                    (bvh, cost, true)
+                }
+            }
         }
-    );
+        None => {
+            let bvh = Bvh::build(&scene.mesh.triangles, &options);
+            let cost = bvh.stats.sah_cost;
+            (bvh, cost, true)
+        }
+    };
+    // (A refitted tree's line is above.)
+    if built {
+        let s = &bvh.stats;
+        eprintln!(
+            "{}: {} triangles; BVH ({}, {} bins, leaf {}) built in {:.1} ms: {} levels, {} leaves, SAH cost {:.2}{}",
+            scene.name,
+            scene.triangle_count(),
+            options.split,
+            options.bins,
+            options.max_leaf_size,
+            s.build_ms,
+            s.levels,
+            s.leaves,
+            s.sah_cost,
+            if s.excluded + s.degenerate > 0 {
+                format!(
+                    "; left out: {} with non-finite vertices, {} with zero area",
+                    s.excluded, s.degenerate
+                )
+            } else {
+                String::new()
+            }
+        );
+    }
     // Asked before the render, so a build without the denoiser does not render for nothing.
     let denoiser = a.denoise.then(Denoiser::new).transpose()?;
     let bar = ProgressBar::new(settings.height as u64).with_style(
@@ -347,5 +385,6 @@ fn render_frame(a: &RenderArgs, time: Option<f64>, output: &Path, warn: bool) ->
             String::new()
         }
     );
+    *kept = Some((bvh, built_cost));
     Ok(())
 }

@@ -6,10 +6,13 @@ use std::time::Instant;
 
 use anyhow::Result;
 use clap::{Args, Subcommand};
+use glam::Vec3;
 use tracery::bench::scaling::{self, ScalingRow, growth_per_doubling};
 use tracery::bench::{self, BenchConfig};
 use tracery::bvh::{BuildOptions, Bvh, SplitMethod, Visits};
+use tracery::geometry::Aabb;
 use tracery::render::{RenderSettings, render};
+use tracery::rng::SplitMix64;
 use tracery::scene::Scene;
 
 use super::load_scene;
@@ -83,6 +86,20 @@ enum ReportKind {
         #[arg(long, default_value_t = 5)]
         repeat: usize,
     },
+    /// Refit against rebuild after the mesh's vertices move (each by up to `--move` of the
+    /// mesh's size, shared vertices together): one thread, best of `--repeat` in alternating
+    /// rounds, with the SAH cost and closest-hit speed (canonical camera rays, one thread) of
+    /// each tree.
+    Refit {
+        /// Mesh or scene file.
+        mesh: PathBuf,
+        /// Largest move of a vertex along each axis, as a fraction of the mesh's diagonal.
+        #[arg(long = "move", default_value_t = 0.01)]
+        reach: f32,
+        /// Repeat each measurement and keep the best.
+        #[arg(long, default_value_t = 5)]
+        repeat: usize,
+    },
 }
 
 pub fn run(a: ReportArgs) -> Result<()> {
@@ -103,7 +120,103 @@ pub fn run(a: ReportArgs) -> Result<()> {
             repeat,
             plot,
         } => scaling(meshes, generated, repeat, plot),
+        ReportKind::Refit {
+            mesh,
+            reach,
+            repeat,
+        } => refit_table(mesh, reach, repeat),
     }
+}
+
+/// Each vertex of `tris` moved by up to `reach` along each axis, by a hash of its position
+/// (so a vertex shared by several triangles moves the same way in each).
+fn moved(tris: &[[Vec3; 3]], reach: f32) -> Vec<[Vec3; 3]> {
+    let shift = |v: Vec3| {
+        let axis = |k: u64| {
+            let mut rng = SplitMix64::new(
+                u64::from(v.x.to_bits())
+                    ^ u64::from(v.y.to_bits()) << 21
+                    ^ u64::from(v.z.to_bits()) << 42
+                    ^ k,
+            );
+            (rng.next_f32() * 2.0 - 1.0) * reach
+        };
+        Vec3::new(axis(1), axis(2), axis(3))
+    };
+    tris.iter().map(|t| t.map(|v| v + shift(v))).collect()
+}
+
+fn refit_table(mesh: PathBuf, reach: f32, repeat: usize) -> Result<()> {
+    if !(reach.is_finite() && reach >= 0.0) {
+        anyhow::bail!("--move {reach}: expected a fraction of the mesh's size, 0 or more");
+    }
+    let scene = load_scene(Some(&mesh))?;
+    let tris = &scene.mesh.triangles;
+    let b = scene.mesh.bounds();
+    let size = (Vec3::from(b.max) - Vec3::from(b.min)).length();
+    let after = moved(tris, reach * size);
+    let pool = rayon::ThreadPoolBuilder::new().num_threads(1).build()?;
+    let options = BuildOptions::sah();
+    let built = pool.install(|| Bvh::build(tris, &options));
+    let (mut refit_ms, mut build_ms) = (f64::INFINITY, f64::INFINITY);
+    let (mut refitted, mut rebuilt) = (built.clone(), built.clone());
+    for round in 0..repeat.max(1) {
+        eprintln!("  round {}/{}", round + 1, repeat.max(1));
+        let mut r = built.clone();
+        let t = Instant::now();
+        pool.install(|| r.refit(&after))
+            .map_err(anyhow::Error::msg)?;
+        refit_ms = refit_ms.min(t.elapsed().as_secs_f64() * 1e3);
+        refitted = r;
+        let t = Instant::now();
+        rebuilt = pool.install(|| Bvh::build(&after, &options));
+        build_ms = build_ms.min(t.elapsed().as_secs_f64() * 1e3);
+    }
+    let rays = bench::canonical_rays(&Aabb::of_finite_points(after.iter().flatten().copied()));
+    let speed = |bvh: &Bvh| {
+        let mut best = f64::INFINITY;
+        for _ in 0..repeat.max(1) {
+            let t = Instant::now();
+            let hits = pool.install(|| {
+                rays.iter()
+                    .filter(|r| bvh.intersect(r, f32::INFINITY).is_some())
+                    .count()
+            });
+            std::hint::black_box(hits);
+            best = best.min(t.elapsed().as_secs_f64());
+        }
+        rays.len() as f64 / best / 1e6
+    };
+    let (refit_speed, build_speed) = (speed(&refitted), speed(&rebuilt));
+    println!(
+        "{}: {} triangles, every vertex moved by up to {}% of the mesh's size ({:.4}) per axis; one thread, best of {}",
+        scene.name,
+        tris.len(),
+        reach * 100.0,
+        reach * size,
+        repeat.max(1)
+    );
+    println!("| tree | ms | SAH cost | closest Mrays/s |");
+    println!("|---|---:|---:|---:|");
+    println!(
+        "| built before the move | - | {:.2} | - |",
+        built.stats.sah_cost
+    );
+    println!(
+        "| refitted | {refit_ms:.2} | {:.2} | {refit_speed:.2} |",
+        refitted.stats.sah_cost
+    );
+    println!(
+        "| rebuilt | {build_ms:.2} | {:.2} | {build_speed:.2} |",
+        rebuilt.stats.sah_cost
+    );
+    println!(
+        "refit / rebuild: time {:.2}x, SAH cost {:.2}x, closest-hit speed {:.2}x",
+        refit_ms / build_ms,
+        refitted.stats.sah_cost / rebuilt.stats.sah_cost,
+        refit_speed / build_speed
+    );
+    Ok(())
 }
 
 /// Runs the benchmark on the scene's canonical camera rays, progress on stderr.

@@ -1,5 +1,7 @@
 //! The BVH as a resource: rebuilt off the frame when the scene or the BVH settings change,
-//! and exactly then.
+//! and exactly then. Another instant of an animation (the same file, its triangles moved)
+//! refits the current tree instead, unless refitting has cost it too much quality
+//! ([`Bvh::refit_or_rebuild`]).
 
 use std::sync::Arc;
 use std::time::Instant;
@@ -8,7 +10,7 @@ use bevy::prelude::*;
 
 use super::scene::CurrentScene;
 use super::task::Background;
-use crate::bvh::{BuildOptions, Bvh};
+use crate::bvh::{BuildOptions, Bvh, Update};
 
 /// Keeps [`SceneBvh`] in step with [`CurrentScene`] and [`BvhSettings`].
 pub struct BvhPlugin {
@@ -46,8 +48,12 @@ pub struct SceneBvh {
     pub bvh: Option<Arc<Bvh>>,
     /// What it was built from.
     pub key: Option<BvhKey>,
-    /// Builds installed since start.
+    /// Builds installed since start (refits included).
     pub builds: u64,
+    /// Of those, the refits.
+    pub refits: u64,
+    /// The SAH cost of the tree when it was last built (refits are measured against it).
+    pub built_cost: f64,
 }
 
 impl SceneBvh {
@@ -63,7 +69,7 @@ impl SceneBvh {
 /// The build under way, if any.
 #[derive(Resource, Default)]
 pub struct BvhBuilding {
-    job: Background<BvhKey, Bvh>,
+    job: Background<BvhKey, (Bvh, Option<Update>)>,
     started: Option<Instant>,
     /// A build that failed (not retried until the key changes).
     failed: Option<BvhKey>,
@@ -91,11 +97,29 @@ fn rebuild_bvh(
     };
     if let Some((key, result)) = building.job.poll() {
         match result {
-            Ok(tree) if key == wanted => {
-                info!(
-                    "BVH built in {:.1} ms: {} nodes, {} levels, SAH cost {:.2}",
-                    tree.stats.build_ms, tree.stats.nodes, tree.stats.levels, tree.stats.sah_cost
-                );
+            Ok((tree, update)) if key == wanted => {
+                match &update {
+                    Some(Update::Refitted(r)) => {
+                        info!(
+                            "BVH refitted in {:.1} ms: SAH cost {:.2} ({:.2} when built)",
+                            r.ms, r.sah_cost, bvh.built_cost
+                        );
+                        bvh.refits += 1;
+                    }
+                    rebuilt => {
+                        if let Some(Update::Rebuilt(why)) = rebuilt {
+                            info!("BVH built again: {why}");
+                        }
+                        info!(
+                            "BVH built in {:.1} ms: {} nodes, {} levels, SAH cost {:.2}",
+                            tree.stats.build_ms,
+                            tree.stats.nodes,
+                            tree.stats.levels,
+                            tree.stats.sah_cost
+                        );
+                        bvh.built_cost = tree.stats.sah_cost;
+                    }
+                }
                 bvh.bvh = Some(Arc::new(tree));
                 bvh.key = Some(key);
                 bvh.builds += 1;
@@ -115,8 +139,22 @@ fn rebuild_bvh(
     }
     let triangles = scene.scene.clone();
     let options = settings.0;
-    building.job.start(wanted, "tracery-bvh", move || {
-        Bvh::build(&triangles.mesh.triangles, &options)
-    });
+    // Another instant of the same file: the current tree, refitted (a copy: the pictures
+    // under way keep tracing the old one).
+    let previous = bvh
+        .bvh
+        .clone()
+        .filter(|b| !scene.reframe && b.options == options);
+    let built_cost = bvh.built_cost;
+    building
+        .job
+        .start(wanted, "tracery-bvh", move || match previous {
+            Some(tree) => {
+                let mut tree = (*tree).clone();
+                let update = tree.refit_or_rebuild(&triangles.mesh.triangles, built_cost);
+                (tree, Some(update))
+            }
+            None => (Bvh::build(&triangles.mesh.triangles, &options), None),
+        });
     building.started = Some(Instant::now());
 }

@@ -19,6 +19,7 @@ use glam::{Vec3, Vec4};
 
 use super::{BLOCK, Child, Kernel, TriBlock, WIDTH, WideBvh, WideNode};
 use crate::bvh::BvhNode;
+use crate::geometry::Aabb;
 
 /// Collapses `nodes` (the binary tree, root at 0) whose leaf slots hold the triangles
 /// `triangles[prim_ids[slot]]`. Also returns, for every binary leaf, the index of its first
@@ -606,6 +607,90 @@ fn fill_blocks(sources: &[(u32, u32)], triangles: &[[Vec3; 3]], prim_ids: &[u32]
             block
         })
         .collect()
+}
+
+/// The layout made to fit its triangles after their vertices moved, keeping its shape: every
+/// block's lanes read again from `triangles` (by their caller's index); then, children before
+/// parents (a node's children follow it in [`WideBvh::nodes`]), every lane's box made again
+/// from its blocks' triangles or from its child node's lanes, and each node's visiting order
+/// made again. The boxes are the triangles' exact bounds, as [`collapse`] makes them.
+pub fn refit(w: &mut WideBvh, triangles: &[[Vec3; 3]]) {
+    // The triangles are scattered over the caller's array: each block asks for those of the
+    // block `AHEAD` of it, as `fill_blocks` does.
+    const AHEAD: usize = 24;
+    for b in 0..w.blocks.len() {
+        if let Some(ahead) = w.blocks.get(b + AHEAD) {
+            for &id in &ahead.prim {
+                if let Some(t) = triangles.get(id as usize) {
+                    super::kernel::prefetch(&t[0].x);
+                    super::kernel::prefetch(&t[2].z);
+                }
+            }
+        }
+        let block = &mut w.blocks[b];
+        for lane in 0..BLOCK {
+            let id = block.prim[lane];
+            if id == u32::MAX {
+                continue;
+            }
+            for (vertex, p) in triangles[id as usize].iter().enumerate() {
+                for axis in 0..3 {
+                    block.v[vertex][axis][lane] = p[axis];
+                }
+            }
+        }
+    }
+    let blocks_box = |blocks: &[TriBlock]| {
+        let mut b = Aabb::EMPTY;
+        for block in blocks {
+            for lane in 0..BLOCK {
+                if block.prim[lane] != u32::MAX {
+                    for p in block.triangle(lane) {
+                        b.grow_point(p);
+                    }
+                }
+            }
+        }
+        b
+    };
+    for i in (0..w.nodes.len()).rev() {
+        let mut node = w.nodes[i];
+        for lane in 0..WIDTH {
+            if node.planes[0][lane] > node.planes[1][lane] {
+                continue; // an empty lane
+            }
+            let child = Child(node.child[lane]);
+            let b = if child.is_leaf() {
+                let (first, count) = child.blocks();
+                blocks_box(&w.blocks[first as usize..(first + count) as usize])
+            } else {
+                debug_assert!(child.index() as usize > i, "children follow their parent");
+                let c = &w.nodes[child.index() as usize];
+                let mut b = Aabb::EMPTY;
+                for k in 0..WIDTH {
+                    if c.planes[0][k] <= c.planes[1][k] {
+                        b.grow_point(glam::Vec3A::new(
+                            c.planes[0][k],
+                            c.planes[2][k],
+                            c.planes[4][k],
+                        ));
+                        b.grow_point(glam::Vec3A::new(
+                            c.planes[1][k],
+                            c.planes[3][k],
+                            c.planes[5][k],
+                        ));
+                    }
+                }
+                b
+            };
+            for axis in 0..3 {
+                node.planes[2 * axis][lane] = b.min[axis];
+                node.planes[2 * axis + 1][lane] = b.max[axis];
+            }
+        }
+        node.order = octant_order(&node);
+        w.nodes[i] = node;
+    }
 }
 
 #[cfg(test)]

@@ -363,4 +363,4 @@ impl WideBvh {
     }
 }
 
-pub(super) use collapse::collapse;
+pub(super) use collapse::{collapse, refit};
