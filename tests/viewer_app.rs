@@ -661,6 +661,11 @@ fn the_timeline_shows_and_plays_the_animation() {
     settle(&mut app, "the first instant", |w| {
         w.resource::<CurrentScene>().time == Some(0.0) && idle(w)
     });
+    // Its tree built, so the next instant's can be this one refitted.
+    settle(&mut app, "the first instant's BVH", |w| {
+        let generation = w.resource::<CurrentScene>().generation;
+        w.resource::<SceneBvh>().for_scene(generation).is_some()
+    });
     let at = |app: &App| app.world().resource::<CurrentScene>().scene.clone();
     let start = at(&app);
     assert_eq!(start.animation, Some(5.5));

@@ -15,6 +15,7 @@
 //! ([`Bvh::leaf_triangles`] reads a binary leaf's).
 
 mod build;
+mod instances;
 mod reference;
 mod refit;
 mod stats;
@@ -24,6 +25,7 @@ pub mod wide;
 
 use glam::{Vec3, Vec3A};
 
+pub use instances::{Instance, InstanceError, InstanceHit, TwoLevel};
 pub use reference::BruteForce;
 pub use refit::{REFIT_SAH_BOUND, Refit, RefitError, Update};
 pub use stats::{BuildPhases, BvhStats};

@@ -86,6 +86,20 @@ enum ReportKind {
         #[arg(long, default_value_t = 5)]
         repeat: usize,
     },
+    /// Instances over two levels of trees: the top level of `--count` placements of the mesh
+    /// (a grid, each turned and scaled its own way) built on one thread, best of
+    /// `--repeat`, and the bytes the placements take against the mesh's tree and against
+    /// the mesh copied once per placement.
+    Instances {
+        /// Mesh or scene file (the built-in Cornell box when left out).
+        mesh: Option<PathBuf>,
+        /// Placements.
+        #[arg(long, default_value_t = 10_000)]
+        count: usize,
+        /// Repeat each measurement and keep the best.
+        #[arg(long, default_value_t = 5)]
+        repeat: usize,
+    },
     /// Refit against rebuild after the mesh's vertices move (each by up to `--move` of the
     /// mesh's size, shared vertices together): one thread, best of `--repeat` in alternating
     /// rounds, with the SAH cost and closest-hit speed (canonical camera rays, one thread) of
@@ -125,6 +139,11 @@ pub fn run(a: ReportArgs) -> Result<()> {
             reach,
             repeat,
         } => refit_table(mesh, reach, repeat),
+        ReportKind::Instances {
+            mesh,
+            count,
+            repeat,
+        } => instances_table(mesh, count, repeat),
     }
 }
 
@@ -144,6 +163,67 @@ fn moved(tris: &[[Vec3; 3]], reach: f32) -> Vec<[Vec3; 3]> {
         Vec3::new(axis(1), axis(2), axis(3))
     };
     tris.iter().map(|t| t.map(|v| v + shift(v))).collect()
+}
+
+fn instances_table(mesh: Option<PathBuf>, count: usize, repeat: usize) -> Result<()> {
+    use std::sync::Arc;
+    use tracery::bvh::{Instance, TwoLevel};
+    let scene = load_scene(mesh.as_deref())?;
+    let tree = Arc::new(Bvh::build(&scene.mesh.triangles, &BuildOptions::sah()));
+    let b = scene.mesh.bounds();
+    let size = (Vec3::from(b.max) - Vec3::from(b.min)).length().max(1e-6);
+    let side = (count as f64).cbrt().ceil() as usize;
+    let instances: Vec<Instance> = (0..count)
+        .map(|k| {
+            let cell = Vec3::new(
+                (k % side) as f32,
+                (k / side % side) as f32,
+                (k / (side * side)) as f32,
+            );
+            Instance {
+                mesh: 0,
+                to_world: glam::Affine3A::from_scale_rotation_translation(
+                    Vec3::splat(0.5 + (k % 7) as f32 * 0.1),
+                    glam::Quat::from_rotation_y(k as f32 * 0.7),
+                    cell * size * 1.5,
+                ),
+            }
+        })
+        .collect();
+    let pool = rayon::ThreadPoolBuilder::new().num_threads(1).build()?;
+    let mut best = f64::INFINITY;
+    let mut two = None;
+    for _ in 0..repeat.max(1) {
+        let placed = instances.clone();
+        // `build_ms`: the transforms inverted, the world boxes made, the top level built.
+        let built = pool
+            .install(|| TwoLevel::new(vec![tree.clone()], placed))
+            .map_err(anyhow::Error::msg)?;
+        best = best.min(built.build_ms);
+        two = Some(built);
+    }
+    let two = two.expect("built at least once");
+    let mesh_bytes = tree.stats.binary_bytes + tree.stats.wide_bytes;
+    println!(
+        "{}: {} triangles, {count} placements; one thread, best of {}",
+        scene.name,
+        scene.triangle_count(),
+        repeat.max(1)
+    );
+    println!("| what | figure |");
+    println!("|---|---:|");
+    println!("| top level built in | {best:.2} ms |");
+    println!("| the mesh's tree | {mesh_bytes} bytes |");
+    println!(
+        "| the placements (transforms and top level) | {} bytes, {:.0} a placement |",
+        two.bytes(),
+        two.bytes() as f64 / count.max(1) as f64
+    );
+    println!(
+        "| the mesh's tree copied once per placement | {} bytes |",
+        mesh_bytes as u128 * count as u128
+    );
+    Ok(())
 }
 
 fn refit_table(mesh: PathBuf, reach: f32, repeat: usize) -> Result<()> {

@@ -1,0 +1,411 @@
+//! Two levels: meshes placed many times. Each mesh has its own tree (the bottom level, a
+//! [`Bvh`] in the mesh's own frame), each placement (an [`Instance`]) a transform, and a top
+//! level, a binary tree over the instances' world boxes, finds the instances a ray may meet.
+//! A query walks the top level and, in each instance it enters, carries the ray into the
+//! mesh's frame (origin and direction by the inverse transform; the direction is not
+//! normalised, so distances along the ray are the same in both frames) and asks the mesh's
+//! tree. A mesh placed a thousand times is held once: an instance costs its transforms and
+//! its share of the top level ([`TwoLevel::bytes`]).
+
+use std::sync::Arc;
+use std::time::Instant;
+
+use glam::{Affine3A, Vec3A};
+
+use super::{Bvh, BvhNode, Hit};
+use crate::geometry::{Aabb, PreparedRay, Ray};
+
+/// A mesh placed in the world.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Instance {
+    /// The mesh it places: an index into [`TwoLevel::meshes`].
+    pub mesh: u32,
+    /// From the mesh's frame to the world.
+    pub to_world: Affine3A,
+}
+
+/// The closest hit of a ray among instances: which instance, and the hit in its mesh
+/// (`hit.prim` is the triangle's index in the mesh's list, `hit.t` the distance along the
+/// world ray).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct InstanceHit {
+    /// Index of the instance in [`TwoLevel::instances`].
+    pub instance: u32,
+    /// The hit in the instance's mesh.
+    pub hit: Hit,
+}
+
+/// Why instances cannot be placed.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum InstanceError {
+    /// An instance names a mesh past the list.
+    NoMesh {
+        /// The instance.
+        instance: usize,
+        /// The mesh it names.
+        mesh: u32,
+    },
+    /// An instance's transform is not finite or cannot be inverted (a zero scale).
+    Singular(usize),
+}
+
+impl std::fmt::Display for InstanceError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            InstanceError::NoMesh { instance, mesh } => {
+                write!(
+                    f,
+                    "instance {instance} places mesh {mesh}, which does not exist"
+                )
+            }
+            InstanceError::Singular(i) => write!(
+                f,
+                "instance {i}'s transform is not finite or cannot be inverted (a zero scale?)"
+            ),
+        }
+    }
+}
+
+impl std::error::Error for InstanceError {}
+
+/// Meshes, their instances, and the top-level tree over the instances.
+#[derive(Clone, Debug)]
+pub struct TwoLevel {
+    /// Each mesh's tree, in the mesh's frame.
+    pub meshes: Vec<Arc<Bvh>>,
+    /// The placements.
+    pub instances: Vec<Instance>,
+    /// Each instance's transform from the world to its mesh's frame.
+    to_mesh: Vec<Affine3A>,
+    /// The top level: root at 0, slot 1 unused, sibling pairs from 2 on (as [`Bvh::nodes`]);
+    /// a leaf's `first` and `count` index `order`.
+    nodes: Vec<BvhNode>,
+    /// Instance indices in leaf order.
+    order: Vec<u32>,
+    /// Wall-clock time of the top level's build, milliseconds.
+    pub build_ms: f64,
+}
+
+/// The deepest the top level may grow (its build splits by count past this, halving each
+/// time).
+const TOP_DEPTH: usize = 64;
+
+/// Bins of the top level's SAH.
+const TOP_BINS: usize = 16;
+
+impl TwoLevel {
+    /// Places `instances` of `meshes` and builds the top level over their world boxes (a
+    /// binned SAH, one instance per leaf). An error names an instance whose mesh does not
+    /// exist or whose transform cannot be inverted.
+    pub fn new(meshes: Vec<Arc<Bvh>>, instances: Vec<Instance>) -> Result<Self, InstanceError> {
+        let start = Instant::now();
+        let mut to_mesh = Vec::with_capacity(instances.len());
+        let mut boxes = Vec::with_capacity(instances.len());
+        for (i, inst) in instances.iter().enumerate() {
+            let Some(mesh) = meshes.get(inst.mesh as usize) else {
+                return Err(InstanceError::NoMesh {
+                    instance: i,
+                    mesh: inst.mesh,
+                });
+            };
+            let inverse = inst.to_world.inverse();
+            let finite = inst.to_world.is_finite() && inverse.is_finite();
+            if !finite || inst.to_world.matrix3.determinant() == 0.0 {
+                return Err(InstanceError::Singular(i));
+            }
+            to_mesh.push(inverse);
+            boxes.push(world_box(&mesh.bounds(), &inst.to_world));
+        }
+        let (nodes, order) = build_top(&boxes);
+        Ok(TwoLevel {
+            meshes,
+            instances,
+            to_mesh,
+            nodes,
+            order,
+            build_ms: start.elapsed().as_secs_f64() * 1e3,
+        })
+    }
+
+    /// Bytes the instances take beyond their meshes: each one's two transforms and index,
+    /// and the top level's nodes and order.
+    pub fn bytes(&self) -> usize {
+        std::mem::size_of_val(&self.instances[..])
+            + std::mem::size_of_val(&self.to_mesh[..])
+            + std::mem::size_of_val(&self.nodes[..])
+            + std::mem::size_of_val(&self.order[..])
+    }
+
+    /// Box around every instance (empty without any).
+    pub fn bounds(&self) -> Aabb {
+        if self.order.is_empty() {
+            Aabb::EMPTY
+        } else {
+            self.nodes[0].aabb()
+        }
+    }
+
+    /// `ray` carried into instance `i`'s mesh frame.
+    #[inline]
+    fn local(&self, i: usize, ray: &Ray) -> Ray {
+        let m = &self.to_mesh[i];
+        Ray {
+            origin: m.transform_point3(ray.origin),
+            dir: m.transform_vector3(ray.dir),
+        }
+    }
+
+    /// Calls `visit(instance)` for each instance whose world box the ray enters before
+    /// `limit()` (asked again before each box, so a closest-hit search can shrink it),
+    /// nearest box first where two siblings are both entered.
+    fn walk(&self, ray: &Ray, mut limit: impl FnMut() -> f32, mut visit: impl FnMut(u32) -> bool) {
+        if self.order.is_empty() || !ray.is_valid() {
+            return;
+        }
+        let p = PreparedRay::new(ray);
+        let enter = |n: &BvhNode, limit: f32| {
+            let (near, far) = n.aabb().slab(&p);
+            let near = near.max(0.0);
+            (near <= far.min(limit)).then_some(near)
+        };
+        // Depth is at most `TOP_DEPTH` plus the halvings by count past it (32 at most).
+        let mut stack = [(0u32, 0.0f32); 2 * TOP_DEPTH + 64];
+        let mut sp = 0;
+        if enter(&self.nodes[0], limit()).is_none() {
+            return;
+        }
+        stack[sp] = (0, 0.0);
+        sp += 1;
+        while sp > 0 {
+            sp -= 1;
+            let (i, near) = stack[sp];
+            if near > limit() {
+                continue;
+            }
+            let n = &self.nodes[i as usize];
+            if n.is_leaf() {
+                for &inst in &self.order[n.first as usize..(n.first + n.count) as usize] {
+                    if !visit(inst) {
+                        return;
+                    }
+                }
+                continue;
+            }
+            let lim = limit();
+            let (l, r) = (n.first, n.first + 1);
+            let a = enter(&self.nodes[l as usize], lim).map(|t| (l, t));
+            let b = enter(&self.nodes[r as usize], lim).map(|t| (r, t));
+            // The farther pushed first, so the nearer is walked first.
+            let (first, second) = match (a, b) {
+                (Some(a), Some(b)) if b.1 < a.1 => (Some(a), Some(b)),
+                (a, b) => (b, a),
+            };
+            for e in [first, second].into_iter().flatten() {
+                stack[sp] = e;
+                sp += 1;
+            }
+        }
+    }
+
+    /// The closest hit at `0 < t < t_max` among all instances; ties in `t` go to the lowest
+    /// instance, then (within it) to the lowest triangle index. A NaN, infinite or zero ray
+    /// hits nothing.
+    pub fn intersect(&self, ray: &Ray, t_max: f32) -> Option<InstanceHit> {
+        if t_max.is_nan() || t_max <= 0.0 {
+            return None;
+        }
+        let best = std::cell::Cell::new(None::<InstanceHit>);
+        let limit = || best.get().map_or(t_max, |b| b.hit.t);
+        self.walk(ray, limit, |i| {
+            let inst = &self.instances[i as usize];
+            let local = self.local(i as usize, ray);
+            let current = best.get();
+            // Up to and including the best distance, so a tie is seen and decided.
+            let reach = current.map_or(t_max, |b| b.hit.t.next_up());
+            if let Some(h) = self.meshes[inst.mesh as usize].intersect(&local, reach) {
+                let better = match current {
+                    None => true,
+                    Some(b) => h.t < b.hit.t || (h.t == b.hit.t && i < b.instance),
+                };
+                if better && h.t < t_max {
+                    best.set(Some(InstanceHit {
+                        instance: i,
+                        hit: h,
+                    }));
+                }
+            }
+            true
+        });
+        best.get()
+    }
+
+    /// Whether any instance has a triangle at `0 < t < t_max` along the ray.
+    pub fn occluded(&self, ray: &Ray, t_max: f32) -> bool {
+        if t_max.is_nan() || t_max <= 0.0 {
+            return false;
+        }
+        let mut blocked = false;
+        self.walk(
+            ray,
+            || t_max,
+            |i| {
+                let inst = &self.instances[i as usize];
+                blocked =
+                    self.meshes[inst.mesh as usize].occluded(&self.local(i as usize, ray), t_max);
+                !blocked
+            },
+        );
+        blocked
+    }
+}
+
+/// The world box of a mesh box under a transform: the box's centre moved, and its half
+/// extent through the transform's linear part with every entry made positive (Arvo 1990: the
+/// box around the eight moved corners, in two products instead of eight).
+fn world_box(b: &Aabb, m: &Affine3A) -> Aabb {
+    if b.is_empty() {
+        return Aabb::EMPTY;
+    }
+    let centre = m.transform_point3a((b.min + b.max) * 0.5);
+    let half = (b.max - b.min) * 0.5;
+    let l = &m.matrix3;
+    let extent = l.x_axis.abs() * half.x + l.y_axis.abs() * half.y + l.z_axis.abs() * half.z;
+    // Rounding in the products may leave a moved corner a little outside: widened by a few
+    // units in the last place of the largest coordinate, so no ray that meets an instance's
+    // triangles misses its box.
+    let lo = centre - extent;
+    let hi = centre + extent;
+    let pad = Vec3A::splat(lo.abs().max(hi.abs()).max_element() * 4.0 * f32::EPSILON);
+    Aabb {
+        min: lo - pad,
+        max: hi + pad,
+    }
+}
+
+/// The top level over `boxes`: a binned SAH on the boxes' centres, one instance per leaf
+/// (an empty box, an instance of an empty mesh, is left out of the tree).
+fn build_top(boxes: &[Aabb]) -> (Vec<BvhNode>, Vec<u32>) {
+    let mut order: Vec<u32> = (0..boxes.len() as u32)
+        .filter(|&i| !boxes[i as usize].is_empty())
+        .collect();
+    let empty = BvhNode {
+        min: [0.0; 3],
+        first: 0,
+        max: [0.0; 3],
+        count: 0,
+    };
+    if order.is_empty() {
+        return (vec![empty], order);
+    }
+    let centres: Vec<Vec3A> = boxes.iter().map(|b| (b.min + b.max) * 0.5).collect();
+    let mut nodes = Vec::with_capacity(2 * order.len());
+    nodes.extend([empty, empty]);
+    let spread_of = |range: &[u32]| {
+        let mut spread = Aabb::EMPTY;
+        for &i in range {
+            spread.grow_point(centres[i as usize]);
+        }
+        spread
+    };
+    // (node, start, end, depth, the centres' box): each node's box is made from its bins
+    // (or its one instance), and its children's centre boxes as it is split, so each
+    // instance is read twice per level.
+    let mut tasks = vec![(0usize, 0usize, order.len(), 0usize, spread_of(&order))];
+    while let Some((node, start, end, depth, spread)) = tasks.pop() {
+        let range = &mut order[start..end];
+        if end - start == 1 {
+            nodes[node].set_aabb(&boxes[range[0] as usize]);
+            nodes[node].first = start as u32;
+            nodes[node].count = 1;
+            continue;
+        }
+        let extent = spread.max - spread.min;
+        let axis = if extent.x >= extent.y && extent.x >= extent.z {
+            0
+        } else if extent.y >= extent.z {
+            1
+        } else {
+            2
+        };
+        let centre = |i: u32| centres[i as usize][axis];
+        let (lo, width) = (spread.min[axis], extent[axis]);
+        let scale = TOP_BINS as f32 / width;
+        // (Through i32: a float-to-usize conversion saturates at both ends, at a cost.)
+        let bin =
+            |i: u32| (((centre(i) - lo) * scale) as i32).clamp(0, TOP_BINS as i32 - 1) as usize;
+        let mut split = None;
+        if width > 0.0 && depth < TOP_DEPTH - 2 {
+            let mut counts = [0usize; TOP_BINS];
+            let mut bins = [Aabb::EMPTY; TOP_BINS];
+            for &i in range.iter() {
+                let k = bin(i);
+                counts[k] += 1;
+                bins[k] = bins[k].union(&boxes[i as usize]);
+            }
+            // Cost of splitting after bin k: the two sides' areas times their counts.
+            let mut right = [(Aabb::EMPTY, 0usize); TOP_BINS];
+            let mut acc = (Aabb::EMPTY, 0);
+            for k in (1..TOP_BINS).rev() {
+                acc = (acc.0.union(&bins[k]), acc.1 + counts[k]);
+                right[k] = acc;
+            }
+            let mut left = (Aabb::EMPTY, 0usize);
+            let mut best = (f64::INFINITY, 0usize);
+            for k in 0..TOP_BINS - 1 {
+                left = (left.0.union(&bins[k]), left.1 + counts[k]);
+                let (r, nr) = right[k + 1];
+                if left.1 == 0 || nr == 0 {
+                    continue;
+                }
+                let cost = left.0.half_area() * left.1 as f64 + r.half_area() * nr as f64;
+                if cost < best.0 {
+                    best = (cost, k);
+                }
+            }
+            nodes[node].set_aabb(&left.0.union(&bins[TOP_BINS - 1]));
+            if best.0.is_finite() {
+                split = Some(best.1);
+            }
+        } else {
+            let mut bounds = Aabb::EMPTY;
+            for &i in range.iter() {
+                bounds = bounds.union(&boxes[i as usize]);
+            }
+            nodes[node].set_aabb(&bounds);
+        }
+        let (mid, left, right) = match split {
+            Some(split) => {
+                let (mut a, mut l, mut r) = (0, Aabb::EMPTY, Aabb::EMPTY);
+                for j in 0..range.len() {
+                    let i = range[j];
+                    if bin(i) <= split {
+                        l.grow_point(centres[i as usize]);
+                        range.swap(a, j);
+                        a += 1;
+                    } else {
+                        r.grow_point(centres[i as usize]);
+                    }
+                }
+                (start + a, l, r)
+            }
+            None => {
+                // All centres at one point (or too deep): halves by count, in centre order.
+                range.sort_by(|&a, &b| centre(a).total_cmp(&centre(b)));
+                let half = range.len() / 2;
+                (
+                    start + half,
+                    spread_of(&range[..half]),
+                    spread_of(&range[half..]),
+                )
+            }
+        };
+        let first = nodes.len();
+        nodes.push(empty);
+        nodes.push(empty);
+        nodes[node].first = first as u32;
+        nodes[node].count = 0;
+        tasks.push((first, start, mid, depth + 1, left));
+        tasks.push((first + 1, mid, end, depth + 1, right));
+    }
+    (nodes, order)
+}
