@@ -29,12 +29,11 @@ fn scene() -> (Vec<Vec<[Vec3; 3]>>, Vec<Instance>) {
     }
     let mut deep = Affine3A::IDENTITY;
     for level in 0..6 {
-        deep = deep
-            * Affine3A::from_scale_rotation_translation(
-                Vec3::splat(1.05),
-                Quat::from_rotation_y(0.3 + level as f32 * 0.1),
-                Vec3::new(0.3, 0.1, 0.2),
-            );
+        deep *= Affine3A::from_scale_rotation_translation(
+            Vec3::splat(1.05),
+            Quat::from_rotation_y(0.3 + level as f32 * 0.1),
+            Vec3::new(0.3, 0.1, 0.2),
+        );
     }
     for (mesh, to_world) in [
         (
