@@ -4,23 +4,14 @@
 
 mod common;
 
+use common::{data_uri, f32_bytes};
+
 use std::path::{Path, PathBuf};
 
 use base64::Engine as _;
 use glam::{DMat4, DQuat, DVec3, DVec4};
 use serde_json::{Value, json};
 use tracery::scene::Scene;
-
-fn f32_bytes(v: &[f32]) -> Vec<u8> {
-    v.iter().flat_map(|x| x.to_le_bytes()).collect()
-}
-
-fn data_uri(bytes: &[u8]) -> String {
-    format!(
-        "data:application/octet-stream;base64,{}",
-        base64::engine::general_purpose::STANDARD.encode(bytes)
-    )
-}
 
 fn write(dir: &Path, name: &str, json: &Value) -> PathBuf {
     let p = dir.join(name);

@@ -6,6 +6,8 @@
 
 mod common;
 
+use common::{data_uri, f32_bytes};
+
 use std::path::{Path, PathBuf};
 
 use base64::Engine as _;
@@ -18,19 +20,6 @@ use tracery::scene::{Light, Scene, Texture, Wrap, face_normal};
 // ---------------------------------------------------------------------------------------
 // Writing small glTF files
 // ---------------------------------------------------------------------------------------
-
-/// Little-endian bytes of f32 values.
-fn f32_bytes(v: &[f32]) -> Vec<u8> {
-    v.iter().flat_map(|x| x.to_le_bytes()).collect()
-}
-
-/// A data URI holding `bytes`.
-fn data_uri(bytes: &[u8]) -> String {
-    format!(
-        "data:application/octet-stream;base64,{}",
-        base64::engine::general_purpose::STANDARD.encode(bytes)
-    )
-}
 
 /// One triangle (0,0,0), (1,0,0), (0,1,0) with +z normals, texture coordinates and u16
 /// indices: the buffer and the accessors 0 (POSITION), 1 (NORMAL), 2 (TEXCOORD_0), 3 (indices).

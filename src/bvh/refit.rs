@@ -13,7 +13,7 @@ use std::time::Instant;
 use glam::Vec3;
 
 use super::stats::TreeCounts;
-use super::{Bvh, BvhStats, sah};
+use super::{Bvh, BvhStats};
 use crate::geometry::{Aabb, is_degenerate};
 
 /// Largest SAH cost of a refitted tree, as a multiple of its build's, before
@@ -166,20 +166,7 @@ impl Bvh {
 
 /// The SAH cost of a tree, by walking it (the builder counts it as it goes instead).
 fn sah_cost(bvh: &Bvh) -> f64 {
-    let mut c = TreeCounts::EMPTY;
-    bvh.for_each_node(|n, depth| {
-        if n.is_leaf() {
-            c.leaf(n, depth);
-        } else {
-            c.inner(n);
-        }
-    });
-    let root_area = bvh.bounds().half_area();
-    if root_area > 0.0 {
-        (sah::C_TRAVERSE * c.inner_area + sah::C_INTERSECT * c.leaf_area) / root_area
-    } else {
-        sah::C_INTERSECT * sah::leaf_tests(bvh.triangle_count())
-    }
+    TreeCounts::walk(bvh).sah_cost(bvh.bounds().half_area(), bvh.triangle_count())
 }
 
 #[cfg(test)]

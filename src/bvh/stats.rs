@@ -110,13 +110,7 @@ impl BvhStats {
                 triangles as f64 / counts.leaves as f64
             },
             max_leaf_size: counts.max_leaf,
-            sah_cost: if root_area > 0.0 {
-                (sah::C_TRAVERSE * counts.inner_area + sah::C_INTERSECT * counts.leaf_area)
-                    / root_area
-            } else {
-                // A flat or point-like scene: every ray meeting the root tests everything.
-                sah::C_INTERSECT * sah::leaf_tests(triangles)
-            },
+            sah_cost: counts.sah_cost(root_area, triangles),
         }
     }
 }
@@ -176,8 +170,18 @@ impl TreeCounts {
         self.leaf_area += other.leaf_area;
     }
 
+    /// The tree's SAH cost from these counts: [`BvhStats::sah_cost`] for a tree of
+    /// `triangles` whose root box has half area `root_area`.
+    pub fn sah_cost(&self, root_area: f64, triangles: usize) -> f64 {
+        if root_area > 0.0 {
+            (sah::C_TRAVERSE * self.inner_area + sah::C_INTERSECT * self.leaf_area) / root_area
+        } else {
+            // A flat or point-like scene: every ray meeting the root tests everything.
+            sah::C_INTERSECT * sah::leaf_tests(triangles)
+        }
+    }
+
     /// The counts of a finished tree, by walking it.
-    #[cfg(test)]
     pub fn walk(bvh: &Bvh) -> TreeCounts {
         let mut c = TreeCounts::EMPTY;
         bvh.for_each_node(|n, depth| {

@@ -221,3 +221,17 @@ pub fn png_2x2() -> Vec<u8> {
     img.write_to(&mut out, image::ImageFormat::Png).unwrap();
     out.into_inner()
 }
+
+/// Little-endian bytes of f32 values (glTF buffers written by the tests).
+pub fn f32_bytes(v: &[f32]) -> Vec<u8> {
+    v.iter().flat_map(|x| x.to_le_bytes()).collect()
+}
+
+/// A data URI holding `bytes` (a glTF buffer inside the file).
+pub fn data_uri(bytes: &[u8]) -> String {
+    use base64::Engine as _;
+    format!(
+        "data:application/octet-stream;base64,{}",
+        base64::engine::general_purpose::STANDARD.encode(bytes)
+    )
+}

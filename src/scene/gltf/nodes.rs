@@ -52,6 +52,24 @@ pub(super) fn skinning(
 }
 
 impl Loader<'_> {
+    /// Node `index` reached at `depth` below a root, `on_path` marking its ancestors: an
+    /// error when it is its own ancestor (a cycle) or too deep.
+    fn check_path(&self, index: usize, on_path: &[bool], depth: usize) -> Result<()> {
+        if on_path[index] {
+            bail!(
+                "{}: nodes[{index}]: the node hierarchy has a cycle (nodes[{index}] is its own ancestor)",
+                self.name
+            );
+        }
+        if depth > MAX_NODE_DEPTH {
+            bail!(
+                "{}: nodes[{index}]: the node hierarchy is deeper than {MAX_NODE_DEPTH} levels",
+                self.name
+            );
+        }
+        Ok(())
+    }
+
     /// Walks the node hierarchy from `roots` as [`Loader::visit`] will, counting placements
     /// and the triangles they place from the accessors' counts alone, and refuses a file that
     /// places too many before any of them is read: a small file whose nodes place a mesh many
@@ -71,18 +89,7 @@ impl Loader<'_> {
             let Some(node) = self.nodes.get(index) else {
                 bail!("{}: nodes[{index}] does not exist", self.name);
             };
-            if on_path[index] {
-                bail!(
-                    "{}: nodes[{index}]: the node hierarchy has a cycle (nodes[{index}] is its own ancestor)",
-                    self.name
-                );
-            }
-            if depth > MAX_NODE_DEPTH {
-                bail!(
-                    "{}: nodes[{index}]: the node hierarchy is deeper than {MAX_NODE_DEPTH} levels",
-                    self.name
-                );
-            }
+            self.check_path(index, &on_path, depth)?;
             placements += 1;
             if placements > MAX_NODE_VISITS {
                 bail!(
@@ -118,18 +125,7 @@ impl Loader<'_> {
         on_path: &mut [bool],
         depth: usize,
     ) -> Result<()> {
-        if on_path[index] {
-            bail!(
-                "{}: nodes[{index}]: the node hierarchy has a cycle (nodes[{index}] is its own ancestor)",
-                self.name
-            );
-        }
-        if depth > MAX_NODE_DEPTH {
-            bail!(
-                "{}: nodes[{index}]: the node hierarchy is deeper than {MAX_NODE_DEPTH} levels",
-                self.name
-            );
-        }
+        self.check_path(index, on_path, depth)?;
         self.visits += 1;
         if self.visits > MAX_NODE_VISITS {
             bail!(
