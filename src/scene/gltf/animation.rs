@@ -57,14 +57,18 @@ impl Keyframes {
         let w = self.width;
         let n = self.times.len();
         let cubic = self.interpolation == Interpolation::CubicSpline;
-        // The value of keyframe `k` (the middle of its three groups for a cubic spline).
-        let value = |k: usize| -> Vec<f64> {
-            let at = if cubic { (3 * k + 1) * w } else { k * w };
+        // Group `g` of keyframe `k`: a cubic spline's keyframe holds three (in-tangent, value,
+        // out-tangent), the others one.
+        let per = if cubic { 3 } else { 1 };
+        let group = |k: usize, g: usize| -> Vec<f64> {
+            let at = (per * k + g) * w;
             self.values[at..at + w]
                 .iter()
                 .map(|&v| f64::from(v))
                 .collect()
         };
+        // The value of keyframe `k`.
+        let value = |k: usize| group(k, per / 2);
         let first = f64::from(self.times[0]);
         if n == 1 || t <= first {
             return finish(value(0), rotation);
@@ -89,13 +93,6 @@ impl Keyframes {
                 a.iter().zip(&b).map(|(a, b)| a + (b - a) * s).collect()
             }
             Interpolation::CubicSpline => {
-                let group = |k: usize, g: usize| -> Vec<f64> {
-                    let at = (3 * k + g) * w;
-                    self.values[at..at + w]
-                        .iter()
-                        .map(|&v| f64::from(v))
-                        .collect()
-                };
                 let (p0, b0) = (group(k, 1), group(k, 2));
                 let (a1, p1) = (group(k + 1, 0), group(k + 1, 1));
                 let (s2, s3) = (s * s, s * s * s);
