@@ -1204,6 +1204,7 @@ fn quad_over_floor(top: tracery::scene::Material, uv: impl Fn(Vec3) -> Vec2, lig
         energy_compensation: false,
         warnings: Vec::new(),
         animation: None,
+        instances: Default::default(),
     }
 }
 

@@ -96,7 +96,7 @@ fn instances_agree_with_brute_force() {
         .iter()
         .map(|m| Arc::new(Bvh::build(m, &BuildOptions::sah())))
         .collect();
-    let two = TwoLevel::new(trees, instances.clone()).unwrap();
+    let two = TwoLevel::new(trees, &instances).unwrap();
     let brute: Vec<BruteForce> = meshes.iter().map(|m| BruteForce::new(m)).collect();
     let (world, owner) = flat(&meshes, &instances);
     let world_brute = BruteForce::new(&world);
@@ -155,7 +155,7 @@ fn bad_placements_are_refused_by_name() {
     let tree = Arc::new(Bvh::build(&shapes::cube(), &BuildOptions::sah()));
     let e = TwoLevel::new(
         vec![tree.clone()],
-        vec![Instance {
+        &[Instance {
             mesh: 1,
             to_world: Affine3A::IDENTITY,
         }],
@@ -170,7 +170,7 @@ fn bad_placements_are_refused_by_name() {
     );
     let e = TwoLevel::new(
         vec![tree],
-        vec![
+        &[
             Instance {
                 mesh: 0,
                 to_world: Affine3A::IDENTITY,
@@ -201,7 +201,7 @@ fn an_instance_costs_a_few_hundred_bytes() {
             )),
         })
         .collect();
-    let two = TwoLevel::new(vec![tree], instances).unwrap();
+    let two = TwoLevel::new(vec![tree], &instances).unwrap();
     let per = two.bytes() as f64 / 1000.0;
     println!("{per:.0} bytes per instance");
     assert!(per <= 256.0, "{per} bytes per instance");

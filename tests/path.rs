@@ -28,6 +28,7 @@ fn scene(parts: Vec<(Vec<[Vec3; 3]>, Material)>, lights: Vec<Light>, camera: Cam
         energy_compensation: true,
         warnings: Vec::new(),
         animation: None,
+        instances: Default::default(),
     }
 }
 

@@ -424,6 +424,7 @@ fn cube_on_floor(offset: Vec3) -> Scene {
         energy_compensation: true,
         warnings: Vec::new(),
         animation: None,
+        instances: Default::default(),
     }
 }
 

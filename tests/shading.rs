@@ -31,6 +31,7 @@ fn scene(parts: Vec<(Vec<[Vec3; 3]>, Material)>, lights: Vec<Light>, env: Enviro
         energy_compensation: false,
         warnings: Vec::new(),
         animation: None,
+        instances: Default::default(),
     }
 }
 

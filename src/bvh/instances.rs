@@ -47,6 +47,8 @@ pub enum InstanceError {
     },
     /// An instance's transform is not finite or cannot be inverted (a zero scale).
     Singular(usize),
+    /// The instances hold more triangles than one list can number (`u32`).
+    TooManyTriangles(u64),
 }
 
 impl std::fmt::Display for InstanceError {
@@ -62,6 +64,10 @@ impl std::fmt::Display for InstanceError {
                 f,
                 "instance {i}'s transform is not finite or cannot be inverted (a zero scale?)"
             ),
+            InstanceError::TooManyTriangles(n) => write!(
+                f,
+                "the instances place {n} triangles, more than the {MAX_PLACED} one scene can number"
+            ),
         }
     }
 }
@@ -69,14 +75,20 @@ impl std::fmt::Display for InstanceError {
 impl std::error::Error for InstanceError {}
 
 /// Meshes, their instances, and the top-level tree over the instances.
+///
+/// The triangles of all instances are numbered in one list, instance by instance in order,
+/// each instance's in its mesh's order ([`TwoLevel::intersect_global`]): the numbering of the
+/// same instances flattened into one mesh.
 #[derive(Clone, Debug)]
 pub struct TwoLevel {
     /// Each mesh's tree, in the mesh's frame.
     pub meshes: Vec<Arc<Bvh>>,
-    /// The placements.
-    pub instances: Vec<Instance>,
+    /// The mesh each instance places.
+    mesh_of: Vec<u32>,
     /// Each instance's transform from the world to its mesh's frame.
     to_mesh: Vec<Affine3A>,
+    /// The number, in the list of all instances' triangles, of each instance's first one.
+    first: Vec<u32>,
     /// The top level: root at 0, slot 1 unused, sibling pairs from 2 on (as [`Bvh::nodes`]);
     /// a leaf's `first` and `count` index `order`.
     nodes: Vec<BvhNode>,
@@ -93,14 +105,21 @@ const TOP_DEPTH: usize = 64;
 /// Bins of the top level's SAH.
 const TOP_BINS: usize = 16;
 
+/// The most triangles the instances of one [`TwoLevel`] may place, counted with repeats: every
+/// one is numbered by a `u32`, and [`u32::MAX`] means no hit.
+pub const MAX_PLACED: u64 = u32::MAX as u64 - 1;
+
 impl TwoLevel {
     /// Places `instances` of `meshes` and builds the top level over their world boxes (a
     /// binned SAH, one instance per leaf). An error names an instance whose mesh does not
-    /// exist or whose transform cannot be inverted.
-    pub fn new(meshes: Vec<Arc<Bvh>>, instances: Vec<Instance>) -> Result<Self, InstanceError> {
+    /// exist or whose transform cannot be inverted, or says the instances place more
+    /// triangles than [`MAX_PLACED`].
+    pub fn new(meshes: Vec<Arc<Bvh>>, instances: &[Instance]) -> Result<Self, InstanceError> {
         let start = Instant::now();
         let mut to_mesh = Vec::with_capacity(instances.len());
         let mut boxes = Vec::with_capacity(instances.len());
+        let mut first = Vec::with_capacity(instances.len());
+        let mut placed = 0u64;
         for (i, inst) in instances.iter().enumerate() {
             let Some(mesh) = meshes.get(inst.mesh as usize) else {
                 return Err(InstanceError::NoMesh {
@@ -115,25 +134,66 @@ impl TwoLevel {
             }
             to_mesh.push(inverse);
             boxes.push(world_box(&mesh.bounds(), &inst.to_world));
+            first.push(placed as u32);
+            placed += mesh.triangle_count() as u64;
+            if placed > MAX_PLACED {
+                return Err(InstanceError::TooManyTriangles(placed));
+            }
         }
         let (nodes, order) = build_top(&boxes);
         Ok(TwoLevel {
             meshes,
-            instances,
+            mesh_of: instances.iter().map(|i| i.mesh).collect(),
             to_mesh,
+            first,
             nodes,
             order,
             build_ms: start.elapsed().as_secs_f64() * 1e3,
         })
     }
 
-    /// Bytes the instances take beyond their meshes: each one's two transforms and index,
-    /// and the top level's nodes and order.
+    /// Bytes the instances take beyond their meshes: each one's mesh, transform and first
+    /// triangle's number, and the top level's nodes and order.
     pub fn bytes(&self) -> usize {
-        std::mem::size_of_val(&self.instances[..])
+        std::mem::size_of_val(&self.mesh_of[..])
             + std::mem::size_of_val(&self.to_mesh[..])
+            + std::mem::size_of_val(&self.first[..])
             + std::mem::size_of_val(&self.nodes[..])
             + std::mem::size_of_val(&self.order[..])
+    }
+
+    /// Number of instances.
+    pub fn instance_count(&self) -> usize {
+        self.mesh_of.len()
+    }
+
+    /// The mesh instance `i` places.
+    pub fn mesh_of(&self, i: usize) -> u32 {
+        self.mesh_of[i]
+    }
+
+    /// Instance `i`'s transform from the world to its mesh's frame.
+    pub fn to_mesh(&self, i: usize) -> &Affine3A {
+        &self.to_mesh[i]
+    }
+
+    /// Number of triangles the instances place, counted with repeats.
+    pub fn triangle_count(&self) -> u64 {
+        match (self.first.last(), self.mesh_of.last()) {
+            (Some(&f), Some(&m)) => f as u64 + self.meshes[m as usize].triangle_count() as u64,
+            _ => 0,
+        }
+    }
+
+    /// The top level's nodes (as [`Bvh::nodes`]: root at 0, sibling pairs from 2 on; a
+    /// leaf's `first` indexes [`TwoLevel::leaf_instance`]).
+    pub fn top_nodes(&self) -> &[BvhNode] {
+        &self.nodes
+    }
+
+    /// The instance at position `k` of the top level's leaf order.
+    pub fn leaf_instance(&self, k: u32) -> u32 {
+        self.order[k as usize]
     }
 
     /// Box around every instance (empty without any).
@@ -217,12 +277,12 @@ impl TwoLevel {
         let best = std::cell::Cell::new(None::<InstanceHit>);
         let limit = || best.get().map_or(t_max, |b| b.hit.t);
         self.walk(ray, limit, |i| {
-            let inst = &self.instances[i as usize];
+            let mesh = self.mesh_of[i as usize];
             let local = self.local(i as usize, ray);
             let current = best.get();
             // Up to and including the best distance, so a tie is seen and decided.
             let reach = current.map_or(t_max, |b| b.hit.t.next_up());
-            if let Some(h) = self.meshes[inst.mesh as usize].intersect(&local, reach) {
+            if let Some(h) = self.meshes[mesh as usize].intersect(&local, reach) {
                 let better = match current {
                     None => true,
                     Some(b) => h.t < b.hit.t || (h.t == b.hit.t && i < b.instance),
@@ -239,6 +299,45 @@ impl TwoLevel {
         best.get()
     }
 
+    /// [`TwoLevel::intersect`], the triangle numbered in the list of all instances'
+    /// triangles (see [`TwoLevel`]).
+    #[inline]
+    pub fn intersect_global(&self, ray: &Ray, t_max: f32) -> Option<Hit> {
+        self.intersect(ray, t_max).map(|h| self.global(h))
+    }
+
+    /// The hit `h`, its triangle numbered in the list of all instances' triangles.
+    #[inline]
+    pub fn global(&self, h: InstanceHit) -> Hit {
+        Hit {
+            prim: self.first[h.instance as usize] + h.hit.prim,
+            ..h.hit
+        }
+    }
+
+    /// Calls `f(prim, t)` for every triangle hit at `0 < t < t_max` along the world ray (its
+    /// number in the list of all instances' triangles), in no particular order, until `f`
+    /// returns false.
+    pub fn for_each_hit(&self, ray: &Ray, t_max: f32, mut f: impl FnMut(u32, f32) -> bool) {
+        if t_max.is_nan() || t_max <= 0.0 {
+            return;
+        }
+        let mut going = true;
+        self.walk(
+            ray,
+            || t_max,
+            |i| {
+                let first = self.first[i as usize];
+                let mesh = &self.meshes[self.mesh_of[i as usize] as usize];
+                mesh.for_each_hit(&self.local(i as usize, ray), t_max, |prim, t| {
+                    going = f(first + prim, t);
+                    going
+                });
+                going
+            },
+        );
+    }
+
     /// Whether any instance has a triangle at `0 < t < t_max` along the ray.
     pub fn occluded(&self, ray: &Ray, t_max: f32) -> bool {
         if t_max.is_nan() || t_max <= 0.0 {
@@ -249,9 +348,8 @@ impl TwoLevel {
             ray,
             || t_max,
             |i| {
-                let inst = &self.instances[i as usize];
-                blocked =
-                    self.meshes[inst.mesh as usize].occluded(&self.local(i as usize, ray), t_max);
+                let mesh = &self.meshes[self.mesh_of[i as usize] as usize];
+                blocked = mesh.occluded(&self.local(i as usize, ray), t_max);
                 !blocked
             },
         );

@@ -14,6 +14,7 @@
 //! triangles in blocks of four ([`wide`]), the only copy of the triangles the tree keeps
 //! ([`Bvh::leaf_triangles`] reads a binary leaf's).
 
+mod accel;
 mod build;
 mod instances;
 mod reference;
@@ -25,7 +26,8 @@ pub mod wide;
 
 use glam::{Vec3, Vec3A};
 
-pub use instances::{Instance, InstanceError, InstanceHit, TwoLevel};
+pub use accel::{Accel, Tree};
+pub use instances::{Instance, InstanceError, InstanceHit, MAX_PLACED, TwoLevel};
 pub use reference::BruteForce;
 pub use refit::{REFIT_SAH_BOUND, Refit, RefitError, Update};
 pub use stats::{BuildPhases, BvhStats};

@@ -8,7 +8,7 @@ use std::time::Instant;
 use anyhow::Result;
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
-use tracery::bvh::{Bvh, Update};
+use tracery::bvh::{Accel, Bvh, Tree, Update};
 use tracery::denoise::{Denoiser, Inputs};
 use tracery::film::{Film, OutputKind};
 use tracery::render::aov::Aov;
@@ -239,6 +239,27 @@ fn render_frame(
         let plan = RenderPlan::new(&scene, &settings);
         eprintln!("{}", Explain(&plan, &scene, &settings));
     }
+    if !scene.instances.is_empty() {
+        // Meshes placed many times: their trees and a top level (not refitted between
+        // instants: such a scene has no animation of its own).
+        let accel = Accel::for_scene(&scene, &options)
+            .map_err(|e| anyhow::anyhow!("{}: {e}", scene.name))?;
+        let placed = &scene.instances;
+        eprintln!(
+            "{}: {} triangles ({} placed once, {} meshes placed {} times); BVHs ({}, {} bins, leaf {}) built in {:.1} ms, {:.1} MB",
+            scene.name,
+            scene.triangle_count(),
+            scene.mesh.triangles.len(),
+            placed.meshes.len(),
+            placed.placements().len(),
+            options.split,
+            options.bins,
+            options.max_leaf_size,
+            accel.build_ms(),
+            accel.bytes() as f64 / 1e6,
+        );
+        return finish(a, output, &scene, &settings, accel.tree());
+    }
     let (bvh, built_cost, built) = match kept.take() {
         Some((mut bvh, built_cost)) => {
             match bvh.refit_or_rebuild(&scene.mesh.triangles, built_cost) {
@@ -286,6 +307,20 @@ fn render_frame(
             }
         );
     }
+    finish(a, output, &scene, &settings, (&bvh).into())?;
+    *kept = Some((bvh, built_cost));
+    Ok(())
+}
+
+/// Renders `scene` through `bvh` to `output`, with the render layers and the denoiser when
+/// asked, and says what it wrote.
+fn finish(
+    a: &RenderArgs,
+    output: &Path,
+    scene: &Scene,
+    settings: &RenderSettings,
+    bvh: Tree<'_>,
+) -> Result<()> {
     // Asked before the render, so a build without the denoiser does not render for nothing.
     let denoiser = a.denoise.then(Denoiser::new).transpose()?;
     let bar = ProgressBar::new(settings.height as u64).with_style(
@@ -297,7 +332,7 @@ fn render_frame(
     let plan = RenderPlan::new(&scene, &settings);
     let env = EnvironmentMap::load(&scene.environment, plan.environment)?;
     let start = Instant::now();
-    let out = render_with_plan(&scene, &bvh, &env, &settings, plan, &|_| bar.inc(1));
+    let out = render_with_plan(scene, bvh, &env, settings, plan, &|_| bar.inc(1));
     let took = start.elapsed();
     bar.finish_and_clear();
     let path = ensure_parent(output)?;
@@ -306,7 +341,7 @@ fn render_frame(
     written.dedup();
     let layers = (!written.is_empty() || denoiser.is_some()).then(|| {
         let t = Instant::now();
-        let layers = render_layers(&scene, &bvh, &env, &settings, plan);
+        let layers = render_layers(scene, bvh, &env, settings, plan);
         (layers, t.elapsed().as_secs_f64())
     });
     if let Some((_, secs)) = &layers {
@@ -385,6 +420,5 @@ fn render_frame(
             String::new()
         }
     );
-    *kept = Some((bvh, built_cost));
     Ok(())
 }

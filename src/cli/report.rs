@@ -197,7 +197,7 @@ fn instances_table(mesh: Option<PathBuf>, count: usize, repeat: usize) -> Result
         let placed = instances.clone();
         // `build_ms`: the transforms inverted, the world boxes made, the top level built.
         let built = pool
-            .install(|| TwoLevel::new(vec![tree.clone()], placed))
+            .install(|| TwoLevel::new(vec![tree.clone()], &placed))
             .map_err(anyhow::Error::msg)?;
         best = best.min(built.build_ms);
         two = Some(built);

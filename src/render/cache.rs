@@ -294,7 +294,7 @@ impl RenderCache {
                             .map_or(ray.origin + ray.dir * FAR, |h| ray.at(h.t))
                             .into();
                         normals[pixel(k)] = hit.map_or(NO_NORMAL, |h| {
-                            pack_normal(face_normal(&tracer.scene.mesh.triangles[h.prim as usize]))
+                            pack_normal(face_normal(&tracer.scene.triangle(h.prim)))
                         });
                         albedos[pixel(k)] = hit.map_or(SKY_ALBEDO, |h| albedo_at(tracer, ray, h));
                     }
@@ -404,7 +404,7 @@ impl RenderCache {
                         .map(|(((&i, ray), hit), l)| {
                             let point = hit.map_or(ray.origin + ray.dir * FAR, |h| ray.at(h.t));
                             let normal = hit.map_or(NO_NORMAL, |h| {
-                                let tri = &tracer.scene.mesh.triangles[h.prim as usize];
+                                let tri = &tracer.scene.triangle(h.prim);
                                 pack_normal(face_normal(tri))
                             });
                             let albedo = hit.map_or(SKY_ALBEDO, |h| albedo_at(tracer, &ray, h));

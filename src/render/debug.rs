@@ -131,7 +131,10 @@ impl Tracer<'_> {
         depth: u32,
         path: &mut DebugPath,
     ) {
-        let (hit, nodes) = entered_nodes(self.bvh, ray);
+        let (hit, nodes) = match self.bvh {
+            crate::bvh::Tree::Flat(bvh) => entered_nodes(bvh, ray),
+            crate::bvh::Tree::TwoLevel(t) => (t.intersect_global(ray, f32::INFINITY), Vec::new()),
+        };
         let index = path.segments.len();
         let Some(hit) = hit else {
             path.segments.push(Segment {

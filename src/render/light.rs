@@ -62,16 +62,31 @@ impl LightSet {
             return set;
         }
         let mut covered = vec![0.0f32; scene.lights.len()];
-        for (prim, (tri, &mat)) in scene
-            .mesh
-            .triangles
+        // The scene's own triangles, then those of each placement whose mesh has an emissive
+        // one (a mesh placed many times without any is not walked through once per placement).
+        let own = scene.mesh.triangles.len() as u32;
+        let placed = &scene.instances;
+        let glowing: Vec<bool> = placed
+            .meshes
             .iter()
-            .zip(&scene.mesh.material_ids)
-            .enumerate()
-        {
-            if !emissive[mat as usize] {
+            .map(|m| m.material_ids.iter().any(|&id| emissive[id as usize]))
+            .collect();
+        let prims = (0..own).chain(
+            placed
+                .placements()
+                .iter()
+                .enumerate()
+                .filter(|(_, p)| glowing[p.mesh as usize])
+                .flat_map(|(i, p)| {
+                    let first = own + placed.first_triangle(i);
+                    first..first + placed.meshes[p.mesh as usize].triangles.len() as u32
+                }),
+        );
+        for prim in prims {
+            if !emissive[scene.material_id(prim) as usize] {
                 continue;
             }
+            let tri = &scene.triangle(prim);
             let area = 0.5 * (tri[1] - tri[0]).cross(tri[2] - tri[0]).length();
             if !(area > 0.0 && area.is_finite()) {
                 continue;
@@ -478,7 +493,7 @@ impl Tracer<'_> {
             // A texture's alpha and colour are read where the shadow ray crosses the
             // triangle, as the camera would see them there.
             let (opacity, diffuse) = if m.is_textured() {
-                let tri = &scene.mesh.triangles[prim as usize];
+                let tri = &scene.triangle(prim);
                 let (u, v) = barycentric(tri, origin + to * t);
                 let look = textured(scene, m, prim, u, v);
                 (look.opacity, look.diffuse)
@@ -490,8 +505,8 @@ impl Tracer<'_> {
             }
             crossed = true;
             if self.plan.absorption && m.absorption.max_element() > 0.0 {
-                let id = scene.mesh.material_ids[prim as usize];
-                let entering = face_normal(&scene.mesh.triangles[prim as usize]).dot(to) < 0.0;
+                let id = scene.material_id(prim);
+                let entering = face_normal(&scene.triangle(prim)).dot(to) < 0.0;
                 let (dt, db) = if entering { (-t, 1) } else { (t, -1) };
                 match inside.iter_mut().find(|e| e.0 == id) {
                     Some(e) => {
@@ -524,7 +539,7 @@ impl Tracer<'_> {
             return None;
         }
         let (prim, u) = self.lights.pick(rng.next_2d());
-        let tri = &self.scene.mesh.triangles[prim as usize];
+        let tri = &self.scene.triangle(prim);
         let su = u.x.sqrt();
         let (b1, b2) = (su * (1.0 - u.y), su * u.y);
         let q = tri[0] * (1.0 - su) + tri[1] * b1 + tri[2] * b2;
@@ -564,7 +579,7 @@ impl Tracer<'_> {
         if self.lights.owner.get(&hit.prim) != Some(&Owner::Set) {
             return Vec3::ZERO;
         }
-        let tri = &self.scene.mesh.triangles[hit.prim as usize];
+        let tri = &self.scene.triangle(hit.prim);
         let cos_l = face_normal(tri).dot(wi).abs();
         if cos_l <= 0.0 {
             return Vec3::ZERO;

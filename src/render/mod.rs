@@ -31,7 +31,7 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 use glam::Vec3;
 use rayon::prelude::*;
 
-use crate::bvh::Bvh;
+use crate::bvh::Tree;
 use crate::camera::CameraRays;
 use crate::film::Film;
 use crate::sampling::{PathSampler, PixelSampler, SamplerKind, concentric_disk, dim};
@@ -139,9 +139,9 @@ pub struct RenderOutput {
 /// Renders `scene` with a prebuilt `bvh` and the plan the scene needs, loading the
 /// environment's images if the plan uses them. `progress` is called with the number of
 /// finished rows (from any thread).
-pub fn render(
-    scene: &Scene,
-    bvh: &Bvh,
+pub fn render<'a>(
+    scene: &'a Scene,
+    bvh: impl Into<Tree<'a>>,
     settings: &RenderSettings,
     progress: &(dyn Fn(usize) + Sync),
 ) -> anyhow::Result<RenderOutput> {
@@ -152,9 +152,9 @@ pub fn render(
 
 /// [`render`] with a loaded environment and a given plan (tests compare a pruned plan with
 /// [`RenderPlan::everything`]).
-pub fn render_with_plan(
-    scene: &Scene,
-    bvh: &Bvh,
+pub fn render_with_plan<'a>(
+    scene: &'a Scene,
+    bvh: impl Into<Tree<'a>>,
     env: &EnvironmentMap,
     settings: &RenderSettings,
     plan: RenderPlan,
@@ -164,6 +164,7 @@ pub fn render_with_plan(
     let cam = CameraRays::new(&scene.camera, w, h);
     let mut film = Film::new(w, h);
     let rows_done = AtomicUsize::new(0);
+    let bvh: Tree<'a> = bvh.into();
     let tracer = Tracer::new(scene, bvh, plan, settings.max_depth, env);
     let samples = SampleRange {
         sampler: settings.sampler,
@@ -189,10 +190,10 @@ pub fn render_with_plan(
 
 /// The render layers ([`aov`]) of the samples a render with `settings` takes: the same camera
 /// rays, traced on all cores.
-pub fn render_layers(
-    scene: &Scene,
-    bvh: &Bvh,
-    env: &EnvironmentMap,
+pub fn render_layers<'a>(
+    scene: &'a Scene,
+    bvh: impl Into<Tree<'a>>,
+    env: &'a EnvironmentMap,
     settings: &RenderSettings,
     plan: RenderPlan,
 ) -> aov::AovFilm {

@@ -68,8 +68,8 @@ impl Surface<'_> {
 impl Tracer<'_> {
     pub(super) fn surface(&self, ray: &Ray, prim: u32, u: f32, v: f32) -> Surface<'_> {
         let scene = self.scene;
-        let tri = &scene.mesh.triangles[prim as usize];
-        let ns = &scene.mesh.normals[prim as usize];
+        let tri = &scene.triangle(prim);
+        let ns = &scene.normals(prim);
         let b = [1.0 - u - v, u, v];
         let p = tri[0] * b[0] + tri[1] * b[1] + tri[2] * b[2];
         let p_err = interpolation_error(tri, b);
@@ -175,7 +175,7 @@ pub(super) struct Look {
 /// other materials' textures multiply the diffuse colour.
 pub(super) fn textured(scene: &Scene, m: &Material, prim: u32, u: f32, v: f32) -> Look {
     // Each texture reads its own coordinate set (glTF's TEXCOORD_0 or TEXCOORD_1).
-    let sample = |t: &crate::scene::Texture| t.sample(scene.mesh.uv_at(t.uv_set, prim, u, v));
+    let sample = |t: &crate::scene::Texture| t.sample(scene.uv_at(t.uv_set, prim, u, v));
     let coat = m
         .pbr
         .as_ref()
@@ -315,12 +315,12 @@ fn normal_mapped_by(
     v: f32,
     n: Vec3,
 ) -> Option<Vec3> {
-    let t = scene.mesh.tangent_at(prim, u, v);
+    let t = scene.tangent_at(prim, u, v);
     if t == glam::Vec4::ZERO {
         return None;
     }
     let texel = map
-        .sample(scene.mesh.uv_at(map.uv_set, prim, u, v))
+        .sample(scene.uv_at(map.uv_set, prim, u, v))
         .truncate();
     crate::scene::tangents::perturbed(n, t, texel, scale)
 }
@@ -345,9 +345,8 @@ pub(super) fn bump_mapped(
     n: Vec3,
 ) -> Option<Vec3> {
     let map = m.height_map.as_ref()?;
-    let mesh = &scene.mesh;
-    let tri = &mesh.triangles[prim as usize];
-    let uv = |a: f32, b: f32| mesh.uv_at(map.uv_set, prim, a, b);
+    let tri = &scene.triangle(prim);
+    let uv = |a: f32, b: f32| scene.uv_at(map.uv_set, prim, a, b);
     let (t0, d1, d2) = (uv(0.0, 0.0), uv(1.0, 0.0), uv(0.0, 1.0));
     let (d1, d2) = (d1 - t0, d2 - t0);
     let det = d1.x * d2.y - d1.y * d2.x;

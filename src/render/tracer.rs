@@ -9,7 +9,7 @@ use super::integrator::path::PathBatch;
 use super::light::LightSet;
 use super::surface::{Look, textured};
 use super::{RayCounts, RenderPlan};
-use crate::bvh::{Bvh, Hit};
+use crate::bvh::{Hit, Tree};
 use crate::geometry::Ray;
 use crate::sampling::PathSampler;
 use crate::scene::{Integrator, Scene};
@@ -22,8 +22,8 @@ pub const FALLBACK: Vec3 = Vec3::ZERO;
 pub struct Tracer<'a> {
     /// The scene.
     pub scene: &'a Scene,
-    /// Its BVH.
-    pub bvh: &'a Bvh,
+    /// Its trees (one BVH, or two levels for a scene that places meshes many times).
+    pub bvh: Tree<'a>,
     /// What to compute.
     pub plan: RenderPlan,
     /// Largest number of reflection or transmission events along a path.
@@ -73,7 +73,7 @@ impl<'a> Tracer<'a> {
     /// integrators sample as lights).
     pub fn new(
         scene: &'a Scene,
-        bvh: &'a Bvh,
+        bvh: impl Into<Tree<'a>>,
         plan: RenderPlan,
         max_depth: u32,
         env: &'a EnvironmentMap,
@@ -93,12 +93,13 @@ impl<'a> Tracer<'a> {
     /// instead of finding it for every slice of tracing).
     pub fn with_lights(
         scene: &'a Scene,
-        bvh: &'a Bvh,
+        bvh: impl Into<Tree<'a>>,
         plan: RenderPlan,
         max_depth: u32,
         env: &'a EnvironmentMap,
         lights: std::sync::Arc<LightSet>,
     ) -> Self {
+        let bvh = bvh.into();
         let looks: Vec<Option<Look>> = scene
             .materials
             .iter()
@@ -134,7 +135,7 @@ impl<'a> Tracer<'a> {
     /// The look of triangle `prim`'s material at barycentric `(u, v)` ([`textured`]): the one
     /// found at the start when no texture varies it.
     pub(super) fn look(&self, prim: u32, u: f32, v: f32) -> Look {
-        let id = self.scene.mesh.material_ids[prim as usize] as usize;
+        let id = self.scene.material_id(prim) as usize;
         match self.looks.get(id) {
             Some(Some(look)) => *look,
             _ => textured(self.scene, &self.scene.materials[id], prim, u, v),

@@ -44,6 +44,14 @@
 //! path = "bunny.obj"
 //! crease_angle = 60.0        # computed normals smooth below 60 degrees (default: the file's rule)
 //!
+//! [[meshes]]
+//! path = "dragon.ply"
+//! scale = 0.5
+//! grid = { count = [10, 1, 10], step = [1.2, 0.0, 1.2], turn = 37.0 }
+//!                            # 100 copies of one mesh held once (instances), each moved by a
+//!                            # step along x, y and z from the entry's place and turned `turn`
+//!                            # degrees about y more than the one before (default 0)
+//!
 //! [[lights]]
 //! kind = "rect"
 //! corner = [-0.25, 1.98, -0.25]
@@ -163,7 +171,22 @@ struct MeshDef {
     /// Normals the mesh file does not give: smooth across edges below this angle (degrees;
     /// 0 is flat), instead of the file type's own rule.
     crease_angle: Option<Spanned<f32>>,
+    /// Copies of the mesh on a grid, the mesh held once.
+    grid: Option<Spanned<GridDef>>,
 }
+
+/// A grid of copies of a mesh entry: `count[a]` copies along axis `a`, `step[a]` apart, each
+/// turned `turn` degrees about its own vertical axis more than the one before.
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct GridDef {
+    count: [u32; 3],
+    step: [f64; 3],
+    turn: Option<f64>,
+}
+
+/// The most placements a scene file's grids may make.
+pub const MAX_PLACEMENTS: u64 = 1_000_000;
 
 #[derive(Deserialize)]
 #[serde(tag = "kind", rename_all = "lowercase", deny_unknown_fields)]
@@ -217,6 +240,20 @@ enum EnvDef {
 /// A scene file's `sheen_roughness` when only `sheen` is given: glTF's default of 0 would
 /// show almost nothing but at the silhouettes.
 const DEFAULT_SHEEN_ROUGHNESS: f32 = 0.5;
+
+/// What a scene file's `[[meshes]]` make.
+struct Meshes {
+    /// The entries placed once, as one mesh.
+    mesh: Mesh,
+    /// The meshes of the entries with a grid, each in its own frame.
+    shared: Vec<Mesh>,
+    /// Each grid copy: its mesh in `shared` and its transform to the world.
+    placed: Vec<(u32, DAffine3)>,
+    /// The files' warnings.
+    warnings: Vec<String>,
+    /// The longest animation of the glTF meshes, if any has one.
+    animation: Option<f32>,
+}
 
 /// Reads files a scene refers to (the disk, or the files built into the binary).
 type ReadFn<'a> = &'a dyn Fn(&Path) -> Result<Vec<u8>>;
@@ -414,16 +451,21 @@ impl Ctx<'_> {
         Ok(mat)
     }
 
-    /// The `[[meshes]]` entries, each placed by its transform, as one mesh; the materials of
-    /// mesh files appended to `materials` (an entry with `material` uses that one instead).
-    /// Returns the mesh and the warnings of its files.
+    /// The `[[meshes]]` entries, each placed by its transform, as one mesh, and the entries
+    /// with a `grid` as meshes placed many times; the materials of mesh files appended to
+    /// `materials` (an entry with `material` uses that one instead). Returns the mesh, the
+    /// grids' meshes and placements, the warnings of the files, and the longest animation.
     fn meshes(
         &self,
         defs: &[Spanned<MeshDef>],
         materials: &mut Vec<Material>,
         by_name: &BTreeMap<String, u32>,
-    ) -> Result<(Mesh, Vec<String>, Option<f32>)> {
+    ) -> Result<Meshes> {
         let mut mesh = Mesh::default();
+        let mut shared = Vec::new();
+        let mut placed = Vec::new();
+        let mut placements = 0u64;
+        let mut triangles = 0u64;
         let mut warnings = Vec::new();
         // The longest animation of the glTF meshes, if any has one.
         let mut animation: Option<f32> = None;
@@ -443,8 +485,35 @@ impl Ctx<'_> {
                 })?),
                 None => None,
             };
+            let copies = match &m.grid {
+                Some(g) => self.grid(g)?,
+                None => Vec::new(),
+            };
             let (mut part, part_materials) =
                 self.mesh_part(m, &span, &mut warnings, &mut animation)?;
+            if !copies.is_empty() {
+                // The bounds, checked before a placement is made.
+                placements += copies.len() as u64;
+                triangles += copies.len() as u64 * part.triangles.len() as u64;
+                let g = m.grid.as_ref().expect("copies come from a grid");
+                if placements > MAX_PLACEMENTS {
+                    return Err(self.at(
+                        g.span().start,
+                        format!(
+                            "the grids make {placements} copies, more than {MAX_PLACEMENTS}"
+                        ),
+                    ));
+                }
+                if triangles > crate::bvh::MAX_PLACED {
+                    return Err(self.at(
+                        g.span().start,
+                        format!(
+                            "the grids place {triangles} triangles, more than the {} one scene can number",
+                            crate::bvh::MAX_PLACED
+                        ),
+                    ));
+                }
+            }
             if let Some(id) = override_id
                 && materials[id as usize].has_height_map()
                 && part.uvs.is_empty()
@@ -478,20 +547,64 @@ impl Ctx<'_> {
                     );
                 }
             }
-            part.transform(&transform_of(m));
             match override_id {
-                Some(id) => {
-                    part.material_ids.iter_mut().for_each(|x| *x = id);
-                    mesh.append(part, 0);
-                }
+                Some(id) => part.material_ids.iter_mut().for_each(|x| *x = id),
                 None => {
                     let offset = materials.len() as u32;
                     materials.extend(part_materials);
-                    mesh.append(part, offset);
+                    part.material_ids.iter_mut().for_each(|x| *x += offset);
+                }
+            }
+            let transform = transform_of(m);
+            if copies.is_empty() {
+                part.transform(&transform);
+                mesh.append(part, 0);
+            } else {
+                let index = shared.len() as u32;
+                placed.extend(copies.iter().map(|c| (index, *c * transform)));
+                shared.push(part);
+            }
+        }
+        Ok(Meshes {
+            mesh,
+            shared,
+            placed,
+            warnings,
+            animation,
+        })
+    }
+
+    /// The transforms of a grid's copies (each applied after the entry's own transform).
+    fn grid(&self, g: &Spanned<GridDef>) -> Result<Vec<DAffine3>> {
+        let d = g.get_ref();
+        let n = d.count.iter().map(|&c| c as u64).product::<u64>();
+        if n == 0 {
+            return Err(self.at(g.span().start, "a grid's count is at least 1 along each axis".into()));
+        }
+        if n > MAX_PLACEMENTS {
+            return Err(self.at(
+                g.span().start,
+                format!("the grid makes {n} copies, more than {MAX_PLACEMENTS}"),
+            ));
+        }
+        let turn = d.turn.unwrap_or(0.0);
+        if !(d.step.iter().all(|s| s.is_finite()) && turn.is_finite()) {
+            return Err(self.at(g.span().start, "a grid's step and turn are finite numbers".into()));
+        }
+        let mut out = Vec::with_capacity(n as usize);
+        for z in 0..d.count[2] {
+            for y in 0..d.count[1] {
+                for x in 0..d.count[0] {
+                    let k = out.len() as f64;
+                    let at = DVec3::new(x as f64, y as f64, z as f64) * DVec3::from(d.step);
+                    out.push(
+                        DAffine3::from_translation(at)
+                            * DAffine3::from_rotation_y((turn * k).to_radians()),
+                    );
                 }
             }
         }
-        Ok((mesh, warnings, animation))
+        Ok(out)
     }
 
     /// One mesh entry's triangles, as its file or shape gives them, and their materials;
@@ -642,7 +755,13 @@ pub fn parse_at(
         time,
     };
     let (mut materials, by_name) = ctx.materials(&def.materials)?;
-    let (mut mesh, warnings, animation) = ctx.meshes(&def.meshes, &mut materials, &by_name)?;
+    let Meshes {
+        mut mesh,
+        shared,
+        placed,
+        warnings,
+        animation,
+    } = ctx.meshes(&def.meshes, &mut materials, &by_name)?;
     if materials.is_empty() {
         materials.push(Material::default());
     }
@@ -651,6 +770,7 @@ pub fn parse_at(
     // local frame (`Mesh::origin`, the world's origin for a scene near it), so they are moved
     // into it in f64.
     mesh.settle_origin();
+    let instances = place(&mut mesh, shared, &placed).map_err(|e| anyhow!("{}: {e}", path.display()))?;
     let origin = mesh.origin;
     let local = |p: [f64; 3]| (DVec3::from(p) - origin).as_vec3();
     let lights = def
@@ -682,10 +802,10 @@ pub fn parse_at(
                 ..ctx
             };
             let mut m = materials.clone();
-            let (rest, ..) = rest.meshes(&def.meshes, &mut m, &by_name)?;
-            Camera::canonical(&rest.bounds_around(origin))
+            let rest = rest.meshes(&def.meshes, &mut m, &by_name)?.mesh;
+            Camera::canonical(&rest.bounds_around(origin).union(&instances.bounds()))
         }
-        None => Camera::canonical(&bounds),
+        None => Camera::canonical(&bounds.union(&instances.bounds())),
     };
 
     let environment = ctx.environment(&def.environment)?;
@@ -702,7 +822,44 @@ pub fn parse_at(
         energy_compensation: render.energy_compensation.unwrap_or(true),
         warnings,
         animation,
+        instances,
     })
+}
+
+/// The grids' copies placed in the scene's frame (the frame of `mesh`, the entries placed
+/// once); when there are no such entries, the frame is put at the first copy, or at the
+/// world's origin when the copies span or near it (the rule of [`Mesh::settle_origin`]).
+fn place(
+    mesh: &mut Mesh,
+    shared: Vec<Mesh>,
+    placed: &[(u32, DAffine3)],
+) -> Result<super::Instances, super::PlaceError> {
+    let make = |origin: DVec3| -> Vec<crate::bvh::Instance> {
+        placed
+            .iter()
+            .map(|(m, w)| super::placing(w, shared[*m as usize].origin, origin, *m))
+            .collect()
+    };
+    let mut list = make(mesh.origin);
+    if mesh.triangles.is_empty()
+        && let Some((m, w)) = placed.first()
+    {
+        let mut origin = w.transform_point3(shared[*m as usize].origin);
+        list = make(origin);
+        let boxes: Vec<_> = shared.iter().map(Mesh::bounds).collect();
+        let b = super::placed_bounds(&boxes, &list);
+        if !b.is_empty() {
+            let (lo, hi) = (Vec3::from(b.min).as_dvec3(), Vec3::from(b.max).as_dvec3());
+            let centre = origin + 0.5 * (lo + hi);
+            if centre.abs().max_element() <= (hi - lo).max_element().max(1.0) {
+                origin = DVec3::ZERO;
+                list = make(origin);
+            }
+        }
+        mesh.origin = origin;
+    }
+    let meshes = shared.into_iter().map(std::sync::Arc::new).collect();
+    super::Instances::new(meshes, list, mesh.triangles.len() as u64)
 }
 
 /// Loads an OBJ, PLY or glTF through `read` (a glTF's own camera and lights are not used: the

@@ -9,6 +9,7 @@ pub mod check;
 pub mod file;
 pub mod format;
 pub mod gltf;
+mod instances;
 mod light;
 mod material;
 mod mesh;
@@ -29,6 +30,7 @@ use crate::geometry::Aabb;
 
 pub use camera::{Camera, Environment};
 pub use format::{Format, MeshFile};
+pub use instances::{Instances, PlaceError, placed_bounds, placing};
 pub use light::{Light, spot_falloff};
 pub use material::{AlphaMode, Material};
 pub use mesh::{Mesh, face_normal, local_frame};
@@ -76,8 +78,12 @@ impl std::str::FromStr for Integrator {
 pub struct Scene {
     /// Short name for messages and reports (the file stem).
     pub name: String,
-    /// All triangles of all meshes, in file order.
+    /// The triangles placed once, of all meshes in file order: triangles `0..n` of the
+    /// scene.
     pub mesh: Mesh,
+    /// Meshes placed more than once (a glTF mesh many nodes use, a scene file's `grid`), held
+    /// once each: triangles `n..` of the scene, after [`Scene::mesh`]'s.
+    pub instances: Instances,
     /// Materials the triangles refer to.
     pub materials: Vec<Material>,
     /// Light sources.
@@ -188,6 +194,7 @@ impl Scene {
             energy_compensation: true,
             warnings: Vec::new(),
             animation: None,
+            instances: Instances::default(),
         }
     }
 
@@ -197,14 +204,90 @@ impl Scene {
         file::load_embedded_cornell_box()
     }
 
-    /// Number of triangles.
+    /// Number of triangles, each placement of a mesh placed many times counted.
     pub fn triangle_count(&self) -> usize {
-        self.mesh.triangles.len()
+        self.mesh.triangles.len() + self.instances.triangle_count() as usize
     }
 
     /// The material of triangle `prim`.
+    #[inline]
     pub fn material_of(&self, prim: u32) -> &Material {
-        &self.materials[self.mesh.material_ids[prim as usize] as usize]
+        &self.materials[self.material_id(prim) as usize]
+    }
+
+    /// The index in [`Scene::materials`] of triangle `prim`'s material.
+    #[inline]
+    pub fn material_id(&self, prim: u32) -> u32 {
+        match self.mesh.material_ids.get(prim as usize) {
+            Some(&id) => id,
+            None => self.instances.material_id(self.placed(prim)),
+        }
+    }
+
+    /// The number among the placed triangles of scene triangle `prim` (one past the scene
+    /// mesh's own).
+    #[inline]
+    fn placed(&self, prim: u32) -> u32 {
+        prim - self.mesh.triangles.len() as u32
+    }
+
+    /// Corners of triangle `prim`, in the scene's frame.
+    #[inline]
+    pub fn triangle(&self, prim: u32) -> [Vec3; 3] {
+        match self.mesh.triangles.get(prim as usize) {
+            Some(t) => *t,
+            None => self.instances.triangle(self.placed(prim)),
+        }
+    }
+
+    /// Shading normals of triangle `prim`'s corners, in the scene's frame.
+    #[inline]
+    pub fn normals(&self, prim: u32) -> [Vec3; 3] {
+        match self.mesh.normals.get(prim as usize) {
+            Some(n) => *n,
+            None => self.instances.normals(self.placed(prim)),
+        }
+    }
+
+    /// The texture coordinate of set `set` at barycentric `(u, v)` of triangle `prim` (see
+    /// [`Mesh::uv_at`]).
+    #[inline]
+    pub fn uv_at(&self, set: u8, prim: u32, u: f32, v: f32) -> glam::Vec2 {
+        if (prim as usize) < self.mesh.triangles.len() {
+            self.mesh.uv_at(set, prim, u, v)
+        } else {
+            self.instances.uv_at(set, self.placed(prim), u, v)
+        }
+    }
+
+    /// The tangent at barycentric `(u, v)` of triangle `prim` (see [`Mesh::tangent_at`]).
+    #[inline]
+    pub fn tangent_at(&self, prim: u32, u: f32, v: f32) -> glam::Vec4 {
+        if (prim as usize) < self.mesh.triangles.len() {
+            self.mesh.tangent_at(prim, u, v)
+        } else {
+            self.instances.tangent_at(self.placed(prim), u, v)
+        }
+    }
+
+    /// Box around every triangle, placed ones included, in the scene's frame.
+    pub fn bounds(&self) -> Aabb {
+        self.mesh.bounds().union(&self.instances.bounds())
+    }
+
+    /// The same scene with every placement's triangles copied into [`Scene::mesh`], in the
+    /// order they are numbered, each as [`Scene::triangle`] and the rest read it: the
+    /// picture of the same samples differs only where the rays' hits differ in their last
+    /// bits (a placed mesh is traced in its own frame).
+    pub fn flattened(&self) -> Scene {
+        let mut scene = self.clone();
+        scene.instances = Instances::default();
+        let origin = scene.mesh.origin;
+        for i in 0..self.instances.placements().len() {
+            // In the scene's frame already: appended without moving a vertex.
+            scene.mesh.append(self.instances.placed_mesh(i, origin), 0);
+        }
+        scene
     }
 }
 

@@ -366,7 +366,7 @@ impl Tracer<'_> {
         let d = travelled + hit.t * ray.dir.length();
         match self.lights.owner.get(&hit.prim) {
             Some(Owner::Set) => {
-                let tri = &self.scene.mesh.triangles[hit.prim as usize];
+                let tri = &self.scene.triangle(hit.prim);
                 let cos = face_normal(tri).dot(dir).abs();
                 if cos <= 0.0 {
                     return Vec3::ZERO;

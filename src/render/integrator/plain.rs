@@ -76,7 +76,7 @@ impl Tracer<'_> {
         if lane.v.depth > self.max_depth {
             return None;
         }
-        let id = self.scene.mesh.material_ids[hit.prim as usize];
+        let id = self.scene.material_id(hit.prim);
         let diffuse = (*self.plain.get(id as usize)?)?;
         Some((hit, diffuse))
     }
@@ -129,7 +129,7 @@ impl Tracer<'_> {
 
     /// The chunk of the paths `group` (at most [`W`]), read from their lanes.
     fn gather(&self, lanes: &[Lane], group: &[u32]) -> Chunk {
-        let mesh = &self.scene.mesh;
+        let scene = self.scene;
         let first = &lanes[group[0] as usize];
         let kind = first.rng.parts().0;
         let mut c = Chunk {
@@ -168,8 +168,8 @@ impl Tracer<'_> {
             c.ids[j] = k;
             c.u[j] = hit.u;
             c.v[j] = hit.v;
-            let tri = &mesh.triangles[hit.prim as usize];
-            let ns = &mesh.normals[hit.prim as usize];
+            let tri = &scene.triangle(hit.prim);
+            let ns = &scene.normals(hit.prim);
             for a in 0..3 {
                 c.dir[a][j] = lane.v.ray.dir[a];
                 c.beta[a][j] = lane.v.beta[a];

@@ -1,0 +1,159 @@
+//! Scenes that place meshes many times: a scene file's `grid` holds its mesh once and renders
+//! the picture of the same scene with every copy flattened into one mesh; refused grids name
+//! the file and line.
+
+use std::path::Path;
+
+use tracery::bvh::{Accel, BuildOptions, Bvh};
+use tracery::render::{RenderSettings, render};
+use tracery::scene::{Integrator, Scene};
+
+/// A floor placed once; a grid of turned, non-uniformly scaled boxes; a mirrored grid of
+/// spheres; a grid of glowing spheres (emissive triangles sampled as lights); a rectangle light.
+const GRID: &str = r#"
+[camera]
+position = [3.0, 4.0, 9.0]
+look_at = [3.0, 0.5, 2.0]
+fov = 50.0
+
+[materials.red]
+diffuse = [0.8, 0.2, 0.1]
+
+[materials.glow]
+diffuse = [0.0, 0.0, 0.0]
+emission = [4.0, 3.0, 1.0]
+
+[materials.glass]
+diffuse = [0.9, 0.9, 1.0]
+opacity = 0.3
+
+[[meshes]]
+shape = "quad"
+scale = 20.0
+rotate = [-90.0, 0.0, 0.0]
+
+[[meshes]]
+shape = "cube"
+material = "red"
+scale = [0.3, 0.6, 0.2]
+translate = [0.0, 0.6, 0.0]
+grid = { count = [4, 1, 3], step = [2.0, 0.0, 2.0], turn = 23.0 }
+
+[[meshes]]
+shape = "sphere"
+subdivisions = 2
+scale = [-0.35, 0.35, 0.5]
+translate = [1.0, 0.4, 1.0]
+grid = { count = [3, 2, 2], step = [2.0, 1.2, 2.0] }
+
+[[meshes]]
+shape = "sphere"
+subdivisions = 1
+material = "glow"
+scale = 0.12
+translate = [1.0, 2.2, 0.0]
+grid = { count = [3, 1, 2], step = [2.0, 0.0, 3.0] }
+
+[[meshes]]
+shape = "cube"
+material = "glass"
+scale = 0.25
+translate = [5.0, 0.3, 4.0]
+grid = { count = [1, 1, 2], step = [0.0, 0.0, -1.5] }
+
+[[lights]]
+kind = "rect"
+corner = [2.0, 5.0, 1.0]
+edge_u = [1.5, 0.0, 0.0]
+edge_v = [0.0, 0.0, 1.5]
+intensity = 20.0
+"#;
+
+fn load(text: &str) -> anyhow::Result<Scene> {
+    let path = Path::new("grid.toml");
+    tracery::scene::file::parse(path, text, &|p| anyhow::bail!("{}: no files here", p.display()), false)
+}
+
+/// Mean and largest difference of two pictures, relative to the first's mean, and the
+/// number of pixels that differ by more than a thousandth of it (a 255th of a level of an
+/// 8-bit picture of it).
+fn difference(a: &[glam::Vec3], b: &[glam::Vec3]) -> (f64, f64, usize) {
+    let mean_a = a.iter().map(|p| p.element_sum() as f64).sum::<f64>() / a.len() as f64;
+    let (mut sum, mut max, mut differ) = (0.0f64, 0.0f64, 0usize);
+    for (p, q) in a.iter().zip(b) {
+        let d = (*p - *q).abs().element_sum() as f64;
+        sum += d;
+        max = max.max(d);
+        differ += (d > 1e-3 * mean_a) as usize;
+    }
+    (sum / a.len() as f64 / mean_a, max / mean_a, differ)
+}
+
+#[test]
+fn a_grid_renders_the_picture_of_its_copies_flattened() {
+    for integrator in [Integrator::Direct, Integrator::Path] {
+        let mut scene = load(GRID).unwrap();
+        scene.integrator = integrator;
+        assert_eq!(scene.instances.meshes.len(), 4);
+        assert_eq!(scene.instances.placements().len(), 12 + 12 + 6 + 2);
+        assert_eq!(scene.mesh.triangles.len(), 2, "the floor alone is placed once");
+        let flat = scene.flattened();
+        assert_eq!(flat.triangle_count(), scene.triangle_count());
+        let settings = RenderSettings {
+            width: 96,
+            height: 72,
+            spp: 16,
+            ..RenderSettings::default()
+        };
+        let accel = Accel::for_scene(&scene, &BuildOptions::sah()).unwrap();
+        assert!(accel.flat().is_none(), "two levels for a scene with grids");
+        let placed = render(&scene, &accel, &settings, &|_| {}).unwrap();
+        let bvh = Bvh::build(&flat.mesh.triangles, &BuildOptions::sah());
+        let flattened = render(&flat, &bvh, &settings, &|_| {}).unwrap();
+        let (a, b) = (placed.film.mean(), flattened.film.mean());
+        let (mean, max, differ) = difference(&b, &a);
+        println!(
+            "{integrator}: mean difference {mean:.2e}, largest {max:.2e} of the mean, {differ} of {} pixels differ by more than 1e-3 of it",
+            a.len()
+        );
+        // The same samples through the same triangles: pixels differ only where a hit's
+        // last bits (found in the mesh's frame) send a path elsewhere.
+        assert!(mean < 2e-3, "{integrator}: mean difference {mean}");
+        assert!(differ * 50 < a.len(), "{integrator}: {differ} pixels differ");
+        // And the picture is not empty: the grid's lit boxes are in it.
+        let lit = a.iter().filter(|p| p.max_element() > 0.05).count();
+        assert!(lit * 4 > a.len(), "{lit} lit pixels");
+        assert_eq!(placed.rays.camera, flattened.rays.camera);
+    }
+}
+
+#[test]
+fn every_placed_triangle_reads_as_its_flattened_copy() {
+    let scene = load(GRID).unwrap();
+    let flat = scene.flattened();
+    for prim in 0..scene.triangle_count() as u32 {
+        assert_eq!(scene.triangle(prim), flat.mesh.triangles[prim as usize], "{prim}");
+        assert_eq!(scene.normals(prim), flat.mesh.normals[prim as usize], "{prim}");
+        assert_eq!(scene.material_id(prim), flat.mesh.material_ids[prim as usize]);
+    }
+    // The mirrored spheres' normals still point out of them.
+    let b = scene.bounds();
+    assert!(b.min.y < 0.01 && b.max.y > 2.0, "{b:?}");
+}
+
+#[test]
+fn bad_grids_are_refused_with_the_file_and_line() {
+    let cases = [
+        ("count = [0, 1, 1], step = [1.0, 0.0, 0.0]", "at least 1"),
+        ("count = [1000, 1000, 2], step = [1.0, 1.0, 1.0]", "more than 1000000"),
+        ("count = [2, 1, 1], step = [nan, 0.0, 0.0]", "finite"),
+    ];
+    for (grid, want) in cases {
+        let text = format!("[[meshes]]\nshape = \"cube\"\ngrid = {{ {grid} }}\n");
+        let e = format!("{:#}", load(&text).unwrap_err());
+        assert!(e.contains("grid.toml:3") && e.contains(want), "{grid}: {e}");
+    }
+    let text = "[[meshes]]\nshape = \"cube\"\nscale = [0.0, 1.0, 1.0]\ngrid = { count = [2, 1, 1], step = [1.0, 0.0, 0.0] }\n";
+    let e = format!("{:#}", load(text).unwrap_err());
+    assert!(e.contains("grid.toml") && e.contains("cannot be inverted"), "{e}");
+}
