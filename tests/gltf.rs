@@ -675,11 +675,6 @@ fn wrong_types_cycles_and_depth_are_errors() {
 }
 
 /// The process's peak resident memory so far (`VmHWM`), in kilobytes.
-fn peak_kb() -> u64 {
-    let status = std::fs::read_to_string("/proc/self/status").unwrap();
-    let line = status.lines().find(|l| l.starts_with("VmHWM:")).unwrap();
-    line.split_whitespace().nth(1).unwrap().parse().unwrap()
-}
 
 /// A 3 KB file whose nodes place a 200-triangle mesh 262,144 times (each node lists the next
 /// twice: 52 million triangles) is refused before anything is placed: in a child process
@@ -713,39 +708,19 @@ fn a_small_file_that_places_too_many_triangles_is_refused_before_taking_the_memo
     d["meshes"] = json!([{"primitives": [{"attributes": {"POSITION": 0}, "indices": 1}]}]);
     if let Some(dir) = std::env::var_os(CHILD) {
         let path = write(Path::new(&dir), "many.gltf", &d);
-        let before = peak_kb();
+        let before = common::peak_kb();
         let e = format!("{:#}", Scene::load(&path).expect_err("too many triangles"));
-        println!("peak growth {} kB", peak_kb().saturating_sub(before));
+        println!("peak growth {} kB", common::peak_kb().saturating_sub(before));
         println!("error: {e}");
         return;
     }
     let dir = tempfile::tempdir().unwrap();
-    let out = std::process::Command::new(std::env::current_exe().unwrap())
-        .args([
-            "a_small_file_that_places_too_many_triangles_is_refused_before_taking_the_memory",
-            "--exact",
-            "--nocapture",
-            "--test-threads=1",
-        ])
-        .env(CHILD, dir.path())
-        .output()
-        .unwrap();
-    let text = String::from_utf8_lossy(&out.stdout).into_owned();
-    assert!(
-        out.status.success(),
-        "{text}{}",
-        String::from_utf8_lossy(&out.stderr)
+    let text = common::run_child(
+        "a_small_file_that_places_too_many_triangles_is_refused_before_taking_the_memory",
+        CHILD,
+        dir.path().as_os_str(),
     );
-    let growth: u64 = text
-        .lines()
-        .find_map(|l| {
-            l.split("peak growth ")
-                .nth(1)?
-                .strip_suffix(" kB")?
-                .parse()
-                .ok()
-        })
-        .unwrap_or_else(|| panic!("the child reports its peak memory: {text}"));
+    let growth = common::figure(&text, "peak growth ");
     let size = std::fs::metadata(dir.path().join("many.gltf"))
         .unwrap()
         .len()

@@ -2,6 +2,8 @@
 //! the picture of the same scene with every copy flattened into one mesh; refused grids name
 //! the file and line.
 
+mod common;
+
 use std::path::Path;
 
 use tracery::bvh::{Accel, BuildOptions, Bvh};
@@ -156,4 +158,63 @@ fn bad_grids_are_refused_with_the_file_and_line() {
     let text = "[[meshes]]\nshape = \"cube\"\nscale = [0.0, 1.0, 1.0]\ngrid = { count = [2, 1, 1], step = [1.0, 0.0, 0.0] }\n";
     let e = format!("{:#}", load(text).unwrap_err());
     assert!(e.contains("grid.toml") && e.contains("cannot be inverted"), "{e}");
+}
+
+/// A thousand placements of the 202k dragon (202 million triangles) load and render in about
+/// one dragon's memory: in child processes (this test run again), the peak memory of a scene
+/// of one placement and of a thousand; the thousand cost at most 256 bytes each over the one,
+/// counted by their structures and measured by the peak. Needs the fetched dragon.
+#[test]
+fn a_thousand_dragons_take_one_dragons_memory() {
+    const CHILD: &str = "TRACERY_TEST_DRAGONS_CHILD";
+    let Some(dragon) = common::external("dragon/dragon_vrip_res2.ply") else {
+        return;
+    };
+    if let Some(count) = std::env::var_os(CHILD) {
+        let count: u32 = count.to_str().unwrap().parse().unwrap();
+        let (nx, nz) = if count == 1 { (1, 1) } else { (25, count / 25) };
+        let text = format!(
+            "[camera]\nposition = [-0.6, 0.9, 1.5]\nlook_at = [1.4, 0.0, -1.6]\n\
+             [[meshes]]\npath = {:?}\ngrid = {{ count = [{nx}, 1, {nz}], step = [0.2, 0.0, -0.2], turn = 37.0 }}\n",
+            dragon.display().to_string()
+        );
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("dragons.toml");
+        std::fs::write(&path, text).unwrap();
+        let scene = Scene::load(&path).unwrap();
+        let accel = Accel::for_scene(&scene, &BuildOptions::sah()).unwrap();
+        let settings = RenderSettings {
+            width: 64,
+            height: 48,
+            spp: 1,
+            ..RenderSettings::default()
+        };
+        let out = render(&scene, &accel, &settings, &|_| {}).unwrap();
+        let Accel::TwoLevel(two) = &accel else {
+            panic!("two levels")
+        };
+        println!("triangles {}", scene.triangle_count());
+        println!("hit {}", out.film.mean().iter().filter(|p| p.max_element() > 0.0).count());
+        println!("placements {}", scene.instances.bytes() + two.bytes());
+        println!("peak {} kB", common::peak_kb());
+        return;
+    }
+    let name = "a_thousand_dragons_take_one_dragons_memory";
+    let one = common::run_child(name, CHILD, "1".as_ref());
+    let many = common::run_child(name, CHILD, "1000".as_ref());
+    let (peak1, peak) = (common::figure(&one, "peak "), common::figure(&many, "peak "));
+    let bytes = common::figure(&many, "placements ") - common::figure(&one, "placements ");
+    assert_eq!(common::figure(&many, "triangles "), 1000 * 202_520);
+    assert!(common::figure(&many, "hit ") > 64 * 48 / 4, "{many}");
+    let structures = bytes as f64 / 999.0;
+    println!(
+        "peak memory: one dragon {peak1} kB, a thousand {peak} kB; each placement beyond the first: {structures:.0} bytes (its transform, first triangle's number and share of the top level)"
+    );
+    assert!(structures <= 256.0, "{structures} bytes a placement");
+    // Two processes' peaks differ by a few MB whatever they place (the allocator, the
+    // threads' stacks): the thousand may take no more than their bytes and 1 MB over the one.
+    assert!(
+        peak.saturating_sub(peak1) * 1024 <= 999 * 256 + (1 << 20),
+        "a thousand dragons peaked {peak} kB against one's {peak1} kB"
+    );
 }

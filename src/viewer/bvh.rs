@@ -10,7 +10,7 @@ use bevy::prelude::*;
 
 use super::scene::CurrentScene;
 use super::task::Background;
-use crate::bvh::{BuildOptions, Bvh, Update};
+use crate::bvh::{Accel, BuildOptions, Bvh, Tree, TwoLevel, Update};
 
 /// Keeps [`SceneBvh`] in step with [`CurrentScene`] and [`BvhSettings`].
 pub struct BvhPlugin {
@@ -44,8 +44,11 @@ pub struct BvhKey {
 /// the new one builds: `key` says which).
 #[derive(Resource, Default)]
 pub struct SceneBvh {
-    /// The tree, once one is built.
+    /// The tree of the scene's own triangles (those placed once), once one is built.
     pub bvh: Option<Arc<Bvh>>,
+    /// For a scene that places meshes many times, the two levels rays are traced through
+    /// (with `bvh` as one of their meshes' trees).
+    pub placed: Option<Arc<TwoLevel>>,
     /// What it was built from.
     pub key: Option<BvhKey>,
     /// Builds installed since start (refits included).
@@ -64,12 +67,26 @@ impl SceneBvh {
             _ => None,
         }
     }
+
+    /// What the rays of the scene of generation `scene` are traced through: the two levels
+    /// of a scene that places meshes many times, else the one tree.
+    pub fn tracing(&self, scene: u64) -> Option<Tree<'_>> {
+        let own = self.for_scene(scene)?;
+        Some(match &self.placed {
+            Some(t) => Tree::TwoLevel(t),
+            None => Tree::Flat(own),
+        })
+    }
 }
+
+/// What a build gives: the tree of the scene's own triangles, how it was made when refitted,
+/// and the two levels of a scene that places meshes many times.
+type Built = (Arc<Bvh>, Option<Update>, Option<Arc<TwoLevel>>);
 
 /// The build under way, if any.
 #[derive(Resource, Default)]
 pub struct BvhBuilding {
-    job: Background<BvhKey, (Bvh, Option<Update>)>,
+    job: Background<BvhKey, Built>,
     started: Option<Instant>,
     /// A build that failed (not retried until the key changes).
     failed: Option<BvhKey>,
@@ -97,7 +114,7 @@ fn rebuild_bvh(
     };
     if let Some((key, result)) = building.job.poll() {
         match result {
-            Ok((tree, update)) if key == wanted => {
+            Ok((tree, update, placed)) if key == wanted => {
                 match &update {
                     Some(Update::Refitted(r)) => {
                         info!(
@@ -120,7 +137,16 @@ fn rebuild_bvh(
                         bvh.built_cost = tree.stats.sah_cost;
                     }
                 }
-                bvh.bvh = Some(Arc::new(tree));
+                if let Some(t) = &placed {
+                    info!(
+                        "{} placements of {} meshes: top level built in {:.2} ms",
+                        t.instance_count(),
+                        t.meshes.len(),
+                        t.build_ms
+                    );
+                }
+                bvh.bvh = Some(tree);
+                bvh.placed = placed;
                 bvh.key = Some(key);
                 bvh.builds += 1;
             }
@@ -148,13 +174,49 @@ fn rebuild_bvh(
     let built_cost = bvh.built_cost;
     building
         .job
-        .start(wanted, "tracery-bvh", move || match previous {
-            Some(tree) => {
-                let mut tree = (*tree).clone();
-                let update = tree.refit_or_rebuild(&triangles.mesh.triangles, built_cost);
-                (tree, Some(update))
-            }
-            None => (Bvh::build(&triangles.mesh.triangles, &options), None),
+        .start(wanted, "tracery-bvh", move || {
+            let (own, update) = match previous {
+                Some(tree) => {
+                    let mut tree = (*tree).clone();
+                    let update = tree.refit_or_rebuild(&triangles.mesh.triangles, built_cost);
+                    (Arc::new(tree), Some(update))
+                }
+                None => (Arc::new(Bvh::build(&triangles.mesh.triangles, &options)), None),
+            };
+            (own.clone(), update, placed_trees(&triangles, own, &options))
         });
     building.started = Some(Instant::now());
+}
+
+/// The two levels of a scene that places meshes many times (`None` for one that does not),
+/// `own` the tree of its own triangles; a placement the top level refuses is logged and the
+/// scene traced without its placements.
+fn placed_trees(
+    scene: &crate::scene::Scene,
+    own: Arc<Bvh>,
+    options: &BuildOptions,
+) -> Option<Arc<TwoLevel>> {
+    if scene.instances.is_empty() {
+        return None;
+    }
+    let has_own = !scene.mesh.triangles.is_empty();
+    let mut meshes = Vec::with_capacity(scene.instances.meshes.len() + 1);
+    if has_own {
+        meshes.push(own);
+    }
+    meshes.extend(
+        scene
+            .instances
+            .meshes
+            .iter()
+            .map(|m| Arc::new(Bvh::build(&m.triangles, options))),
+    );
+    match Accel::place(scene, meshes, has_own) {
+        Ok(Accel::TwoLevel(t)) => Some(Arc::new(t)),
+        Ok(Accel::Flat(_)) => None,
+        Err(e) => {
+            error!("{}: {e}", scene.name);
+            None
+        }
+    }
 }

@@ -150,7 +150,7 @@ fn shoot(
         debug.pending = Some(p);
     }
     let (Ok((transform, projection)), Some(tree)) =
-        (camera.single(), bvh.for_scene(current.generation))
+        (camera.single(), bvh.tracing(current.generation))
     else {
         picks.clear();
         return;

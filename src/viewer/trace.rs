@@ -627,6 +627,7 @@ fn send_job(
         generation: acc.generation,
         scene: current.scene.clone(),
         bvh: tree.clone(),
+        placed: bvh.placed.clone(),
         env: env.map.clone(),
         camera: camera_rays(transform, projection, size, &settings),
         display: viewport.0,

@@ -235,3 +235,34 @@ pub fn data_uri(bytes: &[u8]) -> String {
         base64::engine::general_purpose::STANDARD.encode(bytes)
     )
 }
+
+/// The process's peak resident memory so far (`VmHWM`), kB.
+pub fn peak_kb() -> u64 {
+    let status = std::fs::read_to_string("/proc/self/status").unwrap();
+    let line = status.lines().find(|l| l.starts_with("VmHWM:")).unwrap();
+    line.split_whitespace().nth(1).unwrap().parse().unwrap()
+}
+
+/// Runs the test `name` of this test binary again in a child process with `var` set to
+/// `value`, and returns its standard output (failing when the child fails).
+pub fn run_child(name: &str, var: &str, value: &std::ffi::OsStr) -> String {
+    let out = std::process::Command::new(std::env::current_exe().unwrap())
+        .args([name, "--exact", "--nocapture", "--test-threads=1"])
+        .env(var, value)
+        .output()
+        .unwrap();
+    let text = String::from_utf8_lossy(&out.stdout).into_owned();
+    assert!(
+        out.status.success(),
+        "{text}{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    text
+}
+
+/// The number after `key` in a child's output (`key 123`).
+pub fn figure(text: &str, key: &str) -> u64 {
+    text.lines()
+        .find_map(|l| l.split(key).nth(1)?.split_whitespace().next()?.parse().ok())
+        .unwrap_or_else(|| panic!("no `{key}` in: {text}"))
+}

@@ -218,7 +218,7 @@ fn still(
     let (Some(film), Ok((transform, projection)), Some(tree)) = (
         film,
         views.camera.single(),
-        views.bvh.for_scene(views.current.generation),
+        views.bvh.tracing(views.current.generation),
     ) else {
         return None;
     };
@@ -291,7 +291,7 @@ fn moving_picture(
     let display = views.viewport.0;
     let (Ok((_, projection)), Some(tree)) = (
         views.camera.single(),
-        views.bvh.for_scene(views.current.generation),
+        views.bvh.tracing(views.current.generation),
     ) else {
         return;
     };

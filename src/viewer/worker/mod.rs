@@ -84,8 +84,10 @@ pub struct Job {
     pub generation: u64,
     /// The scene.
     pub scene: Arc<Scene>,
-    /// Its BVH.
+    /// The tree of its own triangles.
     pub bvh: Arc<Bvh>,
+    /// The two levels of a scene that places meshes many times (`bvh` one of their trees).
+    pub placed: Option<Arc<crate::bvh::TwoLevel>>,
     /// The environment, loaded.
     pub env: Arc<EnvironmentMap>,
     /// The view at the traced resolution.
@@ -96,6 +98,16 @@ pub struct Job {
     pub settings: ViewSettings,
     /// What the samples depend on besides the view.
     pub content: Content,
+}
+
+impl Job {
+    /// What the job's rays are traced through.
+    pub fn tree(&self) -> crate::bvh::Tree<'_> {
+        match &self.placed {
+            Some(t) => crate::bvh::Tree::TwoLevel(t),
+            None => crate::bvh::Tree::Flat(&self.bvh),
+        }
+    }
 }
 
 /// A finished picture.
@@ -499,7 +511,7 @@ fn tracer<'a>(job: &'a Job, light_samples: Option<u32>, lights: Arc<LightSet>) -
         plan.max_light_samples = light_samples;
     }
     let max_depth = job.settings.max_depth;
-    Tracer::with_lights(&job.scene, &job.bvh, plan, max_depth, &job.env, lights)
+    Tracer::with_lights(&job.scene, job.tree(), plan, max_depth, &job.env, lights)
 }
 
 /// The integrators' light set for the job's scene: found once per scene, not for every slice
