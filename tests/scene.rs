@@ -445,7 +445,7 @@ fn every_project_scene_loads_and_renders() {
         }
         let scene = Scene::load(&path).unwrap_or_else(|e| panic!("{}: {e:#}", path.display()));
         assert!(scene.warnings.is_empty(), "{:?}", scene.warnings);
-        let bvh = tracery::bvh::Bvh::build(&scene.mesh.triangles, &Default::default());
+        let bvh = tracery::bvh::Accel::for_scene(&scene, &Default::default()).unwrap();
         let settings = tracery::render::RenderSettings {
             width: 12,
             height: 9,

@@ -228,12 +228,23 @@ impl TwoLevel {
             let near = near.max(0.0);
             (near <= far.min(limit)).then_some(near)
         };
-        // Depth is at most `TOP_DEPTH` plus the halvings by count past it (32 at most).
-        let mut stack = [(0u32, 0.0f32); 2 * TOP_DEPTH + 64];
-        let mut sp = 0;
-        if enter(&self.nodes[0], limit()).is_none() {
+        let root = &self.nodes[0];
+        if enter(root, limit()).is_none() {
             return;
         }
+        if root.is_leaf() {
+            // One instance: no walk (and no stack to set up).
+            for &inst in &self.order[root.first as usize..(root.first + root.count) as usize] {
+                if !visit(inst) {
+                    return;
+                }
+            }
+            return;
+        }
+        // A walk keeps at most one sibling per level: depth is at most `TOP_DEPTH` plus the
+        // halvings by count past it (32 at most).
+        let mut stack = [(0u32, 0.0f32); TOP_DEPTH + 40];
+        let mut sp = 0;
         stack[sp] = (0, 0.0);
         sp += 1;
         while sp > 0 {

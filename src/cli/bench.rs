@@ -121,7 +121,7 @@ pub fn run(a: BenchArgs) -> Result<()> {
     let mut all_results: Vec<EngineResult> = Vec::new();
     for src in &sources {
         let scene = match src {
-            Some(p) => Scene::load(p)?,
+            Some(p) => super::load_flat_scene(Some(p), "bench")?,
             None => Scene::cornell_box(),
         };
         let tris = &scene.mesh.triangles;

@@ -7,7 +7,7 @@ use anyhow::Result;
 use clap::Args;
 use tracery::scene::check::{Finding, MeshReport, NEEDLE_ASPECT, check_mesh};
 
-use super::load_scene;
+use super::load_flat_scene;
 
 #[derive(Args, Debug)]
 pub struct CheckMeshArgs {
@@ -32,7 +32,7 @@ pub fn run(a: CheckMeshArgs) -> ExitCode {
 }
 
 fn check(a: &CheckMeshArgs) -> Result<bool> {
-    let scene = load_scene(Some(&a.path))?;
+    let scene = load_flat_scene(Some(&a.path), "check-mesh")?;
     let mut r = check_mesh(&scene.mesh.triangles);
     // Bounds in world coordinates (the mesh is stored about its own origin).
     let o = scene.mesh.origin;

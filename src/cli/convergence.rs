@@ -10,7 +10,7 @@ use tracery::convergence::{self, ConvergenceConfig, Peer, tick, time_to};
 use tracery::render::Integrator;
 use tracery::sampling::SamplerKind;
 
-use super::{ensure_parent, load_scene};
+use super::{ensure_parent, load_flat_scene};
 
 #[derive(Args, Debug)]
 pub struct ConvergenceArgs {
@@ -63,7 +63,7 @@ pub struct ConvergenceArgs {
 }
 
 pub fn run(a: ConvergenceArgs) -> Result<()> {
-    let mut scene = load_scene(a.scene.as_deref())?;
+    let mut scene = load_flat_scene(a.scene.as_deref(), "convergence")?;
     if let Some(i) = a.integrator {
         scene.integrator = i;
     }

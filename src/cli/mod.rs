@@ -172,6 +172,32 @@ pub fn load_scene(path: Option<&Path>) -> Result<Scene> {
     Ok(scene)
 }
 
+/// [`load_scene`] for a command that studies one tree over all of a scene's triangles: a
+/// scene that places meshes many times is flattened into one mesh (said on stderr), or
+/// refused when that would make more than [`FLAT_LIMIT`] triangles.
+pub fn load_flat_scene(path: Option<&Path>, command: &str) -> Result<Scene> {
+    let scene = load_scene(path)?;
+    if scene.instances.is_empty() {
+        return Ok(scene);
+    }
+    let n = scene.triangle_count();
+    let placed = scene.instances.placements().len();
+    if n > FLAT_LIMIT {
+        anyhow::bail!(
+            "{}: places {placed} copies of meshes, {n} triangles in all; `tracery {command}` studies them flattened into one mesh, which is refused past {FLAT_LIMIT} triangles (`tracery render` and `tracery view` trace the copies as placements)",
+            scene.name
+        );
+    }
+    eprintln!(
+        "note: {}: its {placed} placed copies are flattened into one mesh of {n} triangles for `tracery {command}`",
+        scene.name
+    );
+    Ok(scene.flattened())
+}
+
+/// The most triangles a scene of placed copies may be flattened into ([`load_flat_scene`]).
+pub const FLAT_LIMIT: usize = 50_000_000;
+
 /// Makes the global rayon pool use `threads` threads (0: all cores).
 pub fn set_threads(threads: usize) -> Result<()> {
     if threads > 0 {

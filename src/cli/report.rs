@@ -15,7 +15,7 @@ use tracery::render::{RenderSettings, render};
 use tracery::rng::SplitMix64;
 use tracery::scene::Scene;
 
-use super::load_scene;
+use super::load_flat_scene;
 
 #[derive(Args, Debug)]
 pub struct ReportArgs {
@@ -168,7 +168,7 @@ fn moved(tris: &[[Vec3; 3]], reach: f32) -> Vec<[Vec3; 3]> {
 fn instances_table(mesh: Option<PathBuf>, count: usize, repeat: usize) -> Result<()> {
     use std::sync::Arc;
     use tracery::bvh::{Instance, TwoLevel};
-    let scene = load_scene(mesh.as_deref())?;
+    let scene = load_flat_scene(mesh.as_deref(), "report")?;
     let tree = Arc::new(Bvh::build(&scene.mesh.triangles, &BuildOptions::sah()));
     let b = scene.mesh.bounds();
     let size = (Vec3::from(b.max) - Vec3::from(b.min)).length().max(1e-6);
@@ -223,6 +223,47 @@ fn instances_table(mesh: Option<PathBuf>, count: usize, repeat: usize) -> Result
         "| the mesh's tree copied once per placement | {} bytes |",
         mesh_bytes as u128 * count as u128
     );
+    // One placement at the identity against the mesh's own tree: what the top level and
+    // the ray's trip into the mesh's frame cost on the canonical camera rays, in
+    // alternating rounds on one thread.
+    let one = TwoLevel::new(
+        vec![tree.clone()],
+        &[Instance {
+            mesh: 0,
+            to_world: glam::Affine3A::IDENTITY,
+        }],
+    )
+    .map_err(anyhow::Error::msg)?;
+    let rays = bench::canonical_rays(&scene.mesh.bounds());
+    let (mut flat_s, mut one_s) = (f64::INFINITY, f64::INFINITY);
+    for _ in 0..repeat.max(1) {
+        let t = Instant::now();
+        let hits = pool.install(|| {
+            rays.iter()
+                .filter(|r| tree.intersect(r, f32::INFINITY).is_some())
+                .count()
+        });
+        flat_s = flat_s.min(t.elapsed().as_secs_f64());
+        let t = Instant::now();
+        let placed = pool.install(|| {
+            rays.iter()
+                .filter(|r| one.intersect(r, f32::INFINITY).is_some())
+                .count()
+        });
+        one_s = one_s.min(t.elapsed().as_secs_f64());
+        anyhow::ensure!(hits == placed, "{hits} hits flat, {placed} through one placement");
+    }
+    let mrays = |s: f64| rays.len() as f64 / s / 1e6;
+    println!(
+        "| closest hits, the mesh's own tree ({} camera rays) | {:.2} Mrays/s |",
+        rays.len(),
+        mrays(flat_s)
+    );
+    println!(
+        "| closest hits, one placement under a top level (scenes load a lone copy without one) | {:.2} Mrays/s ({:.2}x) |",
+        mrays(one_s),
+        flat_s / one_s
+    );
     Ok(())
 }
 
@@ -230,7 +271,7 @@ fn refit_table(mesh: PathBuf, reach: f32, repeat: usize) -> Result<()> {
     if !(reach.is_finite() && reach >= 0.0) {
         anyhow::bail!("--move {reach}: expected a fraction of the mesh's size, 0 or more");
     }
-    let scene = load_scene(Some(&mesh))?;
+    let scene = load_flat_scene(Some(&mesh), "report")?;
     let tris = &scene.mesh.triangles;
     let b = scene.mesh.bounds();
     let size = (Vec3::from(b.max) - Vec3::from(b.min)).length();
@@ -328,7 +369,7 @@ fn splits(meshes: Vec<PathBuf>, repeat: usize) -> Result<()> {
     );
     println!("|---|---:|---|---:|---:|---:|---:|---:|---:|---:|");
     for src in &sources {
-        let scene = load_scene(src.as_deref())?;
+        let scene = load_flat_scene(src.as_deref(), "report")?;
         let config = BenchConfig {
             threads: vec![1, cores],
             repeat,
@@ -387,7 +428,7 @@ fn splits(meshes: Vec<PathBuf>, repeat: usize) -> Result<()> {
 }
 
 fn bins_table(mesh: PathBuf, bins: Vec<u32>, repeat: usize) -> Result<()> {
-    let scene = load_scene(Some(&mesh))?;
+    let scene = load_flat_scene(Some(&mesh), "report")?;
     let mut ours = Vec::new();
     for &b in &bins {
         let options = BuildOptions {
@@ -487,10 +528,10 @@ fn threads_table(
     (width, height, spp): (u32, u32, u32),
     repeat: usize,
 ) -> Result<()> {
-    let mut scene = load_scene(scene.as_deref())?;
+    let mut scene = load_flat_scene(scene.as_deref(), "report")?;
     scene.integrator = tracery::scene::Integrator::Path;
     let built = match &build {
-        Some(p) => load_scene(Some(p))?,
+        Some(p) => load_flat_scene(Some(p), "report")?,
         None => scene.clone(),
     };
     let settings = RenderSettings {
@@ -573,7 +614,7 @@ fn scaling(
     let cores = all_threads();
     let mut inputs: Vec<(String, Vec<[glam::Vec3; 3]>)> = Vec::new();
     for m in &meshes {
-        let scene = load_scene(Some(m))?;
+        let scene = load_flat_scene(Some(m), "report")?;
         inputs.push((scene.name.clone(), scene.mesh.triangles));
     }
     if generated > 0 {

@@ -6,7 +6,7 @@ use anyhow::Result;
 use clap::Args;
 use tracery::bvh::{BuildOptions, Bvh, BvhStats, SplitMethod};
 
-use super::load_scene;
+use super::load_flat_scene;
 
 #[derive(Args, Debug)]
 pub struct StatsArgs {
@@ -37,7 +37,7 @@ struct Row {
 }
 
 pub fn run(a: StatsArgs) -> Result<()> {
-    let scene = load_scene(a.path.as_deref())?;
+    let scene = load_flat_scene(a.path.as_deref(), "stats")?;
     let base = BuildOptions {
         split: a.split.unwrap_or(SplitMethod::Sah),
         bins: a.bins,

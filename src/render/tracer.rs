@@ -100,6 +100,10 @@ impl<'a> Tracer<'a> {
         lights: std::sync::Arc<LightSet>,
     ) -> Self {
         let bvh = bvh.into();
+        assert!(
+            scene.instances.is_empty() || matches!(bvh, Tree::TwoLevel(_)),
+            "a scene that places meshes many times is traced through its two levels (Accel::for_scene)"
+        );
         let looks: Vec<Option<Look>> = scene
             .materials
             .iter()

@@ -556,8 +556,11 @@ impl Ctx<'_> {
                 }
             }
             let transform = transform_of(m);
-            if copies.is_empty() {
-                part.transform(&transform);
+            if copies.len() <= 1 {
+                // Placed once (a grid of one copy too): with the scene's own triangles, traced
+                // through one tree without a top level.
+                let copy = copies.first().copied().unwrap_or(DAffine3::IDENTITY);
+                part.transform(&(copy * transform));
                 mesh.append(part, 0);
             } else {
                 let index = shared.len() as u32;
