@@ -108,7 +108,14 @@ fn error_of(path: &Path) -> String {
 
 /// World positions of triangle `i`.
 fn world(scene: &Scene, i: usize) -> [Vec3; 3] {
-    scene.mesh.triangles[i].map(|v| (scene.mesh.origin + v.as_dvec3()).as_vec3())
+    scene
+        .triangle(i as u32)
+        .map(|v| (scene.mesh.origin + v.as_dvec3()).as_vec3())
+}
+
+/// The texture coordinates of scene triangle `i`'s corners.
+fn corner_uvs(scene: &Scene, i: usize) -> [Vec2; 3] {
+    [(0.0, 0.0), (1.0, 0.0), (0.0, 1.0)].map(|(u, v)| scene.uv_at(0, i as u32, u, v))
 }
 
 fn close(a: Vec3, b: Vec3) -> bool {
@@ -134,6 +141,8 @@ fn node_transforms_compose_and_instances_and_mirrors_are_placed() {
     let p = write(dir.path(), "nodes.gltf", &doc(nodes, json!({})));
     let s = Scene::load(&p).unwrap();
     assert_eq!(s.triangle_count(), 3);
+    // The mesh three nodes use is held once, each node a placement.
+    assert_eq!((s.instances.meshes.len(), s.instances.placements().len()), (1, 3));
     let expect = [
         [
             Vec3::new(10., 0., 0.),
@@ -159,19 +168,19 @@ fn node_transforms_compose_and_instances_and_mirrors_are_placed() {
             "triangle {i}: {got:?}, expected {want:?}"
         );
         assert!(close(face_normal(&got), Vec3::Z), "triangle {i} faces +z");
-        for n in s.mesh.normals[i] {
+        for n in s.normals(i as u32) {
             assert!(close(n, Vec3::Z), "triangle {i}: shading normal {n}");
         }
         // Texture coordinates follow their corners.
-        let uv = s.mesh.uvs[i];
+        let uv = corner_uvs(&s, i);
         assert_eq!(uv[0], Vec2::new(0.0, 0.0));
     }
     assert_eq!(
-        s.mesh.uvs[0],
+        corner_uvs(&s, 0),
         [Vec2::ZERO, Vec2::new(1., 0.), Vec2::new(0., 1.)]
     );
     assert_eq!(
-        s.mesh.uvs[2],
+        corner_uvs(&s, 2),
         [Vec2::ZERO, Vec2::new(0., 1.), Vec2::new(1., 0.)]
     );
 }
@@ -674,10 +683,8 @@ fn wrong_types_cycles_and_depth_are_errors() {
     assert!(e.contains("GLB"), "{e}");
 }
 
-/// The process's peak resident memory so far (`VmHWM`), in kilobytes.
-
-/// A 3 KB file whose nodes place a 200-triangle mesh 262,144 times (each node lists the next
-/// twice: 52 million triangles) is refused before anything is placed: in a child process
+/// A 3 KB file whose nodes place a 200-triangle morphed mesh 262,144 times (each node lists
+/// the next twice: 52 million triangles) is refused before anything is placed: in a child process
 /// (this test run again), the load's peak memory grows by no more than a few MB.
 #[test]
 fn a_small_file_that_places_too_many_triangles_is_refused_before_taking_the_memory() {
@@ -705,12 +712,18 @@ fn a_small_file_that_places_too_many_triangles_is_refused_before_taking_the_memo
         {"bufferView": 0, "componentType": 5126, "count": 3, "type": "VEC3"},
         {"bufferView": 1, "componentType": 5123, "count": 600, "type": "SCALAR"}
     ]);
-    d["meshes"] = json!([{"primitives": [{"attributes": {"POSITION": 0}, "indices": 1}]}]);
+    // A morph target keeps the mesh from being held once (each node's copy could be
+    // weighted its own way): every placement would be copied.
+    d["meshes"] = json!([{"primitives": [{"attributes": {"POSITION": 0}, "indices": 1,
+        "targets": [{"POSITION": 0}]}]}]);
     if let Some(dir) = std::env::var_os(CHILD) {
         let path = write(Path::new(&dir), "many.gltf", &d);
         let before = common::peak_kb();
         let e = format!("{:#}", Scene::load(&path).expect_err("too many triangles"));
-        println!("peak growth {} kB", common::peak_kb().saturating_sub(before));
+        println!(
+            "peak growth {} kB",
+            common::peak_kb().saturating_sub(before)
+        );
         println!("error: {e}");
         return;
     }
@@ -2915,4 +2928,59 @@ fn a_clear_coat_adds_its_highlight_over_the_base() {
         (c / want_coated - 1.0).abs() < 0.015,
         "coated {c}, want {want_coated}"
     );
+}
+
+/// A mesh that many nodes place, unskinned and unmorphed, is held once: each node a
+/// placement (mirrored ones keep their front faces front, nodes that scale it to nothing are
+/// left out), its triangles where the nodes' transforms put them; a mesh one node places
+/// stays among the scene's own triangles.
+#[test]
+fn a_mesh_many_nodes_place_is_held_once() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut nodes: Vec<Value> = (0..400)
+        .map(|i| json!({"mesh": 0, "translation": [(i % 20) as f64 * 2.0, (i / 20) as f64 * 2.0, 0.0]}))
+        .collect();
+    nodes.push(json!({"mesh": 0, "scale": [-1.0, 1.0, 1.0], "translation": [0.0, 0.0, 5.0]}));
+    nodes.push(json!({"mesh": 0, "scale": [0.0, 0.0, 0.0]}));
+    nodes.push(json!({"mesh": 1, "translation": [0.0, 0.0, -3.0]}));
+    let mut d = doc(Value::Array(nodes), json!({}));
+    let prim = d["meshes"][0].clone();
+    d["meshes"] = json!([prim, prim]);
+    let p = write(dir.path(), "forest.gltf", &d);
+    let s = Scene::load(&p).unwrap();
+    assert_eq!(s.instances.meshes.len(), 1, "mesh 0 held once");
+    assert_eq!(s.instances.placements().len(), 401, "the zero scale left out");
+    assert_eq!(s.mesh.triangles.len(), 1, "mesh 1, placed once, is the scene's own");
+    assert_eq!(s.triangle_count(), 402);
+    let at = |prim: u32| s.triangle(prim).map(|v| (s.mesh.origin + v.as_dvec3()).as_vec3());
+    for (k, prim) in [(0u32, 1u32), (57, 58), (399, 400)] {
+        let o = Vec3::new((k % 20) as f32 * 2.0, (k / 20) as f32 * 2.0, 0.0);
+        let want = [o, o + Vec3::X, o + Vec3::Y];
+        let got = at(prim);
+        assert!(got.iter().zip(&want).all(|(a, b)| close(*a, *b)), "{k}: {got:?}");
+        assert!(close(face_normal(&got), Vec3::Z));
+    }
+    // The mirrored node: corners 1 and 2 swapped back, facing +z, its texture coordinates
+    // following their corners.
+    let m = at(401);
+    let o = Vec3::new(0.0, 0.0, 5.0);
+    assert!(close(m[0], o) && close(m[1], o + Vec3::Y) && close(m[2], o - Vec3::X), "{m:?}");
+    assert!(close(face_normal(&m), Vec3::Z));
+    assert!(s.normals(401).iter().all(|n| close(*n, Vec3::Z)));
+    assert_eq!(s.uv_at(0, 401, 1.0, 0.0), Vec2::new(0.0, 1.0));
+    // Rendered through two levels, the picture of its copies flattened.
+    let accel = tracery::bvh::Accel::for_scene(&s, &BuildOptions::sah()).unwrap();
+    let flat = s.flattened();
+    let settings = tracery::render::RenderSettings {
+        width: 48,
+        height: 36,
+        spp: 4,
+        ..Default::default()
+    };
+    let a = tracery::render::render(&s, &accel, &settings, &|_| {}).unwrap().film.mean();
+    let bvh = Bvh::build(&flat.mesh.triangles, &BuildOptions::sah());
+    let b = tracery::render::render(&flat, &bvh, &settings, &|_| {}).unwrap().film.mean();
+    let diff: f32 = a.iter().zip(&b).map(|(p, q)| (*p - *q).abs().element_sum()).sum();
+    let total: f32 = b.iter().map(|p| p.element_sum()).sum();
+    assert!(total > 0.0 && diff <= 1e-3 * total, "{diff} of {total}");
 }

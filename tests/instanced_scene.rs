@@ -73,7 +73,12 @@ intensity = 20.0
 
 fn load(text: &str) -> anyhow::Result<Scene> {
     let path = Path::new("grid.toml");
-    tracery::scene::file::parse(path, text, &|p| anyhow::bail!("{}: no files here", p.display()), false)
+    tracery::scene::file::parse(
+        path,
+        text,
+        &|p| anyhow::bail!("{}: no files here", p.display()),
+        false,
+    )
 }
 
 /// Mean and largest difference of two pictures, relative to the first's mean, and the
@@ -98,7 +103,11 @@ fn a_grid_renders_the_picture_of_its_copies_flattened() {
         scene.integrator = integrator;
         assert_eq!(scene.instances.meshes.len(), 4);
         assert_eq!(scene.instances.placements().len(), 12 + 12 + 6 + 2);
-        assert_eq!(scene.mesh.triangles.len(), 2, "the floor alone is placed once");
+        assert_eq!(
+            scene.mesh.triangles.len(),
+            2,
+            "the floor alone is placed once"
+        );
         let flat = scene.flattened();
         assert_eq!(flat.triangle_count(), scene.triangle_count());
         let settings = RenderSettings {
@@ -121,7 +130,10 @@ fn a_grid_renders_the_picture_of_its_copies_flattened() {
         // The same samples through the same triangles: pixels differ only where a hit's
         // last bits (found in the mesh's frame) send a path elsewhere.
         assert!(mean < 2e-3, "{integrator}: mean difference {mean}");
-        assert!(differ * 50 < a.len(), "{integrator}: {differ} pixels differ");
+        assert!(
+            differ * 50 < a.len(),
+            "{integrator}: {differ} pixels differ"
+        );
         // And the picture is not empty: the grid's lit boxes are in it.
         let lit = a.iter().filter(|p| p.max_element() > 0.05).count();
         assert!(lit * 4 > a.len(), "{lit} lit pixels");
@@ -134,9 +146,20 @@ fn every_placed_triangle_reads_as_its_flattened_copy() {
     let scene = load(GRID).unwrap();
     let flat = scene.flattened();
     for prim in 0..scene.triangle_count() as u32 {
-        assert_eq!(scene.triangle(prim), flat.mesh.triangles[prim as usize], "{prim}");
-        assert_eq!(scene.normals(prim), flat.mesh.normals[prim as usize], "{prim}");
-        assert_eq!(scene.material_id(prim), flat.mesh.material_ids[prim as usize]);
+        assert_eq!(
+            scene.triangle(prim),
+            flat.mesh.triangles[prim as usize],
+            "{prim}"
+        );
+        assert_eq!(
+            scene.normals(prim),
+            flat.mesh.normals[prim as usize],
+            "{prim}"
+        );
+        assert_eq!(
+            scene.material_id(prim),
+            flat.mesh.material_ids[prim as usize]
+        );
     }
     // The mirrored spheres' normals still point out of them.
     let b = scene.bounds();
@@ -147,7 +170,10 @@ fn every_placed_triangle_reads_as_its_flattened_copy() {
 fn bad_grids_are_refused_with_the_file_and_line() {
     let cases = [
         ("count = [0, 1, 1], step = [1.0, 0.0, 0.0]", "at least 1"),
-        ("count = [1000, 1000, 2], step = [1.0, 1.0, 1.0]", "more than 1000000"),
+        (
+            "count = [1000, 1000, 2], step = [1.0, 1.0, 1.0]",
+            "more than 1000000",
+        ),
         ("count = [2, 1, 1], step = [nan, 0.0, 0.0]", "finite"),
     ];
     for (grid, want) in cases {
@@ -157,7 +183,10 @@ fn bad_grids_are_refused_with_the_file_and_line() {
     }
     let text = "[[meshes]]\nshape = \"cube\"\nscale = [0.0, 1.0, 1.0]\ngrid = { count = [2, 1, 1], step = [1.0, 0.0, 0.0] }\n";
     let e = format!("{:#}", load(text).unwrap_err());
-    assert!(e.contains("grid.toml") && e.contains("cannot be inverted"), "{e}");
+    assert!(
+        e.contains("grid.toml") && e.contains("cannot be inverted"),
+        "{e}"
+    );
 }
 
 /// A thousand placements of the 202k dragon (202 million triangles) load and render in about
@@ -197,7 +226,14 @@ fn a_thousand_dragons_take_one_dragons_memory() {
         };
         assert_eq!(top == 0, count == 1);
         println!("triangles {}", scene.triangle_count());
-        println!("hit {}", out.film.mean().iter().filter(|p| p.max_element() > 0.0).count());
+        println!(
+            "hit {}",
+            out.film
+                .mean()
+                .iter()
+                .filter(|p| p.max_element() > 0.0)
+                .count()
+        );
         println!("placements {}", scene.instances.bytes() + top);
         println!("peak {} kB", common::peak_kb());
         return;
@@ -205,7 +241,10 @@ fn a_thousand_dragons_take_one_dragons_memory() {
     let name = "a_thousand_dragons_take_one_dragons_memory";
     let one = common::run_child(name, CHILD, "1".as_ref());
     let many = common::run_child(name, CHILD, "1000".as_ref());
-    let (peak1, peak) = (common::figure(&one, "peak "), common::figure(&many, "peak "));
+    let (peak1, peak) = (
+        common::figure(&one, "peak "),
+        common::figure(&many, "peak "),
+    );
     let bytes = common::figure(&many, "placements ");
     assert_eq!(common::figure(&one, "placements "), 0);
     assert_eq!(common::figure(&many, "triangles "), 1000 * 202_520);

@@ -108,7 +108,9 @@ impl Accel {
     pub fn build_ms(&self) -> f64 {
         match self {
             Accel::Flat(b) => b.stats.build_ms,
-            Accel::TwoLevel(t) => t.build_ms + t.meshes.iter().map(|m| m.stats.build_ms).sum::<f64>(),
+            Accel::TwoLevel(t) => {
+                t.build_ms + t.meshes.iter().map(|m| m.stats.build_ms).sum::<f64>()
+            }
         }
     }
 
@@ -183,7 +185,12 @@ impl Tree<'_> {
     }
 
     /// Light that passes along the ray up to `t_max` (see [`Bvh::transmittance`]).
-    pub fn transmittance(&self, ray: &Ray, t_max: f32, mut pass: impl FnMut(u32, f32) -> Vec3) -> Vec3 {
+    pub fn transmittance(
+        &self,
+        ray: &Ray,
+        t_max: f32,
+        mut pass: impl FnMut(u32, f32) -> Vec3,
+    ) -> Vec3 {
         match self {
             Tree::Flat(b) => b.transmittance(ray, t_max, pass),
             Tree::TwoLevel(t) => {

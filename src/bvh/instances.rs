@@ -317,11 +317,22 @@ impl TwoLevel {
         self.intersect(ray, t_max).map(|h| self.global(h))
     }
 
-    /// The hit `h`, its triangle numbered in the list of all instances' triangles.
+    /// The hit `h`, its triangle numbered in the list of all instances' triangles; under a
+    /// mirroring instance, `u` and `v` swapped: the world's triangle lists the mesh's
+    /// corners 1 and 2 the other way round, so its front face stays the front face.
     #[inline]
     pub fn global(&self, h: InstanceHit) -> Hit {
+        let i = h.instance as usize;
+        let mirrored = self.to_mesh[i].matrix3.determinant() < 0.0;
+        let (u, v) = if mirrored {
+            (h.hit.v, h.hit.u)
+        } else {
+            (h.hit.u, h.hit.v)
+        };
         Hit {
-            prim: self.first[h.instance as usize] + h.hit.prim,
+            prim: self.first[i] + h.hit.prim,
+            u,
+            v,
             ..h.hit
         }
     }

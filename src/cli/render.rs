@@ -329,7 +329,7 @@ fn finish(
         )
         .expect("valid template"),
     );
-    let plan = RenderPlan::new(&scene, &settings);
+    let plan = RenderPlan::new(scene, settings);
     let env = EnvironmentMap::load(&scene.environment, plan.environment)?;
     let start = Instant::now();
     let out = render_with_plan(scene, bvh, &env, settings, plan, &|_| bar.inc(1));

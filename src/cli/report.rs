@@ -251,7 +251,10 @@ fn instances_table(mesh: Option<PathBuf>, count: usize, repeat: usize) -> Result
                 .count()
         });
         one_s = one_s.min(t.elapsed().as_secs_f64());
-        anyhow::ensure!(hits == placed, "{hits} hits flat, {placed} through one placement");
+        anyhow::ensure!(
+            hits == placed,
+            "{hits} hits flat, {placed} through one placement"
+        );
     }
     let mrays = |s: f64| rays.len() as f64 / s / 1e6;
     println!(

@@ -103,12 +103,12 @@ impl LightSet {
                 }
                 None => {
                     set.area += area;
-                    set.tris.push(prim as u32);
+                    set.tris.push(prim);
                     set.cdf.push(set.area);
                     Owner::Set
                 }
             };
-            set.owner.insert(prim as u32, owner);
+            set.owner.insert(prim, owner);
         }
         for (i, light) in scene.lights.iter().enumerate() {
             if let Light::Rect { edge_u, edge_v, .. } = light {

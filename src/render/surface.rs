@@ -319,9 +319,7 @@ fn normal_mapped_by(
     if t == glam::Vec4::ZERO {
         return None;
     }
-    let texel = map
-        .sample(scene.uv_at(map.uv_set, prim, u, v))
-        .truncate();
+    let texel = map.sample(scene.uv_at(map.uv_set, prim, u, v)).truncate();
     crate::scene::tangents::perturbed(n, t, texel, scale)
 }
 

@@ -241,6 +241,18 @@ enum EnvDef {
 /// show almost nothing but at the silhouettes.
 const DEFAULT_SHEEN_ROUGHNESS: f32 = 0.5;
 
+/// What one `[[meshes]]` entry's file or shape gives.
+struct Part {
+    /// The triangles it places once.
+    mesh: Mesh,
+    /// Its materials.
+    materials: Vec<Material>,
+    /// The meshes its file places many times, each in its own frame.
+    shared: Vec<Mesh>,
+    /// Their placements: a mesh of `shared` and its transform within the file.
+    placed: Vec<(u32, DAffine3)>,
+}
+
 /// What a scene file's `[[meshes]]` make.
 struct Meshes {
     /// The entries placed once, as one mesh.
@@ -489,34 +501,43 @@ impl Ctx<'_> {
                 Some(g) => self.grid(g)?,
                 None => Vec::new(),
             };
-            let (mut part, part_materials) =
-                self.mesh_part(m, &span, &mut warnings, &mut animation)?;
-            if !copies.is_empty() {
-                // The bounds, checked before a placement is made.
-                placements += copies.len() as u64;
-                triangles += copies.len() as u64 * part.triangles.len() as u64;
-                let g = m.grid.as_ref().expect("copies come from a grid");
-                if placements > MAX_PLACEMENTS {
-                    return Err(self.at(
-                        g.span().start,
-                        format!(
-                            "the grids make {placements} copies, more than {MAX_PLACEMENTS}"
-                        ),
-                    ));
-                }
-                if triangles > crate::bvh::MAX_PLACED {
-                    return Err(self.at(
-                        g.span().start,
-                        format!(
-                            "the grids place {triangles} triangles, more than the {} one scene can number",
-                            crate::bvh::MAX_PLACED
-                        ),
-                    ));
-                }
+            let Part {
+                mesh: part,
+                materials: part_materials,
+                shared: inner,
+                placed: inner_placed,
+            } = self.mesh_part(m, &span, &mut warnings, &mut animation)?;
+            // The bounds, checked before a placement is made: each copy places the entry's
+            // mesh and the meshes its file places many times.
+            let per_copy = inner_placed.len() as u64 + 1;
+            let per_copy_tris = part.triangles.len() as u64
+                + inner_placed
+                    .iter()
+                    .map(|(k, _)| inner[*k as usize].triangles.len() as u64)
+                    .sum::<u64>();
+            let copies_n = copies.len().max(1) as u64;
+            placements += copies_n * per_copy - 1;
+            triangles += copies_n * per_copy_tris;
+            let at = m.grid.as_ref().map_or(span.start, |g| g.span().start);
+            if placements > MAX_PLACEMENTS {
+                return Err(self.at(
+                    at,
+                    format!("the meshes make {placements} copies, more than {MAX_PLACEMENTS}"),
+                ));
             }
+            if triangles > crate::bvh::MAX_PLACED {
+                return Err(self.at(
+                    at,
+                    format!(
+                        "the meshes place {triangles} triangles, more than the {} one scene can number",
+                        crate::bvh::MAX_PLACED
+                    ),
+                ));
+            }
+            let mut meshes: Vec<Mesh> = std::iter::once(part).chain(inner).collect();
             if let Some(id) = override_id
                 && materials[id as usize].has_height_map()
-                && part.uvs.is_empty()
+                && meshes.iter().any(|p| p.uvs.is_empty())
             {
                 warnings.push(format!(
                 "{}:{}: material `{}` has a height map, but the mesh has no texture coordinates: not applied",
@@ -530,37 +551,58 @@ impl Ctx<'_> {
             {
                 // The mesh's own tangents were made for its own materials: MikkTSpace's for the
                 // whole mesh, in its own frame (turned with it below).
-                if part.uvs.is_empty() {
+                if meshes.iter().any(|p| p.uvs.is_empty()) {
                     warnings.push(format!(
                     "{}:{}: material `{}` has a normal map, but the mesh has no texture coordinates: not applied",
                     self.path.display(),
                     line_of(self.text, span.start),
                     materials[id as usize].name
                 ));
-                    part.tangents = Vec::new();
-                } else {
-                    part.tangents = super::tangents::mikktspace(
-                        &part.triangles,
-                        &part.normals,
-                        &part.uvs,
-                        |_| true,
-                    );
+                }
+                for part in &mut meshes {
+                    part.tangents = if part.uvs.is_empty() {
+                        Vec::new()
+                    } else {
+                        super::tangents::mikktspace(
+                            &part.triangles,
+                            &part.normals,
+                            &part.uvs,
+                            |_| true,
+                        )
+                    };
                 }
             }
-            match override_id {
-                Some(id) => part.material_ids.iter_mut().for_each(|x| *x = id),
-                None => {
-                    let offset = materials.len() as u32;
-                    materials.extend(part_materials);
-                    part.material_ids.iter_mut().for_each(|x| *x += offset);
+            let offset = materials.len() as u32;
+            if override_id.is_none() {
+                materials.extend(part_materials);
+            }
+            for part in &mut meshes {
+                match override_id {
+                    Some(id) => part.material_ids.iter_mut().for_each(|x| *x = id),
+                    None => part.material_ids.iter_mut().for_each(|x| *x += offset),
                 }
             }
             let transform = transform_of(m);
-            if copies.len() <= 1 {
+            let mut meshes = meshes.into_iter();
+            let mut part = meshes.next().expect("the entry's own mesh");
+            let first_inner = shared.len() as u32;
+            shared.extend(meshes);
+            let copies = if copies.is_empty() {
+                vec![DAffine3::IDENTITY]
+            } else {
+                copies
+            };
+            for c in &copies {
+                placed.extend(
+                    inner_placed
+                        .iter()
+                        .map(|(k, w)| (first_inner + k, *c * transform * *w)),
+                );
+            }
+            if copies.len() == 1 {
                 // Placed once (a grid of one copy too): with the scene's own triangles, traced
                 // through one tree without a top level.
-                let copy = copies.first().copied().unwrap_or(DAffine3::IDENTITY);
-                part.transform(&(copy * transform));
+                part.transform(&(copies[0] * transform));
                 mesh.append(part, 0);
             } else {
                 let index = shared.len() as u32;
@@ -582,7 +624,10 @@ impl Ctx<'_> {
         let d = g.get_ref();
         let n = d.count.iter().map(|&c| c as u64).product::<u64>();
         if n == 0 {
-            return Err(self.at(g.span().start, "a grid's count is at least 1 along each axis".into()));
+            return Err(self.at(
+                g.span().start,
+                "a grid's count is at least 1 along each axis".into(),
+            ));
         }
         if n > MAX_PLACEMENTS {
             return Err(self.at(
@@ -592,7 +637,10 @@ impl Ctx<'_> {
         }
         let turn = d.turn.unwrap_or(0.0);
         if !(d.step.iter().all(|s| s.is_finite()) && turn.is_finite()) {
-            return Err(self.at(g.span().start, "a grid's step and turn are finite numbers".into()));
+            return Err(self.at(
+                g.span().start,
+                "a grid's step and turn are finite numbers".into(),
+            ));
         }
         let mut out = Vec::with_capacity(n as usize);
         for z in 0..d.count[2] {
@@ -618,7 +666,7 @@ impl Ctx<'_> {
         span: &std::ops::Range<usize>,
         warnings: &mut Vec<String>,
         animation: &mut Option<f32>,
-    ) -> Result<(Mesh, Vec<Material>)> {
+    ) -> Result<Part> {
         Ok(match (&m.path, m.shape) {
             (Some(p), None) => {
                 let file = self.resolve(p.get_ref());
@@ -639,7 +687,12 @@ impl Ctx<'_> {
                 if let Some(a) = loaded.animation {
                     *animation = Some(animation.map_or(a, |b| b.max(a)));
                 }
-                (loaded.mesh, loaded.materials)
+                Part {
+                    mesh: loaded.mesh,
+                    materials: loaded.materials,
+                    shared: loaded.shared,
+                    placed: loaded.placed,
+                }
             }
             (None, Some(shape)) => {
                 if let Some(a) = &m.crease_angle {
@@ -658,7 +711,12 @@ impl Ctx<'_> {
                     ShapeDef::Sphere => Mesh::smooth_sphere(tris),
                     _ => Mesh::from_triangles(tris, 0),
                 };
-                (part, vec![Material::default()])
+                Part {
+                    mesh: part,
+                    materials: vec![Material::default()],
+                    shared: Vec::new(),
+                    placed: Vec::new(),
+                }
             }
             _ => {
                 return Err(self.at(
@@ -773,7 +831,8 @@ pub fn parse_at(
     // local frame (`Mesh::origin`, the world's origin for a scene near it), so they are moved
     // into it in f64.
     mesh.settle_origin();
-    let instances = place(&mut mesh, shared, &placed).map_err(|e| anyhow!("{}: {e}", path.display()))?;
+    let instances =
+        super::instances::place(&mut mesh, shared, &placed).map_err(|e| anyhow!("{}: {e}", path.display()))?;
     let origin = mesh.origin;
     let local = |p: [f64; 3]| (DVec3::from(p) - origin).as_vec3();
     let lights = def
@@ -829,41 +888,6 @@ pub fn parse_at(
     })
 }
 
-/// The grids' copies placed in the scene's frame (the frame of `mesh`, the entries placed
-/// once); when there are no such entries, the frame is put at the first copy, or at the
-/// world's origin when the copies span or near it (the rule of [`Mesh::settle_origin`]).
-fn place(
-    mesh: &mut Mesh,
-    shared: Vec<Mesh>,
-    placed: &[(u32, DAffine3)],
-) -> Result<super::Instances, super::PlaceError> {
-    let make = |origin: DVec3| -> Vec<crate::bvh::Instance> {
-        placed
-            .iter()
-            .map(|(m, w)| super::placing(w, shared[*m as usize].origin, origin, *m))
-            .collect()
-    };
-    let mut list = make(mesh.origin);
-    if mesh.triangles.is_empty()
-        && let Some((m, w)) = placed.first()
-    {
-        let mut origin = w.transform_point3(shared[*m as usize].origin);
-        list = make(origin);
-        let boxes: Vec<_> = shared.iter().map(Mesh::bounds).collect();
-        let b = super::placed_bounds(&boxes, &list);
-        if !b.is_empty() {
-            let (lo, hi) = (Vec3::from(b.min).as_dvec3(), Vec3::from(b.max).as_dvec3());
-            let centre = origin + 0.5 * (lo + hi);
-            if centre.abs().max_element() <= (hi - lo).max_element().max(1.0) {
-                origin = DVec3::ZERO;
-                list = make(origin);
-            }
-        }
-        mesh.origin = origin;
-    }
-    let meshes = shared.into_iter().map(std::sync::Arc::new).collect();
-    super::Instances::new(meshes, list, mesh.triangles.len() as u64)
-}
 
 /// Loads an OBJ, PLY or glTF through `read` (a glTF's own camera and lights are not used: the
 /// scene file gives them).

@@ -79,6 +79,11 @@ pub struct MeshFile {
     pub warnings: Vec<String>,
     /// How long the file's animations run, in seconds (glTF only; `None` without any).
     pub animation: Option<f32>,
+    /// Meshes the file places more than once (a glTF mesh several nodes use, unskinned and
+    /// without morph targets), each in its own frame, held once.
+    pub shared: Vec<Mesh>,
+    /// Their placements: a mesh of `shared` and its transform to the world.
+    pub placed: Vec<(u32, glam::DAffine3)>,
 }
 
 impl MeshFile {
@@ -91,6 +96,8 @@ impl MeshFile {
             lights: Vec::new(),
             warnings,
             animation: None,
+            shared: Vec::new(),
+            placed: Vec::new(),
         }
     }
 }

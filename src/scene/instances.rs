@@ -118,22 +118,30 @@ impl Instances {
     pub fn locate(&self, k: u32) -> (&Instance, &Mesh, usize) {
         let i = self.first.partition_point(|&f| f <= k) - 1;
         let p = &self.placements[i];
-        (p, &self.meshes[p.mesh as usize], (k - self.first[i]) as usize)
+        (
+            p,
+            &self.meshes[p.mesh as usize],
+            (k - self.first[i]) as usize,
+        )
     }
 
-    /// Corners of placed triangle `k`, in the scene's frame.
+    /// Corners of placed triangle `k`, in the scene's frame: under a mirroring placement,
+    /// corners 1 and 2 swapped, so the front face stays the front face (a hit's barycentric
+    /// `u` and `v` are swapped to match: [`crate::bvh::TwoLevel::global`]).
     #[inline]
     pub fn triangle(&self, k: u32) -> [Vec3; 3] {
         let (p, mesh, t) = self.locate(k);
-        mesh.triangles[t].map(|v| p.to_world.transform_point3(v))
+        corners(&p.to_world, mesh.triangles[t]).map(|v| p.to_world.transform_point3(v))
     }
 
-    /// Shading normals of placed triangle `k`, in the scene's frame (unit length).
+    /// Shading normals of placed triangle `k`'s corners (as [`Instances::triangle`] orders
+    /// them), in the scene's frame (unit length).
     #[inline]
     pub fn normals(&self, k: u32) -> [Vec3; 3] {
         let (p, mesh, t) = self.locate(k);
         let m = normal_matrix(&p.to_world);
-        mesh.normals[t].map(|n| Vec3::from(m * Vec3A::from(n)).normalize_or_zero())
+        corners(&p.to_world, mesh.normals[t])
+            .map(|n| Vec3::from(m * Vec3A::from(n)).normalize_or_zero())
     }
 
     /// Material of placed triangle `k`.
@@ -146,7 +154,8 @@ impl Instances {
     /// Texture coordinate of set `set` at barycentric `(u, v)` of placed triangle `k`.
     #[inline]
     pub fn uv_at(&self, set: u8, k: u32, u: f32, v: f32) -> Vec2 {
-        let (_, mesh, t) = self.locate(k);
+        let (p, mesh, t) = self.locate(k);
+        let (u, v) = if mirrors(&p.to_world) { (v, u) } else { (u, v) };
         mesh.uv_at(set, t as u32, u, v)
     }
 
@@ -156,6 +165,7 @@ impl Instances {
     #[inline]
     pub fn tangent_at(&self, k: u32, u: f32, v: f32) -> Vec4 {
         let (p, mesh, t) = self.locate(k);
+        let (u, v) = if mirrors(&p.to_world) { (v, u) } else { (u, v) };
         turn_tangent(&p.to_world, mesh.tangent_at(t as u32, u, v))
     }
 
@@ -177,16 +187,13 @@ impl Instances {
             triangles: ks().map(|k| self.triangle(k)).collect(),
             normals: ks().map(|k| self.normals(k)).collect(),
             material_ids: mesh.material_ids.clone(),
-            uvs: mesh.uvs.clone(),
-            uvs1: mesh.uvs1.clone(),
-            tangents: if mesh.tangents.is_empty() {
-                Vec::new()
-            } else {
-                mesh.tangents
-                    .iter()
-                    .map(|t| t.map(|v| turn_tangent(&p.to_world, v)))
-                    .collect()
-            },
+            uvs: mesh.uvs.iter().map(|c| corners(&p.to_world, *c)).collect(),
+            uvs1: mesh.uvs1.iter().map(|c| corners(&p.to_world, *c)).collect(),
+            tangents: mesh
+                .tangents
+                .iter()
+                .map(|t| corners(&p.to_world, t.map(|v| turn_tangent(&p.to_world, v))))
+                .collect(),
             origin,
         }
     }
@@ -201,7 +208,9 @@ pub fn placing(world: &DAffine3, mesh_origin: DVec3, scene_origin: DVec3, mesh: 
         mesh,
         to_world: Affine3A {
             matrix3: Mat3A::from(world.matrix3.as_mat3()),
-            translation: Vec3A::from((world.transform_point3(mesh_origin) - scene_origin).as_vec3()),
+            translation: Vec3A::from(
+                (world.transform_point3(mesh_origin) - scene_origin).as_vec3(),
+            ),
         },
     }
 }
@@ -225,6 +234,55 @@ pub fn placed_bounds(boxes: &[Aabb], placements: &[Instance]) -> Aabb {
         }
     }
     b
+}
+
+/// Copies of meshes (`placed`: a mesh of `shared` and its transform to the world) placed in the scene's frame (the frame of `mesh`, the entries placed
+/// once); when there are none, the frame is put at the first copy, or at the
+/// world's origin when the copies span or near it (the rule of [`Mesh::settle_origin`]).
+pub(crate) fn place(
+    mesh: &mut Mesh,
+    shared: Vec<Mesh>,
+    placed: &[(u32, DAffine3)],
+) -> Result<Instances, PlaceError> {
+    let make = |origin: DVec3| -> Vec<crate::bvh::Instance> {
+        placed
+            .iter()
+            .map(|(m, w)| placing(w, shared[*m as usize].origin, origin, *m))
+            .collect()
+    };
+    let mut list = make(mesh.origin);
+    if mesh.triangles.is_empty()
+        && let Some((m, w)) = placed.first()
+    {
+        let mut origin = w.transform_point3(shared[*m as usize].origin);
+        list = make(origin);
+        let boxes: Vec<_> = shared.iter().map(Mesh::bounds).collect();
+        let b = placed_bounds(&boxes, &list);
+        if !b.is_empty() {
+            let (lo, hi) = (Vec3::from(b.min).as_dvec3(), Vec3::from(b.max).as_dvec3());
+            let centre = origin + 0.5 * (lo + hi);
+            if centre.abs().max_element() <= (hi - lo).max_element().max(1.0) {
+                origin = DVec3::ZERO;
+                list = make(origin);
+            }
+        }
+        mesh.origin = origin;
+    }
+    let meshes = shared.into_iter().map(std::sync::Arc::new).collect();
+    Instances::new(meshes, list, mesh.triangles.len() as u64)
+}
+
+/// Whether `m` mirrors (turns the winding of a triangle around).
+#[inline]
+fn mirrors(m: &Affine3A) -> bool {
+    m.matrix3.determinant() < 0.0
+}
+
+/// A triangle's per-corner values in the order a placement by `m` shows them: corners 1
+/// and 2 swapped when `m` mirrors.
+#[inline]
+fn corners<T: Copy>(m: &Affine3A, c: [T; 3]) -> [T; 3] {
+    if mirrors(m) { [c[0], c[2], c[1]] } else { c }
 }
 
 /// The matrix that carries normals through `m`: the inverse transpose of its linear part.

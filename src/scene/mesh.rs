@@ -163,7 +163,8 @@ impl Mesh {
         }
     }
 
-    /// Applies an affine transform to positions and normals.
+    /// Applies an affine transform to positions, normals and tangents; a mirroring one swaps
+    /// corners 1 and 2 of every triangle, so the front face stays the front face.
     pub fn transform(&mut self, m: &glam::DAffine3) {
         // World position T(origin + v) = T(origin) + L v: the origin moves in f64, the local
         // positions only turn and scale.
@@ -192,6 +193,18 @@ impl Mesh {
                     .normalize_or_zero()
                     .extend(v.w * sign)
             });
+        }
+        if sign < 0.0 {
+            // A mirror turns each triangle's winding around: corners 1 and 2 swapped back, so
+            // the front face stays the front face (as glTF asks of its nodes).
+            fn swap<T>(list: &mut [[T; 3]]) {
+                list.iter_mut().for_each(|c| c.swap(1, 2));
+            }
+            swap(&mut self.triangles);
+            swap(&mut self.normals);
+            swap(&mut self.uvs);
+            swap(&mut self.uvs1);
+            swap(&mut self.tangents);
         }
     }
 

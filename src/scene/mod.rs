@@ -9,7 +9,7 @@ pub mod check;
 pub mod file;
 pub mod format;
 pub mod gltf;
-mod instances;
+pub(crate) mod instances;
 mod light;
 mod material;
 mod mesh;
@@ -144,7 +144,7 @@ impl Scene {
                     _ => None,
                 };
                 let own_lights = !d.lights.is_empty();
-                let mut scene = gltf::scene_of(name_of(path), d);
+                let mut scene = gltf::scene_of(name_of(path), d)?;
                 if let Some(b) = rest {
                     let (camera, light) = default_view(&b);
                     scene.camera = camera;

@@ -172,19 +172,20 @@ fn rebuild_bvh(
         .clone()
         .filter(|b| !scene.reframe && b.options == options);
     let built_cost = bvh.built_cost;
-    building
-        .job
-        .start(wanted, "tracery-bvh", move || {
-            let (own, update) = match previous {
-                Some(tree) => {
-                    let mut tree = (*tree).clone();
-                    let update = tree.refit_or_rebuild(&triangles.mesh.triangles, built_cost);
-                    (Arc::new(tree), Some(update))
-                }
-                None => (Arc::new(Bvh::build(&triangles.mesh.triangles, &options)), None),
-            };
-            (own.clone(), update, placed_trees(&triangles, own, &options))
-        });
+    building.job.start(wanted, "tracery-bvh", move || {
+        let (own, update) = match previous {
+            Some(tree) => {
+                let mut tree = (*tree).clone();
+                let update = tree.refit_or_rebuild(&triangles.mesh.triangles, built_cost);
+                (Arc::new(tree), Some(update))
+            }
+            None => (
+                Arc::new(Bvh::build(&triangles.mesh.triangles, &options)),
+                None,
+            ),
+        };
+        (own.clone(), update, placed_trees(&triangles, own, &options))
+    });
     building.started = Some(Instant::now());
 }
 

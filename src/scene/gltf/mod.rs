@@ -107,15 +107,24 @@ pub enum LightKind {
 
 /// Builds the scene of a loaded mesh file: its camera and lights (a glTF's) moved into the
 /// mesh's local frame, the defaults of a bare mesh where it has none.
-pub fn scene_of(name: String, d: MeshFile) -> Scene {
-    let mut scene = Scene::from_mesh(name, d.mesh, d.materials);
+pub fn scene_of(name: String, d: MeshFile) -> Result<Scene> {
+    let mut mesh = d.mesh;
+    let instances = super::instances::place(&mut mesh, d.shared, &d.placed)
+        .map_err(|e| anyhow::anyhow!("{name}: {e}"))?;
+    let mut scene = Scene::from_mesh(name, mesh, d.materials);
     scene.warnings = d.warnings;
     scene.animation = d.animation;
+    if !instances.is_empty() {
+        scene.instances = instances;
+        let (camera, light) = super::default_view(&scene.bounds());
+        scene.camera = camera;
+        scene.lights = vec![light];
+    }
     let origin = scene.mesh.origin;
     let local = |p: DVec3| (p - origin).as_vec3();
     if let Some(c) = &d.camera {
         let distance = {
-            let b = scene.mesh.bounds();
+            let b = scene.bounds();
             if b.is_empty() {
                 1.0
             } else {
@@ -133,7 +142,7 @@ pub fn scene_of(name: String, d: MeshFile) -> Scene {
         };
     }
     if !d.lights.is_empty() {
-        let b = scene.mesh.bounds();
+        let b = scene.bounds();
         let (centre, radius) = if b.is_empty() {
             (Vec3::ZERO, 1.0)
         } else {
@@ -175,7 +184,7 @@ pub fn scene_of(name: String, d: MeshFile) -> Scene {
             rotation_deg: 0.0,
         };
     }
-    scene
+    Ok(scene)
 }
 
 /// Loads glTF bytes named `path` (for messages), reading external buffers and images through
@@ -255,6 +264,8 @@ pub fn load_from(
         any_uvs: false,
         any_uvs1: false,
         visits: 0,
+        share: std::collections::HashSet::new(),
+        placed: Vec::new(),
         pose: animation::Pose::default(),
     };
 
@@ -406,15 +417,79 @@ struct Loader<'a> {
     any_uvs1: bool,
     /// Nodes placed so far (see [`MAX_NODE_VISITS`]).
     visits: usize,
+    /// Meshes placed by several nodes, none skinned and none morphed: held once, each node
+    /// a placement ([`Loader::plan`] finds them).
+    share: std::collections::HashSet<usize>,
+    /// The placements of the meshes in `share`: mesh and world transform, in node order.
+    placed: Vec<(usize, DMat4)>,
     /// The animations' nodes at the time asked for (empty without a time).
     pose: animation::Pose,
 }
 
 impl Loader<'_> {
     /// The mesh, with positions placed in a local frame and flat normals where the file has
-    /// none; warnings for what was left out.
-    fn finish(self) -> Result<MeshFile> {
-        let mut left: Vec<(String, usize)> = self.left_out.into_iter().collect();
+    /// none, and each shared mesh in its own frame with its placements; warnings for what
+    /// was left out.
+    fn finish(mut self) -> Result<MeshFile> {
+        // Each shared mesh's primitives, placed once at the identity into buffers of their
+        // own and made a mesh as the scene's own triangles are.
+        let mut ids: Vec<usize> = self.share.iter().copied().collect();
+        ids.sort_unstable();
+        let mut shared = Vec::with_capacity(ids.len());
+        for &m in &ids {
+            let own = self.take_buffers();
+            let mesh = self
+                .nodes
+                .iter()
+                .find_map(|n| n.mesh().filter(|x| x.index() == m));
+            if let Some(mesh) = mesh {
+                for prim in mesh.primitives() {
+                    self.place(m, prim, &[], &DMat4::IDENTITY, None)?;
+                }
+            }
+            let materials = self.materials.clone();
+            shared.push(self.mesh_of_buffers(&materials));
+            self.put_buffers(own);
+        }
+        let placed = std::mem::take(&mut self.placed)
+            .into_iter()
+            .map(|(m, w)| {
+                let k = ids.binary_search(&m).expect("a shared mesh") as u32;
+                (k, glam::DAffine3::from_mat4(w))
+            })
+            .collect();
+        let mut file = self.finish_own()?;
+        file.shared = shared;
+        file.placed = placed;
+        Ok(file)
+    }
+
+    /// The triangles gathered so far, taken out (the buffers left empty).
+    fn take_buffers(&mut self) -> Buffers {
+        Buffers {
+            positions: std::mem::take(&mut self.positions),
+            normals: std::mem::take(&mut self.normals),
+            uvs: std::mem::take(&mut self.uvs),
+            uvs1: std::mem::take(&mut self.uvs1),
+            tangents: std::mem::take(&mut self.tangents),
+            material_ids: std::mem::take(&mut self.material_ids),
+        }
+    }
+
+    /// Puts buffers taken by [`Loader::take_buffers`] back.
+    fn put_buffers(&mut self, b: Buffers) {
+        self.positions = b.positions;
+        self.normals = b.normals;
+        self.uvs = b.uvs;
+        self.uvs1 = b.uvs1;
+        self.tangents = b.tangents;
+        self.material_ids = b.material_ids;
+    }
+
+    /// The scene's own triangles (see [`Loader::finish`]).
+    fn finish_own(mut self) -> Result<MeshFile> {
+        let mut left: Vec<(String, usize)> =
+            std::mem::take(&mut self.left_out).into_iter().collect();
         left.sort();
         for (why, count) in left {
             self.warnings.push(format!(
@@ -427,11 +502,37 @@ impl Loader<'_> {
                 }
             ));
         }
-        let (origin, local) = super::local_frame(&self.positions);
+        if self.material_ids.is_empty() && self.placed.is_empty() && self.share.is_empty() {
+            self.warnings
+                .push(format!("{}: the scene holds no triangles", self.name));
+        }
+        let mut materials = std::mem::take(&mut self.materials);
+        if materials.is_empty() {
+            materials.push(Material::default());
+        }
+        let mesh = self.mesh_of_buffers(&materials);
+        Ok(MeshFile {
+            mesh,
+            materials,
+            camera: self.camera.take(),
+            lights: std::mem::take(&mut self.lights),
+            warnings: std::mem::take(self.warnings),
+            animation: None,
+            shared: Vec::new(),
+            placed: Vec::new(),
+        })
+    }
+
+    /// The triangles gathered in the buffers (taken, the buffers left empty) as a mesh in a
+    /// local frame: flat normals where the file has none, MikkTSpace's tangents where a
+    /// normal-mapped material needs them and the file gives none.
+    fn mesh_of_buffers(&mut self, materials: &[Material]) -> Mesh {
+        let b = self.take_buffers();
+        let (origin, local) = super::local_frame(&b.positions);
         let triangles: Vec<[Vec3; 3]> = local.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect();
         let normals: Vec<[Vec3; 3]> = triangles
             .iter()
-            .zip(&self.normals)
+            .zip(&b.normals)
             .map(|(t, n)| {
                 let flat = super::face_normal(t);
                 match n {
@@ -446,21 +547,18 @@ impl Loader<'_> {
                 }
             })
             .collect();
-        if triangles.is_empty() {
-            self.warnings
-                .push(format!("{}: the scene holds no triangles", self.name));
-        }
-        let mut materials = self.materials;
-        if materials.is_empty() {
-            materials.push(Material::default());
-        }
-        let mapped = |i: usize| materials[self.material_ids[i] as usize].has_normal_map();
+        let default = Material::default();
+        let material = |i: usize| {
+            materials
+                .get(b.material_ids[i] as usize)
+                .unwrap_or(&default)
+        };
+        let mapped = |i: usize| material(i).has_normal_map();
         let tangents = if (self.any_uvs || self.any_uvs1) && (0..triangles.len()).any(mapped) {
             // MikkTSpace's where the file gives none, the file's where it does; made from the
-            // coordinate set the normal map reads.
-            // The base's normal map's set, else the coat's.
+            // coordinate set the normal map reads: the base's normal map's, else the coat's.
             let set1 = |i: usize| {
-                let m = &materials[self.material_ids[i] as usize];
+                let m = material(i);
                 let coat = m.pbr.as_ref().and_then(|p| p.clearcoat.as_ref());
                 m.normal_map
                     .as_ref()
@@ -468,12 +566,12 @@ impl Loader<'_> {
                     .is_some_and(|t| t.uv_set == 1)
             };
             let uvs: Vec<[Vec2; 3]> = (0..triangles.len())
-                .map(|i| if set1(i) { self.uvs1[i] } else { self.uvs[i] })
+                .map(|i| if set1(i) { b.uvs1[i] } else { b.uvs[i] })
                 .collect();
             let mut t = super::tangents::mikktspace(&triangles, &normals, &uvs, |i| {
-                mapped(i) && self.tangents[i].is_none()
+                mapped(i) && b.tangents[i].is_none()
             });
-            for (i, given) in self.tangents.iter().enumerate() {
+            for (i, given) in b.tangents.iter().enumerate() {
                 if let (Some(given), true) = (given, mapped(i)) {
                     t[i] = given.map(|v| if v.is_finite() { v } else { Vec4::ZERO });
                 }
@@ -482,21 +580,24 @@ impl Loader<'_> {
         } else {
             Vec::new()
         };
-        Ok(MeshFile {
-            mesh: Mesh {
-                triangles,
-                normals,
-                material_ids: self.material_ids,
-                uvs: if self.any_uvs { self.uvs } else { Vec::new() },
-                uvs1: if self.any_uvs1 { self.uvs1 } else { Vec::new() },
-                tangents,
-                origin,
-            },
-            materials,
-            camera: self.camera,
-            lights: self.lights,
-            warnings: std::mem::take(self.warnings),
-            animation: None,
-        })
+        Mesh {
+            triangles,
+            normals,
+            material_ids: b.material_ids,
+            uvs: if self.any_uvs { b.uvs } else { Vec::new() },
+            uvs1: if self.any_uvs1 { b.uvs1 } else { Vec::new() },
+            tangents,
+            origin,
+        }
     }
+}
+
+/// The triangles a [`Loader`] gathers, as [`Loader::take_buffers`] takes them.
+struct Buffers {
+    positions: Vec<DVec3>,
+    normals: Vec<Option<[Vec3; 3]>>,
+    uvs: Vec<[Vec2; 3]>,
+    uvs1: Vec<[Vec2; 3]>,
+    tangents: Vec<Option<[Vec4; 3]>>,
+    material_ids: Vec<u32>,
 }

@@ -73,10 +73,13 @@ impl Loader<'_> {
     /// Walks the node hierarchy from `roots` as [`Loader::visit`] will, counting placements
     /// and the triangles they place from the accessors' counts alone, and refuses a file that
     /// places too many before any of them is read: a small file whose nodes place a mesh many
-    /// times over asks for memory it would take only while placing.
-    pub(super) fn plan(&self, roots: &[usize]) -> Result<()> {
-        let mut per_mesh: HashMap<usize, u64> = HashMap::new();
-        let (mut placements, mut triangles) = (0usize, 0u64);
+    /// times over asks for memory it would take only while placing. Finds the meshes to hold
+    /// once ([`Loader::share`]): those several nodes place, none with a skin, no primitive
+    /// with morph targets.
+    pub(super) fn plan(&mut self, roots: &[usize]) -> Result<()> {
+        // Per mesh: its triangles, how many nodes place it, whether one of them skins it.
+        let mut per_mesh: HashMap<usize, (u64, u64, bool)> = HashMap::new();
+        let mut placements = 0usize;
         let mut on_path = vec![false; self.nodes.len()];
         // Depth-first, as `visit` goes: (node, depth, whether its children are done).
         let mut stack: Vec<(usize, usize, bool)> =
@@ -98,22 +101,52 @@ impl Loader<'_> {
                 );
             }
             if let Some(mesh) = node.mesh() {
-                let n = *per_mesh
-                    .entry(mesh.index())
-                    .or_insert_with(|| mesh.primitives().map(|p| primitive_triangles(&p)).sum());
-                triangles += n;
-                if triangles > MAX_TRIANGLES as u64 {
-                    bail!(
-                        "{}: its nodes place more than {MAX_TRIANGLES} triangles ({placements} placements so far; meshes[{}] has {n}); such a scene is not loaded",
-                        self.name,
-                        mesh.index()
-                    );
-                }
+                let e = per_mesh.entry(mesh.index()).or_insert_with(|| {
+                    let n = mesh.primitives().map(|p| primitive_triangles(&p)).sum();
+                    (n, 0, false)
+                });
+                e.1 += 1;
+                e.2 |= node.skin().is_some();
             }
             on_path[index] = true;
             stack.push((index, depth, true));
             let children: Vec<usize> = node.children().map(|c| c.index()).collect();
             stack.extend(children.into_iter().rev().map(|c| (c, depth + 1, false)));
+        }
+        let morphed = |m: usize| {
+            self.nodes.iter().find_map(|n| n.mesh().filter(|x| x.index() == m)).is_some_and(
+                |mesh| mesh.primitives().any(|p| p.morph_targets().next().is_some()),
+            )
+        };
+        let (mut held, mut placed, mut largest) = (0u64, 0u64, (0usize, 0u64));
+        let mut meshes: Vec<(&usize, &(u64, u64, bool))> = per_mesh.iter().collect();
+        meshes.sort_unstable();
+        for (&m, &(n, uses, skinned)) in meshes {
+            if uses >= 2 && !skinned && !morphed(m) {
+                self.share.insert(m);
+                held += n;
+                placed += uses * n;
+            } else {
+                held += uses * n;
+            }
+            if uses * n > largest.1 {
+                largest = (m, uses * n);
+            }
+        }
+        if held > MAX_TRIANGLES as u64 {
+            bail!(
+                "{}: its nodes place more than {MAX_TRIANGLES} triangles ({placements} placements; meshes[{}] makes {}); such a scene is not loaded",
+                self.name,
+                largest.0,
+                largest.1
+            );
+        }
+        if placed > crate::bvh::MAX_PLACED {
+            bail!(
+                "{}: its nodes place {placed} triangles of meshes held once, more than the {} one scene can number",
+                self.name,
+                crate::bvh::MAX_PLACED
+            );
         }
         Ok(())
     }
@@ -141,7 +174,15 @@ impl Loader<'_> {
         if !world.is_finite() {
             bail!("{}: nodes[{index}]: its transform is not finite", self.name);
         }
-        if let Some(mesh) = node.mesh() {
+        if let Some(mesh) = node.mesh()
+            && self.share.contains(&mesh.index())
+        {
+            // Held once: this node is one of its placements (one that scales it to nothing
+            // shows nothing, and is left out).
+            if world.determinant() != 0.0 {
+                self.placed.push((mesh.index(), world));
+            }
+        } else if let Some(mesh) = node.mesh() {
             // Morph targets at the animated weights, else the node's, else the mesh's.
             let weights = self
                 .pose
