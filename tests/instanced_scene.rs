@@ -32,7 +32,6 @@ opacity = 0.3
 [[meshes]]
 shape = "quad"
 scale = 20.0
-rotate = [-90.0, 0.0, 0.0]
 
 [[meshes]]
 shape = "cube"

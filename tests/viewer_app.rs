@@ -714,3 +714,69 @@ fn the_timeline_shows_and_plays_the_animation() {
         w.resource::<CurrentScene>().time.is_some_and(|t| t != 1.25)
     });
 }
+
+/// A scene that places a mesh many times has one entity per placement; changing one entity's
+/// `Transform` rebuilds the top level only, once (every mesh's tree kept), and rays meet the
+/// object where it was moved to.
+#[test]
+fn moving_an_object_rebuilds_the_top_level_only_once() {
+    use tracery::viewer::objects::SceneObject;
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("grid.toml");
+    std::fs::write(
+        &path,
+        "[camera]\nposition = [1.5, 4.0, 6.0]\nlook_at = [1.5, 0.0, -1.5]\n\n\
+         [[meshes]]\nshape = \"quad\"\nscale = 10.0\n\n\
+         [[meshes]]\nshape = \"cube\"\nscale = 0.3\n\
+         grid = { count = [3, 1, 3], step = [1.5, 0.0, -1.5] }\n",
+    )
+    .unwrap();
+    let mut app = app(Some(path.to_str().unwrap()));
+    let ready = |w: &World| {
+        let current = w.resource::<CurrentScene>();
+        current.source.is_some()
+            && w.resource::<SceneBvh>()
+                .tracing(current.generation)
+                .is_some()
+    };
+    settle(&mut app, "the grid and its trees", ready);
+    let full = builds(&app);
+    let mut q = app.world_mut().query::<(Entity, &SceneObject, &Transform)>();
+    let objects: Vec<(Entity, usize, Vec3)> = q
+        .iter(app.world())
+        .map(|(e, o, t)| (e, o.placement, t.translation))
+        .collect();
+    assert_eq!(objects.len(), 9, "one entity per placement");
+    let &(e, placement, at) = objects.iter().find(|o| o.1 == 4).unwrap();
+    assert!((at - Vec3::new(1.5, 0.0, -1.5)).length() < 1e-5, "{at}");
+    let before = app.world().resource::<CurrentScene>().generation;
+    let to = at + Vec3::new(0.4, 1.0, 0.0);
+    app.world_mut().get_mut::<Transform>(e).unwrap().translation = to;
+    settle(&mut app, "the move installed", |w| {
+        let current = w.resource::<CurrentScene>();
+        current.generation > before && w.resource::<SceneBvh>().key.map(|k| k.scene) == Some(current.generation)
+    });
+    for _ in 0..20 {
+        app.update();
+    }
+    let bvh = app.world().resource::<SceneBvh>();
+    assert_eq!(bvh.top_builds, 1, "the top level built once");
+    assert_eq!(builds(&app), full, "no mesh's tree built again");
+    let current = app.world().resource::<CurrentScene>();
+    assert_eq!(current.generation, before + 1, "one scene installed for the move");
+    let moved = current.scene.instances.placements()[placement].to_world;
+    assert!((Vec3::from(moved.translation) - to).length() < 1e-5);
+    // A ray straight down onto the new place meets that placement's triangles (numbered
+    // after the floor's two), and one onto the old place meets the floor.
+    let tree = bvh.tracing(current.generation).unwrap();
+    let down = |p: Vec3| tracery::geometry::Ray::new(p + Vec3::Y * 5.0, Vec3::NEG_Y);
+    let own = current.scene.mesh.triangles.len() as u32;
+    let first = own + current.scene.instances.first_triangle(placement);
+    let hit = tree.intersect(&down(to), f32::INFINITY).expect("a hit");
+    assert!((first..first + 12).contains(&hit.prim), "{hit:?}");
+    // (Off the floor's diagonal, which runs through the old place.)
+    let hit = tree
+        .intersect(&down(at + Vec3::new(0.05, 0.0, 0.1)), f32::INFINITY)
+        .expect("the floor");
+    assert!(hit.prim < own, "{hit:?}");
+}

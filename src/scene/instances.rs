@@ -85,6 +85,25 @@ impl Instances {
         })
     }
 
+    /// The same placements with some moved: `(placement, its new transform)`, checked as
+    /// [`Instances::new`] checks them; the meshes shared, not copied.
+    pub fn moved(&self, moves: &[(usize, Affine3A)]) -> Result<Instances, PlaceError> {
+        let mut placements = self.placements.clone();
+        for &(i, m) in moves {
+            let p = placements.get_mut(i).ok_or(PlaceError::NoMesh(i))?;
+            let det = m.matrix3.determinant();
+            if !m.is_finite() || det == 0.0 || !det.is_finite() {
+                return Err(PlaceError::Singular(i));
+            }
+            p.to_world = m;
+        }
+        Ok(Instances {
+            meshes: self.meshes.clone(),
+            placements,
+            first: self.first.clone(),
+        })
+    }
+
     /// Whether nothing is placed.
     pub fn is_empty(&self) -> bool {
         self.placements.is_empty()

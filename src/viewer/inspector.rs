@@ -14,6 +14,7 @@ use super::capture::SavePng;
 use super::debug_ray::{DebugRay, DebugRayGizmos, FocusPicking};
 use super::gizmos::{BvhIndex, BvhLevelGizmos, LeafGizmos, LeafView};
 use super::scene::{CurrentScene, LoadScene, SceneLoading, ViewerStatus, scene_files};
+use super::objects::{SceneObject, Selection};
 use super::trace::{EXTERNAL, EnvChoice, RenderMode, TraceStats, ViewSettings};
 use super::{PanelWidth, UiFocus};
 use crate::bvh::SplitMethod;
@@ -90,7 +91,7 @@ pub const KEYS: &[(&str, &str)] = &[
     ("Shift", "fly faster"),
     ("Right mouse (hold) / M", "look around / toggle mouse look"),
     ("Scroll", "change flying speed"),
-    ("Left click", "shoot a debug ray through the pixel"),
+    ("Left click", "shoot a debug ray through the pixel; pick the object there"),
     ("F, then click", "focus the lens on the clicked point"),
     ("B", "BVH boxes of one level"),
     ("[ / ]", "level down / up"),
@@ -102,6 +103,9 @@ pub const KEYS: &[(&str, &str)] = &[
     ("G", "where the samples go (work heatmap)"),
     ("N", "denoise the still picture on / off"),
     ("Space", "play / pause the animation"),
+    ("Arrows, Page Up / Down", "move the picked object"),
+    ("Z / X, - / =", "turn / scale the picked object"),
+    ("Esc", "let the picked object go"),
     ("P", "save the full-resolution image as PNG"),
     ("Tab", "show / hide the inspector"),
     ("F1", "this help"),
@@ -269,7 +273,13 @@ fn inspector(
     mut picking: ResMut<FocusPicking>,
     stats: Res<TraceStats>,
     (mut load, mut save): (MessageWriter<LoadScene>, MessageWriter<SavePng>),
-    (mut panel, line, mut timeline): (ResMut<PanelWidth>, Res<StatusLine>, ResMut<Timeline>),
+    (mut panel, line, mut timeline, selection, objects): (
+        ResMut<PanelWidth>,
+        Res<StatusLine>,
+        ResMut<Timeline>,
+        Res<Selection>,
+        Query<(&SceneObject, &Name, &Transform)>,
+    ),
 ) -> Result {
     if !state.visible {
         panel.set_if_neq(PanelWidth(0));
@@ -298,6 +308,7 @@ fn inspector(
                 if let Some(t) = super::animation::section(ui, &timeline, &current) {
                     *timeline = t;
                 }
+                object_section(ui, &current, &selection, &objects);
                 render_section(ui, &mut s, &stats, current.scene.integrator);
                 dof_section(ui, &mut s, &mut picking.0);
                 env_section(ui, &mut s, &state);
@@ -324,6 +335,37 @@ fn inspector(
         bvh_settings.0 = b;
     }
     Ok(())
+}
+
+/// The picked object: its name, mesh and triangles, and where it stands; the objects of a
+/// scene that places meshes many times, when none is picked.
+fn object_section(
+    ui: &mut egui::Ui,
+    current: &CurrentScene,
+    selection: &Selection,
+    objects: &Query<(&SceneObject, &Name, &Transform)>,
+) {
+    let placed = &current.scene.instances;
+    if placed.is_empty() {
+        return;
+    }
+    egui::CollapsingHeader::new("Objects")
+        .default_open(true)
+        .show(ui, |ui| {
+            ui.label(format!(
+                "{} placements of {} meshes (click one to pick it)",
+                placed.placements().len(),
+                placed.meshes.len()
+            ));
+            let Some((o, name, t)) = selection.0.and_then(|e| objects.get(e).ok()) else {
+                return;
+            };
+            ui.label(egui::RichText::new(name.as_str()).strong());
+            ui.label(format!("{} triangles (mesh {})", o.triangles, o.mesh));
+            let p = t.translation;
+            ui.label(format!("at ({:.3}, {:.3}, {:.3})", p.x, p.y, p.z));
+            ui.label("arrows, Page Up / Down: move; Z / X: turn; - / =: scale; Esc: let go");
+        });
 }
 
 fn scene_section(

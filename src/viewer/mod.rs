@@ -6,7 +6,8 @@
 //! [`trace::TracePlugin`] (the ray-trace system), [`display::DisplayPlugin`] (the traced
 //! image on screen), [`camera::FlyCameraPlugin`], [`gizmos::BvhGizmoPlugin`],
 //! [`debug_ray::DebugRayPlugin`], [`animation::AnimationPlugin`] (the glTF animations'
-//! timeline), [`inspector::InspectorPlugin`],
+//! timeline), [`objects::ObjectsPlugin`] (placed meshes as entities: picked and moved),
+//! [`inspector::InspectorPlugin`],
 //! [`pacing::PacingPlugin`] (continuous updates only while something changes),
 //! [`panel_cache::PanelCachePlugin`] (the inspector's pixels reused while it does not change)
 //! and [`capture::CapturePlugin`] (PNG, screenshots, scripted runs). The tracing itself runs on the
@@ -21,6 +22,7 @@ pub mod debug_ray;
 pub mod display;
 pub mod gizmos;
 pub mod inspector;
+pub mod objects;
 mod orbit;
 pub mod pacing;
 pub mod panel_cache;
@@ -124,6 +126,9 @@ impl Plugin for CorePlugins {
                     interactive: self.interactive,
                 },
                 animation::AnimationPlugin {
+                    interactive: self.interactive,
+                },
+                objects::ObjectsPlugin {
                     interactive: self.interactive,
                 },
             ));

@@ -24,6 +24,7 @@ impl Plugin for ScenePlugin {
             generation: 0,
             time: None,
             reframe: true,
+            moved_from: None,
         })
         .init_resource::<SceneLoading>()
         .init_resource::<ViewerStatus>()
@@ -58,6 +59,9 @@ pub struct CurrentScene {
     /// Whether the last scene installed was a new file (the camera goes to its view), not
     /// another instant of the same one (the camera stays).
     pub reframe: bool,
+    /// When the scene is the one of this generation with objects moved
+    /// ([`super::objects`]): that generation (the meshes and their trees are the same).
+    pub moved_from: Option<u64>,
 }
 
 /// Asks for a scene file, OBJ, PLY or glTF to be opened.
@@ -142,6 +146,7 @@ fn finish_loading(
             current.generation += 1;
             current.time = time;
             current.reframe = false;
+            current.moved_from = None;
         }
         Ok(scene) => {
             info!(
@@ -157,6 +162,7 @@ fn finish_loading(
             current.generation += 1;
             current.time = time;
             current.reframe = true;
+            current.moved_from = None;
         }
         Err(e) => {
             let msg = format!("{e:#}");
