@@ -14,8 +14,8 @@ use glam::Affine3A;
 
 use super::UiFocus;
 use super::bvh::SceneBvh;
-use super::debug_ray::{ShootRay, ray_through};
-use super::scene::{CurrentScene, SceneSystems};
+use super::debug_ray::{DebugRaySystems, ShootRay, ray_through};
+use super::scene::{CurrentScene, SceneLoading, SceneSystems};
 use super::trace::{TraceCamera, ViewSettings, ViewportSize};
 
 /// Spawns the objects of each scene, installs moved placements, and (interactive) picks and
@@ -37,7 +37,13 @@ impl Plugin for ObjectsPlugin {
                     .after(SceneSystems),
             );
         if self.interactive {
-            app.add_systems(Update, (pick, move_keys, draw_selection).chain());
+            // After the debug ray: the camera has taken a new scene's view by then.
+            app.add_systems(
+                Update,
+                (pick, move_keys, draw_selection)
+                    .chain()
+                    .after(DebugRaySystems),
+            );
         }
     }
 }
@@ -154,8 +160,13 @@ fn pick(
     camera: Query<(&Transform, &Projection), With<TraceCamera>>,
     objects: Query<(Entity, &SceneObject)>,
     mut selection: ResMut<Selection>,
+    (loading, mut pending): (Res<SceneLoading>, Local<Option<Vec2>>),
 ) {
-    let Some(ShootRay(p)) = shots.read().last().copied() else {
+    // A click before the scene and its trees are ready (`view --ray`) picks once they are.
+    if let Some(ShootRay(p)) = shots.read().last().copied() {
+        *pending = Some(p);
+    }
+    let Some(p) = *pending else {
         return;
     };
     let (Ok((transform, projection)), Some(tree)) =
@@ -163,6 +174,10 @@ fn pick(
     else {
         return;
     };
+    if loading.current().is_some() {
+        return;
+    }
+    *pending = None;
     let ray = ray_through(transform, projection, viewport.0, &settings, p);
     let own = current.scene.mesh.triangles.len() as u32;
     let placement = tree
@@ -182,6 +197,9 @@ fn pick(
             .find(|(_, o)| o.placement == i)
             .map(|(e, _)| e)
     });
+    if let (Some(i), Some(_)) = (placement, selection.0) {
+        info!("picked placement {i}");
+    }
 }
 
 /// Moves, turns and scales the selected object by keys: a step is a twentieth of its size.
