@@ -142,7 +142,10 @@ fn node_transforms_compose_and_instances_and_mirrors_are_placed() {
     let s = Scene::load(&p).unwrap();
     assert_eq!(s.triangle_count(), 3);
     // The mesh three nodes use is held once, each node a placement.
-    assert_eq!((s.instances.meshes.len(), s.instances.placements().len()), (1, 3));
+    assert_eq!(
+        (s.instances.meshes.len(), s.instances.placements().len()),
+        (1, 3)
+    );
     let expect = [
         [
             Vec3::new(10., 0., 0.),
@@ -2949,22 +2952,39 @@ fn a_mesh_many_nodes_place_is_held_once() {
     let p = write(dir.path(), "forest.gltf", &d);
     let s = Scene::load(&p).unwrap();
     assert_eq!(s.instances.meshes.len(), 1, "mesh 0 held once");
-    assert_eq!(s.instances.placements().len(), 401, "the zero scale left out");
-    assert_eq!(s.mesh.triangles.len(), 1, "mesh 1, placed once, is the scene's own");
+    assert_eq!(
+        s.instances.placements().len(),
+        401,
+        "the zero scale left out"
+    );
+    assert_eq!(
+        s.mesh.triangles.len(),
+        1,
+        "mesh 1, placed once, is the scene's own"
+    );
     assert_eq!(s.triangle_count(), 402);
-    let at = |prim: u32| s.triangle(prim).map(|v| (s.mesh.origin + v.as_dvec3()).as_vec3());
+    let at = |prim: u32| {
+        s.triangle(prim)
+            .map(|v| (s.mesh.origin + v.as_dvec3()).as_vec3())
+    };
     for (k, prim) in [(0u32, 1u32), (57, 58), (399, 400)] {
         let o = Vec3::new((k % 20) as f32 * 2.0, (k / 20) as f32 * 2.0, 0.0);
         let want = [o, o + Vec3::X, o + Vec3::Y];
         let got = at(prim);
-        assert!(got.iter().zip(&want).all(|(a, b)| close(*a, *b)), "{k}: {got:?}");
+        assert!(
+            got.iter().zip(&want).all(|(a, b)| close(*a, *b)),
+            "{k}: {got:?}"
+        );
         assert!(close(face_normal(&got), Vec3::Z));
     }
     // The mirrored node: corners 1 and 2 swapped back, facing +z, its texture coordinates
     // following their corners.
     let m = at(401);
     let o = Vec3::new(0.0, 0.0, 5.0);
-    assert!(close(m[0], o) && close(m[1], o + Vec3::Y) && close(m[2], o - Vec3::X), "{m:?}");
+    assert!(
+        close(m[0], o) && close(m[1], o + Vec3::Y) && close(m[2], o - Vec3::X),
+        "{m:?}"
+    );
     assert!(close(face_normal(&m), Vec3::Z));
     assert!(s.normals(401).iter().all(|n| close(*n, Vec3::Z)));
     assert_eq!(s.uv_at(0, 401, 1.0, 0.0), Vec2::new(0.0, 1.0));
@@ -2977,10 +2997,20 @@ fn a_mesh_many_nodes_place_is_held_once() {
         spp: 4,
         ..Default::default()
     };
-    let a = tracery::render::render(&s, &accel, &settings, &|_| {}).unwrap().film.mean();
+    let a = tracery::render::render(&s, &accel, &settings, &|_| {})
+        .unwrap()
+        .film
+        .mean();
     let bvh = Bvh::build(&flat.mesh.triangles, &BuildOptions::sah());
-    let b = tracery::render::render(&flat, &bvh, &settings, &|_| {}).unwrap().film.mean();
-    let diff: f32 = a.iter().zip(&b).map(|(p, q)| (*p - *q).abs().element_sum()).sum();
+    let b = tracery::render::render(&flat, &bvh, &settings, &|_| {})
+        .unwrap()
+        .film
+        .mean();
+    let diff: f32 = a
+        .iter()
+        .zip(&b)
+        .map(|(p, q)| (*p - *q).abs().element_sum())
+        .sum();
     let total: f32 = b.iter().map(|p| p.element_sum()).sum();
     assert!(total > 0.0 && diff <= 1e-3 * total, "{diff} of {total}");
 }

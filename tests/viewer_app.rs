@@ -741,7 +741,9 @@ fn moving_an_object_rebuilds_the_top_level_only_once() {
     };
     settle(&mut app, "the grid and its trees", ready);
     let full = builds(&app);
-    let mut q = app.world_mut().query::<(Entity, &SceneObject, &Transform)>();
+    let mut q = app
+        .world_mut()
+        .query::<(Entity, &SceneObject, &Transform)>();
     let objects: Vec<(Entity, usize, Vec3)> = q
         .iter(app.world())
         .map(|(e, o, t)| (e, o.placement, t.translation))
@@ -754,7 +756,8 @@ fn moving_an_object_rebuilds_the_top_level_only_once() {
     app.world_mut().get_mut::<Transform>(e).unwrap().translation = to;
     settle(&mut app, "the move installed", |w| {
         let current = w.resource::<CurrentScene>();
-        current.generation > before && w.resource::<SceneBvh>().key.map(|k| k.scene) == Some(current.generation)
+        current.generation > before
+            && w.resource::<SceneBvh>().key.map(|k| k.scene) == Some(current.generation)
     });
     for _ in 0..20 {
         app.update();
@@ -763,7 +766,11 @@ fn moving_an_object_rebuilds_the_top_level_only_once() {
     assert_eq!(bvh.top_builds, 1, "the top level built once");
     assert_eq!(builds(&app), full, "no mesh's tree built again");
     let current = app.world().resource::<CurrentScene>();
-    assert_eq!(current.generation, before + 1, "one scene installed for the move");
+    assert_eq!(
+        current.generation,
+        before + 1,
+        "one scene installed for the move"
+    );
     let moved = current.scene.instances.placements()[placement].to_world;
     assert!((Vec3::from(moved.translation) - to).length() < 1e-5);
     // A ray straight down onto the new place meets that placement's triangles (numbered

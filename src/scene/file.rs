@@ -831,8 +831,8 @@ pub fn parse_at(
     // local frame (`Mesh::origin`, the world's origin for a scene near it), so they are moved
     // into it in f64.
     mesh.settle_origin();
-    let instances =
-        super::instances::place(&mut mesh, shared, &placed).map_err(|e| anyhow!("{}: {e}", path.display()))?;
+    let instances = super::instances::place(&mut mesh, shared, &placed)
+        .map_err(|e| anyhow!("{}: {e}", path.display()))?;
     let origin = mesh.origin;
     let local = |p: [f64; 3]| (DVec3::from(p) - origin).as_vec3();
     let lights = def
@@ -887,7 +887,6 @@ pub fn parse_at(
         instances,
     })
 }
-
 
 /// Loads an OBJ, PLY or glTF through `read` (a glTF's own camera and lights are not used: the
 /// scene file gives them).

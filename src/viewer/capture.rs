@@ -342,13 +342,9 @@ impl GizmosShown<'_> {
         use super::gizmos::{BvhLevelGizmos, LeafGizmos};
         let boxes = self.store.config::<BvhLevelGizmos>().0.enabled
             || self.store.config::<LeafGizmos>().0.enabled;
-        let indexed = match (
-            self.index.bvh(),
-            self.bvh.for_scene(self.current.generation),
-        ) {
-            (Some(a), Some(b)) => Arc::ptr_eq(a, b),
-            _ => false,
-        };
+        // Indexed from the trees of the scene shown.
+        let indexed = self.bvh.for_scene(self.current.generation).is_some()
+            && self.index.made_for == self.bvh.key.map(|k| (k, self.bvh.top_builds));
         let ray_asked = self.debug.pending.is_some() || self.debug.pixel.is_some();
         let ray_traced = self.debug.pending.is_none() && !self.debug.path.segments.is_empty();
         (!boxes || indexed) && (!ray_asked || ray_traced)

@@ -1,16 +1,23 @@
 //! BVH gizmos: the boxes of one level coloured by level (with the boxes that overlap a
 //! sibling standing out in the overlap view), and the leaves (all, or one with its triangles
 //! outlined). Each drawing is its own gizmo group with a key and an inspector toggle.
+//!
+//! The tree drawn is the scene's; in a scene that places meshes many times, the top level
+//! over the placements, or, while an object is picked ([`super::objects`]), that object's
+//! own mesh tree where the object stands.
 
 use std::sync::Arc;
 
 use bevy::prelude::*;
 
+use glam::Affine3A;
+
 use super::UiFocus;
-use super::bvh::SceneBvh;
+use super::bvh::{BvhKey, SceneBvh};
+use super::objects::{SceneObject, Selection};
 use super::scene::CurrentScene;
 use super::trace::{RenderMode, ViewSettings};
-use crate::bvh::Bvh;
+use crate::bvh::{Bvh, BvhNode, TwoLevel};
 
 /// Draws the BVH level and leaf gizmos.
 pub struct BvhGizmoPlugin;
@@ -55,10 +62,42 @@ impl Default for LeafView {
     }
 }
 
-/// The current BVH's nodes sorted by level, and its leaves, for drawing and the sliders.
+/// A tree the gizmos draw.
+#[derive(Clone, Debug)]
+pub enum Indexed {
+    /// A mesh's tree (the scene's own, or a picked object's mesh's).
+    Tree(Arc<Bvh>),
+    /// The top level over a scene's placements.
+    Top(Arc<TwoLevel>),
+}
+
+impl Indexed {
+    fn nodes(&self) -> &[BvhNode] {
+        match self {
+            Indexed::Tree(b) => &b.nodes,
+            Indexed::Top(t) => t.top_nodes(),
+        }
+    }
+
+    fn same(&self, other: &Indexed) -> bool {
+        match (self, other) {
+            (Indexed::Tree(a), Indexed::Tree(b)) => Arc::ptr_eq(a, b),
+            (Indexed::Top(a), Indexed::Top(b)) => Arc::ptr_eq(a, b),
+            _ => false,
+        }
+    }
+}
+
+/// The drawn tree's nodes sorted by level, and its leaves, for drawing and the sliders.
 #[derive(Resource, Default)]
 pub struct BvhIndex {
-    bvh: Option<Arc<Bvh>>,
+    indexed: Option<Indexed>,
+    /// Where the tree's boxes are drawn: a picked object's placement, else the identity.
+    pub to_world: Affine3A,
+    /// What the tree is, for the inspector.
+    pub what: String,
+    /// The BVH build (and count of top levels built alone) the index was made from.
+    pub made_for: Option<(BvhKey, u64)>,
     /// Node indices at each depth.
     pub levels: Vec<Vec<u32>>,
     /// Leaf node indices, in node order.
@@ -68,14 +107,28 @@ pub struct BvhIndex {
 }
 
 impl BvhIndex {
-    /// Indexes `bvh`.
+    /// Indexes `bvh`, drawn as it is.
     pub fn new(bvh: Arc<Bvh>) -> Self {
+        Self::of(
+            Indexed::Tree(bvh),
+            Affine3A::IDENTITY,
+            "the scene's BVH".into(),
+        )
+    }
+
+    /// Indexes `indexed`, drawn through `to_world`.
+    pub fn of(indexed: Indexed, to_world: Affine3A, what: String) -> Self {
+        let nodes = indexed.nodes();
         let mut levels: Vec<Vec<u32>> = Vec::new();
         let mut leaves = Vec::new();
-        let mut depth = vec![0u32; bvh.nodes.len()];
-        let mut overlaps = vec![false; bvh.nodes.len()];
-        if !bvh.is_empty() {
-            for (i, n) in bvh.nodes.iter().enumerate() {
+        let mut depth = vec![0u32; nodes.len()];
+        let mut overlaps = vec![false; nodes.len()];
+        let empty = match &indexed {
+            Indexed::Tree(b) => b.is_empty(),
+            Indexed::Top(t) => t.bounds().is_empty(),
+        };
+        if !empty {
+            for (i, n) in nodes.iter().enumerate() {
                 if i == 1 {
                     continue; // the unused slot
                 }
@@ -91,7 +144,7 @@ impl BvhIndex {
                     depth[a] = depth[i] + 1;
                     depth[b] = depth[i] + 1;
                     // Overlap with volume: shared faces do not count.
-                    let (ba, bb) = (bvh.nodes[a].aabb(), bvh.nodes[b].aabb());
+                    let (ba, bb) = (nodes[a].aabb(), nodes[b].aabb());
                     let o = ba.max.min(bb.max).cmpgt(ba.min.max(bb.min)).all();
                     overlaps[a] = o;
                     overlaps[b] = o;
@@ -99,16 +152,27 @@ impl BvhIndex {
             }
         }
         Self {
-            bvh: Some(bvh),
+            indexed: Some(indexed),
+            to_world,
+            what,
+            made_for: None,
             levels,
             leaves,
             overlaps_sibling: overlaps,
         }
     }
 
-    /// The indexed tree.
+    /// The indexed mesh tree (`None` for the top level).
     pub fn bvh(&self) -> Option<&Arc<Bvh>> {
-        self.bvh.as_ref()
+        match &self.indexed {
+            Some(Indexed::Tree(b)) => Some(b),
+            _ => None,
+        }
+    }
+
+    /// Node `i` of the indexed tree.
+    fn node(&self, i: u32) -> Option<&BvhNode> {
+        self.indexed.as_ref()?.nodes().get(i as usize)
     }
 }
 
@@ -122,22 +186,52 @@ fn default_off(mut store: ResMut<GizmoConfigStore>) {
     store.config_mut::<LeafGizmos>().0.enabled = false;
 }
 
-/// Indexes each new tree, and brings the level and leaf shown into its range (a `--leaf` or
-/// `--level` past it, or a rebuild with fewer leaves, would otherwise draw nothing), saying so.
+/// Indexes each new tree (the scene's, its top level, or the picked object's mesh's), and
+/// brings the level and leaf shown into its range (a `--leaf` or `--level` past it, or a
+/// rebuild with fewer leaves, would otherwise draw nothing), saying so.
 fn index_bvh(
     current: Res<CurrentScene>,
     bvh: Res<SceneBvh>,
     mut index: ResMut<BvhIndex>,
     mut settings: ResMut<ViewSettings>,
     mut leaves: ResMut<LeafView>,
+    (selection, objects): (Res<Selection>, Query<&SceneObject>),
 ) {
     let Some(tree) = bvh.for_scene(current.generation) else {
         return;
     };
-    if index.bvh.as_ref().is_some_and(|b| Arc::ptr_eq(b, tree)) {
+    let picked = selection.0.and_then(|e| objects.get(e).ok());
+    let (want, to_world, what) = match (&bvh.placed, picked) {
+        (Some(two), Some(o)) => {
+            let shift = !current.scene.mesh.triangles.is_empty() as usize;
+            let Some(p) = current.scene.instances.placements().get(o.placement) else {
+                return;
+            };
+            let mesh = two.meshes[o.mesh as usize + shift].clone();
+            (
+                Indexed::Tree(mesh),
+                p.to_world,
+                format!("the BVH of mesh {} (#{})", o.mesh, o.placement),
+            )
+        }
+        (Some(two), None) => (
+            Indexed::Top(two.clone()),
+            Affine3A::IDENTITY,
+            "the top level over the placements".into(),
+        ),
+        (None, _) => (
+            Indexed::Tree(tree.clone()),
+            Affine3A::IDENTITY,
+            "the scene's BVH".into(),
+        ),
+    };
+    let made_for = bvh.key.map(|k| (k, bvh.top_builds));
+    if index.indexed.as_ref().is_some_and(|i| i.same(&want)) && index.to_world == to_world {
+        index.made_for = made_for;
         return;
     }
-    *index = BvhIndex::new(tree.clone());
+    *index = BvhIndex::of(want, to_world, what);
+    index.made_for = made_for;
     if let Some(last) = index.leaves.len().checked_sub(1).map(|l| l as u32)
         && leaves.index > last
     {
@@ -223,7 +317,7 @@ fn draw_level(
     if !gizmos.config.enabled {
         return;
     }
-    let (Some(bvh), Some(nodes)) = (index.bvh(), index.levels.get(settings.level as usize)) else {
+    let Some(nodes) = index.levels.get(settings.level as usize) else {
         return;
     };
     let overlap = settings.mode == RenderMode::Overlap;
@@ -238,11 +332,9 @@ fn draw_level(
         } else {
             color
         };
-        gizmos.aabb_3d(
-            aabb3d(&bvh.nodes[i as usize].aabb()),
-            Transform::IDENTITY,
-            c,
-        );
+        if let Some(n) = index.node(i) {
+            gizmos.aabb_3d(aabb3d(&n.aabb()), index.to_world, c);
+        }
     }
 }
 
@@ -250,30 +342,33 @@ fn draw_leaves(mut gizmos: Gizmos<LeafGizmos>, index: Res<BvhIndex>, view: Res<L
     if !gizmos.config.enabled {
         return;
     }
-    let Some(bvh) = index.bvh() else {
-        return;
-    };
     if view.all {
         for &i in index.leaves.iter().take(view.max_boxes) {
-            gizmos.aabb_3d(
-                aabb3d(&bvh.nodes[i as usize].aabb()),
-                Transform::IDENTITY,
-                Color::srgba(0.3, 0.9, 1.0, 0.6),
-            );
+            if let Some(n) = index.node(i) {
+                gizmos.aabb_3d(
+                    aabb3d(&n.aabb()),
+                    index.to_world,
+                    Color::srgba(0.3, 0.9, 1.0, 0.6),
+                );
+            }
         }
         return;
     }
     let Some(&i) = index.leaves.get(view.index as usize) else {
         return;
     };
-    let n = &bvh.nodes[i as usize];
+    let Some(n) = index.node(i) else {
+        return;
+    };
     gizmos.aabb_3d(
         aabb3d(&n.aabb()),
-        Transform::IDENTITY,
+        index.to_world,
         Color::srgb(0.3, 0.9, 1.0),
     );
-    for (_, t) in bvh.leaf_triangles(i) {
-        let [a, b, c] = t.map(Vec3::from);
-        gizmos.linestrip([a, b, c, a], Color::srgb(1.0, 0.85, 0.2));
+    if let Some(bvh) = index.bvh() {
+        for (_, t) in bvh.leaf_triangles(i) {
+            let [a, b, c] = t.map(|v| Vec3::from(index.to_world.transform_point3a(v)));
+            gizmos.linestrip([a, b, c, a], Color::srgb(1.0, 0.85, 0.2));
+        }
     }
 }

@@ -13,8 +13,8 @@ use super::bvh::{BvhBuilding, BvhSettings, SceneBvh};
 use super::capture::SavePng;
 use super::debug_ray::{DebugRay, DebugRayGizmos, FocusPicking};
 use super::gizmos::{BvhIndex, BvhLevelGizmos, LeafGizmos, LeafView};
-use super::scene::{CurrentScene, LoadScene, SceneLoading, ViewerStatus, scene_files};
 use super::objects::{SceneObject, Selection};
+use super::scene::{CurrentScene, LoadScene, SceneLoading, ViewerStatus, scene_files};
 use super::trace::{EXTERNAL, EnvChoice, RenderMode, TraceStats, ViewSettings};
 use super::{PanelWidth, UiFocus};
 use crate::bvh::SplitMethod;
@@ -91,7 +91,10 @@ pub const KEYS: &[(&str, &str)] = &[
     ("Shift", "fly faster"),
     ("Right mouse (hold) / M", "look around / toggle mouse look"),
     ("Scroll", "change flying speed"),
-    ("Left click", "shoot a debug ray through the pixel; pick the object there"),
+    (
+        "Left click",
+        "shoot a debug ray through the pixel; pick the object there",
+    ),
     ("F, then click", "focus the lens on the clicked point"),
     ("B", "BVH boxes of one level"),
     ("[ / ]", "level down / up"),
@@ -685,6 +688,7 @@ fn gizmo_section(
     egui::CollapsingHeader::new("Gizmos and debug")
         .default_open(true)
         .show(ui, |ui| {
+            ui.label(format!("boxes of {}", index.what));
             ui.checkbox(
                 &mut store.config_mut::<BvhLevelGizmos>().0.enabled,
                 "BVH level boxes (B)",

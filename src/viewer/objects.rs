@@ -127,7 +127,15 @@ fn install_moves(
         .iter()
         .filter(|(o, t)| **t != o.spawned)
         .map(|(o, t)| (o.placement, t.compute_affine()))
-        .filter(|(i, m)| current.scene.instances.placements().get(*i).map(|p| p.to_world) != Some(*m))
+        .filter(|(i, m)| {
+            current
+                .scene
+                .instances
+                .placements()
+                .get(*i)
+                .map(|p| p.to_world)
+                != Some(*m)
+        })
         .collect();
     if moves.is_empty() {
         return;

@@ -114,9 +114,13 @@ impl Loader<'_> {
             stack.extend(children.into_iter().rev().map(|c| (c, depth + 1, false)));
         }
         let morphed = |m: usize| {
-            self.nodes.iter().find_map(|n| n.mesh().filter(|x| x.index() == m)).is_some_and(
-                |mesh| mesh.primitives().any(|p| p.morph_targets().next().is_some()),
-            )
+            self.nodes
+                .iter()
+                .find_map(|n| n.mesh().filter(|x| x.index() == m))
+                .is_some_and(|mesh| {
+                    mesh.primitives()
+                        .any(|p| p.morph_targets().next().is_some())
+                })
         };
         let (mut held, mut placed, mut largest) = (0u64, 0u64, (0usize, 0u64));
         let mut meshes: Vec<(&usize, &(u64, u64, bool))> = per_mesh.iter().collect();
