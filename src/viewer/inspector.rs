@@ -256,6 +256,17 @@ fn help(mut contexts: EguiContexts, mut state: ResMut<InspectorState>) -> Result
     Ok(())
 }
 
+/// The scene's objects as the inspector reads them.
+type Objects<'w, 's> = Query<'w, 's, (&'static SceneObject, &'static Name, &'static Transform)>;
+
+/// The inspector's panel width, status line, timeline, and the picked object.
+type Panel<'w, 's> = (
+    ResMut<'w, PanelWidth>,
+    Res<'w, StatusLine>,
+    ResMut<'w, Timeline>,
+    (Res<'w, Selection>, Objects<'w, 's>),
+);
+
 /// Width of the inspector panel in logical pixels.
 const INSPECTOR_WIDTH: f32 = 330.0;
 
@@ -276,13 +287,7 @@ fn inspector(
     mut picking: ResMut<FocusPicking>,
     stats: Res<TraceStats>,
     (mut load, mut save): (MessageWriter<LoadScene>, MessageWriter<SavePng>),
-    (mut panel, line, mut timeline, selection, objects): (
-        ResMut<PanelWidth>,
-        Res<StatusLine>,
-        ResMut<Timeline>,
-        Res<Selection>,
-        Query<(&SceneObject, &Name, &Transform)>,
-    ),
+    (mut panel, line, mut timeline, (selection, objects)): Panel,
 ) -> Result {
     if !state.visible {
         panel.set_if_neq(PanelWidth(0));
@@ -346,7 +351,7 @@ fn object_section(
     ui: &mut egui::Ui,
     current: &CurrentScene,
     selection: &Selection,
-    objects: &Query<(&SceneObject, &Name, &Transform)>,
+    objects: &Objects,
 ) {
     let placed = &current.scene.instances;
     if placed.is_empty() {
