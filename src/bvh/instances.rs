@@ -285,6 +285,17 @@ impl TwoLevel {
         if t_max.is_nan() || t_max <= 0.0 {
             return None;
         }
+        if let [only] = self.order[..] {
+            // One instance: its mesh's tree tests its own root box; no top level to walk.
+            let i = only as usize;
+            let local = self.local(i, ray);
+            return self.meshes[self.mesh_of[i] as usize]
+                .intersect(&local, t_max)
+                .map(|hit| InstanceHit {
+                    instance: only,
+                    hit,
+                });
+        }
         let best = std::cell::Cell::new(None::<InstanceHit>);
         let limit = || best.get().map_or(t_max, |b| b.hit.t);
         self.walk(ray, limit, |i| {

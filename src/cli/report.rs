@@ -100,6 +100,17 @@ enum ReportKind {
         #[arg(long, default_value_t = 5)]
         repeat: usize,
     },
+    /// A scene that places meshes many times traced through its two levels against the same
+    /// scene flattened into one mesh: the camera rays of the scene's own view (512x512, one
+    /// per pixel centre), closest hits on one thread, best of `--repeat` alternating rounds,
+    /// with each form's build time and bytes.
+    Placed {
+        /// Scene file or glTF with placements (a `grid`, or a mesh several nodes use).
+        scene: PathBuf,
+        /// Repeat each measurement and keep the best.
+        #[arg(long, default_value_t = 5)]
+        repeat: usize,
+    },
     /// Refit against rebuild after the mesh's vertices move (each by up to `--move` of the
     /// mesh's size, shared vertices together): one thread, best of `--repeat` in alternating
     /// rounds, with the SAH cost and closest-hit speed (canonical camera rays, one thread) of
@@ -144,6 +155,7 @@ pub fn run(a: ReportArgs) -> Result<()> {
             count,
             repeat,
         } => instances_table(mesh, count, repeat),
+        ReportKind::Placed { scene, repeat } => placed_table(scene, repeat),
     }
 }
 
@@ -266,6 +278,86 @@ fn instances_table(mesh: Option<PathBuf>, count: usize, repeat: usize) -> Result
         "| closest hits, one placement under a top level (scenes load a lone copy without one) | {:.2} Mrays/s ({:.2}x) |",
         mrays(one_s),
         flat_s / one_s
+    );
+    Ok(())
+}
+
+fn placed_table(path: PathBuf, repeat: usize) -> Result<()> {
+    use tracery::bvh::Accel;
+    let scene = super::load_scene(Some(&path))?;
+    anyhow::ensure!(
+        !scene.instances.is_empty(),
+        "{}: places no mesh more than once: nothing to compare (see `tracery report instances`)",
+        path.display()
+    );
+    anyhow::ensure!(
+        scene.triangle_count() <= super::FLAT_LIMIT,
+        "{}: {} triangles flattened would pass {}: compare a smaller scene",
+        path.display(),
+        scene.triangle_count(),
+        super::FLAT_LIMIT
+    );
+    let pool = rayon::ThreadPoolBuilder::new().num_threads(1).build()?;
+    let options = BuildOptions::sah();
+    let (accel, flat_scene, flat) = pool.install(|| {
+        let accel = Accel::for_scene(&scene, &options);
+        let flat_scene = scene.flattened();
+        let flat = Bvh::build(&flat_scene.mesh.triangles, &options);
+        (accel, flat_scene, flat)
+    });
+    let accel = accel.map_err(anyhow::Error::msg)?;
+    let tree = accel.tree();
+    let cam = tracery::camera::CameraRays::new(&scene.camera, 512, 512);
+    let rays = cam.pixel_center_rays();
+    let (mut two_s, mut flat_s) = (f64::INFINITY, f64::INFINITY);
+    for _ in 0..repeat.max(1) {
+        let t = Instant::now();
+        let a = pool.install(|| {
+            rays.iter()
+                .filter(|r| tree.intersect(r, f32::INFINITY).is_some())
+                .count()
+        });
+        two_s = two_s.min(t.elapsed().as_secs_f64());
+        let t = Instant::now();
+        let b = pool.install(|| {
+            rays.iter()
+                .filter(|r| flat.intersect(r, f32::INFINITY).is_some())
+                .count()
+        });
+        flat_s = flat_s.min(t.elapsed().as_secs_f64());
+        // The two round differently: a ray grazing an edge may hit in one and not the other.
+        anyhow::ensure!(
+            a.abs_diff(b) * 1000 <= rays.len(),
+            "{a} hits through two levels, {b} flattened"
+        );
+    }
+    let mrays = |s: f64| rays.len() as f64 / s / 1e6;
+    let placed = &scene.instances;
+    println!(
+        "{}: {} triangles ({} placed once, {} meshes placed {} times); {} camera rays of its view, one thread, best of {}",
+        scene.name,
+        scene.triangle_count(),
+        scene.mesh.triangles.len(),
+        placed.meshes.len(),
+        placed.placements().len(),
+        rays.len(),
+        repeat.max(1)
+    );
+    println!("| form | build ms | bytes (trees and placements) | closest Mrays/s |");
+    println!("|---|---:|---:|---:|");
+    println!(
+        "| two levels | {:.1} | {} | {:.2} ({:.2}x) |",
+        accel.build_ms(),
+        accel.bytes() + placed.bytes(),
+        mrays(two_s),
+        flat_s / two_s
+    );
+    println!(
+        "| flattened ({} triangles in one mesh) | {:.1} | {} | {:.2} |",
+        flat_scene.mesh.triangles.len(),
+        flat.stats.build_ms,
+        flat.stats.binary_bytes + flat.stats.wide_bytes,
+        mrays(flat_s)
     );
     Ok(())
 }
