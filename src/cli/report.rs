@@ -247,27 +247,15 @@ fn instances_table(mesh: Option<PathBuf>, count: usize, repeat: usize) -> Result
     )
     .map_err(anyhow::Error::msg)?;
     let rays = bench::canonical_rays(&scene.mesh.bounds());
-    let (mut flat_s, mut one_s) = (f64::INFINITY, f64::INFINITY);
-    for _ in 0..repeat.max(1) {
-        let t = Instant::now();
-        let hits = pool.install(|| {
-            rays.iter()
-                .filter(|r| tree.intersect(r, f32::INFINITY).is_some())
-                .count()
-        });
-        flat_s = flat_s.min(t.elapsed().as_secs_f64());
-        let t = Instant::now();
-        let placed = pool.install(|| {
-            rays.iter()
-                .filter(|r| one.intersect(r, f32::INFINITY).is_some())
-                .count()
-        });
-        one_s = one_s.min(t.elapsed().as_secs_f64());
-        anyhow::ensure!(
-            hits == placed,
-            "{hits} hits flat, {placed} through one placement"
-        );
-    }
+    let (flat_s, one_s, hits, placed) = alternating(
+        repeat,
+        || count_hits(&pool, &rays, |r| tree.intersect(r, f32::INFINITY).is_some()),
+        || count_hits(&pool, &rays, |r| one.intersect(r, f32::INFINITY).is_some()),
+    );
+    anyhow::ensure!(
+        hits == placed,
+        "{hits} hits flat, {placed} through one placement"
+    );
     let mrays = |s: f64| rays.len() as f64 / s / 1e6;
     println!(
         "| closest hits, the mesh's own tree ({} camera rays) | {:.2} Mrays/s |",
@@ -280,6 +268,34 @@ fn instances_table(mesh: Option<PathBuf>, count: usize, repeat: usize) -> Result
         flat_s / one_s
     );
     Ok(())
+}
+
+/// How many of `rays` `hit` says hit, on `pool`.
+fn count_hits(
+    pool: &rayon::ThreadPool,
+    rays: &[tracery::geometry::Ray],
+    hit: impl Fn(&tracery::geometry::Ray) -> bool + Sync,
+) -> usize {
+    pool.install(|| rays.iter().filter(|r| hit(r)).count())
+}
+
+/// Runs `a` and `b` in `repeat` alternating rounds (at least one): the best seconds of each,
+/// and what each returned last.
+fn alternating(
+    repeat: usize,
+    mut a: impl FnMut() -> usize,
+    mut b: impl FnMut() -> usize,
+) -> (f64, f64, usize, usize) {
+    let (mut best_a, mut best_b, mut ra, mut rb) = (f64::INFINITY, f64::INFINITY, 0, 0);
+    for _ in 0..repeat.max(1) {
+        let t = Instant::now();
+        ra = std::hint::black_box(a());
+        best_a = best_a.min(t.elapsed().as_secs_f64());
+        let t = Instant::now();
+        rb = std::hint::black_box(b());
+        best_b = best_b.min(t.elapsed().as_secs_f64());
+    }
+    (best_a, best_b, ra, rb)
 }
 
 fn placed_table(path: PathBuf, repeat: usize) -> Result<()> {
@@ -309,28 +325,16 @@ fn placed_table(path: PathBuf, repeat: usize) -> Result<()> {
     let tree = accel.tree();
     let cam = tracery::camera::CameraRays::new(&scene.camera, 512, 512);
     let rays = cam.pixel_center_rays();
-    let (mut two_s, mut flat_s) = (f64::INFINITY, f64::INFINITY);
-    for _ in 0..repeat.max(1) {
-        let t = Instant::now();
-        let a = pool.install(|| {
-            rays.iter()
-                .filter(|r| tree.intersect(r, f32::INFINITY).is_some())
-                .count()
-        });
-        two_s = two_s.min(t.elapsed().as_secs_f64());
-        let t = Instant::now();
-        let b = pool.install(|| {
-            rays.iter()
-                .filter(|r| flat.intersect(r, f32::INFINITY).is_some())
-                .count()
-        });
-        flat_s = flat_s.min(t.elapsed().as_secs_f64());
-        // The two round differently: a ray grazing an edge may hit in one and not the other.
-        anyhow::ensure!(
-            a.abs_diff(b) * 1000 <= rays.len(),
-            "{a} hits through two levels, {b} flattened"
-        );
-    }
+    let (two_s, flat_s, a, b) = alternating(
+        repeat,
+        || count_hits(&pool, &rays, |r| tree.intersect(r, f32::INFINITY).is_some()),
+        || count_hits(&pool, &rays, |r| flat.intersect(r, f32::INFINITY).is_some()),
+    );
+    // The two round differently: a ray grazing an edge may hit in one and not the other.
+    anyhow::ensure!(
+        a.abs_diff(b) * 1000 <= rays.len(),
+        "{a} hits through two levels, {b} flattened"
+    );
     let mrays = |s: f64| rays.len() as f64 / s / 1e6;
     let placed = &scene.instances;
     println!(
