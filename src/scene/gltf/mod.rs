@@ -238,12 +238,7 @@ pub fn load_from(
         read,
         rule,
         warnings: &mut warnings,
-        positions: Vec::new(),
-        normals: Vec::new(),
-        uvs: Vec::new(),
-        uvs1: Vec::new(),
-        tangents: Vec::new(),
-        material_ids: Vec::new(),
+        buf: Buffers::default(),
         primitives: HashMap::new(),
         parents: {
             let mut parents = vec![None; doc.nodes().len()];
@@ -385,18 +380,8 @@ struct Loader<'a> {
     /// Normals for primitives without them (`None`: flat).
     rule: Option<NormalRule>,
     warnings: &'a mut Vec<String>,
-    /// World positions, three per triangle.
-    positions: Vec<DVec3>,
-    /// World normals, three per triangle (`None` for flat).
-    normals: Vec<Option<[Vec3; 3]>>,
-    uvs: Vec<[Vec2; 3]>,
-    /// `TEXCOORD_1`, three per triangle (zero where a primitive has none).
-    uvs1: Vec<[Vec2; 3]>,
-    /// World tangents, three per triangle, for normal-mapped primitives with `TANGENT`
-    /// (`None` otherwise: MikkTSpace's are made in [`Loader::finish`] where the material has
-    /// a normal map).
-    tangents: Vec<Option<[Vec4; 3]>>,
-    material_ids: Vec<u32>,
+    /// The triangles placed so far.
+    buf: Buffers,
     /// Primitives read once, by (mesh, primitive, morph weights as bits, whether a skin
     /// places it), for every node that places them.
     primitives: HashMap<PrimitiveKey, Option<Arc<Primitive>>>,
@@ -437,7 +422,7 @@ impl Loader<'_> {
         ids.sort_unstable();
         let mut shared = Vec::with_capacity(ids.len());
         for &m in &ids {
-            let own = self.take_buffers();
+            let own = std::mem::take(&mut self.buf);
             let mesh = self
                 .nodes
                 .iter()
@@ -449,7 +434,7 @@ impl Loader<'_> {
             }
             let materials = self.materials.clone();
             shared.push(self.mesh_of_buffers(&materials));
-            self.put_buffers(own);
+            self.buf = own;
         }
         let placed = std::mem::take(&mut self.placed)
             .into_iter()
@@ -462,28 +447,6 @@ impl Loader<'_> {
         file.shared = shared;
         file.placed = placed;
         Ok(file)
-    }
-
-    /// The triangles gathered so far, taken out (the buffers left empty).
-    fn take_buffers(&mut self) -> Buffers {
-        Buffers {
-            positions: std::mem::take(&mut self.positions),
-            normals: std::mem::take(&mut self.normals),
-            uvs: std::mem::take(&mut self.uvs),
-            uvs1: std::mem::take(&mut self.uvs1),
-            tangents: std::mem::take(&mut self.tangents),
-            material_ids: std::mem::take(&mut self.material_ids),
-        }
-    }
-
-    /// Puts buffers taken by [`Loader::take_buffers`] back.
-    fn put_buffers(&mut self, b: Buffers) {
-        self.positions = b.positions;
-        self.normals = b.normals;
-        self.uvs = b.uvs;
-        self.uvs1 = b.uvs1;
-        self.tangents = b.tangents;
-        self.material_ids = b.material_ids;
     }
 
     /// The scene's own triangles (see [`Loader::finish`]).
@@ -502,7 +465,7 @@ impl Loader<'_> {
                 }
             ));
         }
-        if self.material_ids.is_empty() && self.placed.is_empty() && self.share.is_empty() {
+        if self.buf.material_ids.is_empty() && self.placed.is_empty() && self.share.is_empty() {
             self.warnings
                 .push(format!("{}: the scene holds no triangles", self.name));
         }
@@ -527,7 +490,7 @@ impl Loader<'_> {
     /// local frame: flat normals where the file has none, MikkTSpace's tangents where a
     /// normal-mapped material needs them and the file gives none.
     fn mesh_of_buffers(&mut self, materials: &[Material]) -> Mesh {
-        let b = self.take_buffers();
+        let b = std::mem::take(&mut self.buf);
         let (origin, local) = super::local_frame(&b.positions);
         let triangles: Vec<[Vec3; 3]> = local.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect();
         let normals: Vec<[Vec3; 3]> = triangles
@@ -592,12 +555,19 @@ impl Loader<'_> {
     }
 }
 
-/// The triangles a [`Loader`] gathers, as [`Loader::take_buffers`] takes them.
+/// The triangles a [`Loader`] gathers.
+#[derive(Default)]
 struct Buffers {
+    /// World positions, three per triangle.
     positions: Vec<DVec3>,
+    /// World normals, three per triangle (`None` for flat).
     normals: Vec<Option<[Vec3; 3]>>,
     uvs: Vec<[Vec2; 3]>,
+    /// `TEXCOORD_1`, three per triangle (zero where a primitive has none).
     uvs1: Vec<[Vec2; 3]>,
+    /// World tangents, three per triangle, for normal-mapped primitives with `TANGENT`
+    /// (`None` otherwise: MikkTSpace's are made in [`Loader::finish`] where the material has
+    /// a normal map).
     tangents: Vec<Option<[Vec4; 3]>>,
     material_ids: Vec<u32>,
 }

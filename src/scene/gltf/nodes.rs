@@ -312,7 +312,7 @@ impl Loader<'_> {
         let Some(p) = data else {
             return Ok(());
         };
-        if self.material_ids.len() + p.triangles.len() > MAX_TRIANGLES {
+        if self.buf.material_ids.len() + p.triangles.len() > MAX_TRIANGLES {
             bail!(
                 "{}: meshes[{mesh}] placed again would make more than {MAX_TRIANGLES} triangles",
                 self.name
@@ -338,31 +338,31 @@ impl Loader<'_> {
             let flip = xf(t[0] as usize).flip;
             let order: [usize; 3] = if flip { [0, 2, 1] } else { [0, 1, 2] };
             let c = order.map(|k| t[k] as usize);
-            self.positions
+            self.buf.positions
                 .extend(c.map(|i| xf(i).full.transform_point3(p.positions[i].as_dvec3())));
             let turn =
                 |i: usize, n: Vec3| (xf(i).normal * n.as_dvec3()).normalize_or_zero().as_vec3();
-            self.normals.push(match (&p.normals, &p.corner_normals) {
+            self.buf.normals.push(match (&p.normals, &p.corner_normals) {
                 (Some(n), _) => Some(c.map(|i| turn(i, n[i]))),
                 (None, Some(cn)) => Some(order.map(|k| turn(t[k] as usize, cn[ti][k]))),
                 (None, None) => None,
             });
-            self.uvs.push(match &p.uvs {
+            self.buf.uvs.push(match &p.uvs {
                 Some(uv) => c.map(|i| uv[i]),
                 None => [Vec2::ZERO; 3],
             });
-            self.uvs1.push(match &p.uvs1 {
+            self.buf.uvs1.push(match &p.uvs1 {
                 Some(uv) => c.map(|i| uv[i]),
                 None => [Vec2::ZERO; 3],
             });
             // Tangents turn as positions do; a mirror turns the bitangent's handedness.
-            self.tangents.push(p.tangents.as_ref().map(|t| {
+            self.buf.tangents.push(p.tangents.as_ref().map(|t| {
                 c.map(|i| {
                     let v = (xf(i).linear * t[i].truncate().as_dvec3()).normalize_or_zero();
                     v.as_vec3().extend(if flip { -t[i].w } else { t[i].w })
                 })
             }));
-            self.material_ids.push(p.material);
+            self.buf.material_ids.push(p.material);
         }
         Ok(())
     }
