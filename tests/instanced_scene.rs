@@ -260,3 +260,35 @@ fn a_thousand_dragons_take_one_dragons_memory() {
         "a thousand dragons peaked {peak} kB against one's {peak1} kB"
     );
 }
+
+/// The cost views walk both levels: the visiting walk over two levels finds the hits the
+/// query finds, and counts the top level's nodes and each entered placement's mesh nodes and
+/// triangles (more than the top level alone wherever a placement is hit).
+#[test]
+fn the_cost_views_walk_both_levels() {
+    use tracery::render::heatmap::{boxes_on_ray, ray_cost};
+    let scene = load(GRID).unwrap();
+    let accel = Accel::for_scene(&scene, &BuildOptions::sah()).unwrap();
+    let Accel::TwoLevel(two) = &accel else {
+        panic!("two levels")
+    };
+    let cam = tracery::camera::CameraRays::new(&scene.camera, 48, 36);
+    let (mut placed_hits, mut top_only) = (0, 0);
+    for ray in cam.pixel_center_rays() {
+        let mut top = 0;
+        let visited = two.intersect_visit(&ray, f32::INFINITY, |is_top, _| top += is_top as u32);
+        let hit = two.intersect_global(&ray, f32::INFINITY);
+        assert_eq!(visited.map(|h| two.global(h)), hit);
+        let cost = ray_cost(&accel, &ray);
+        assert!(cost.nodes >= top, "{cost:?} against {top} top-level nodes");
+        if hit.is_some_and(|h| h.prim >= scene.mesh.triangles.len() as u32) {
+            placed_hits += 1;
+            assert!(cost.nodes > top && cost.triangles > 0, "{cost:?}");
+        }
+        if boxes_on_ray(&accel, &ray, 0) == 1 {
+            top_only += 1;
+        }
+    }
+    assert!(placed_hits > 100, "{placed_hits} rays hit a placement");
+    assert!(top_only > 0);
+}

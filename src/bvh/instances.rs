@@ -218,7 +218,18 @@ impl TwoLevel {
     /// Calls `visit(instance)` for each instance whose world box the ray enters before
     /// `limit()` (asked again before each box, so a closest-hit search can shrink it),
     /// nearest box first where two siblings are both entered.
-    fn walk(&self, ray: &Ray, mut limit: impl FnMut() -> f32, mut visit: impl FnMut(u32) -> bool) {
+    fn walk(&self, ray: &Ray, limit: impl FnMut() -> f32, visit: impl FnMut(u32) -> bool) {
+        self.walk_seen(ray, limit, visit, |_, _| {});
+    }
+
+    /// [`TwoLevel::walk`], telling `seen(node, depth)` about every top-level node entered.
+    fn walk_seen(
+        &self,
+        ray: &Ray,
+        mut limit: impl FnMut() -> f32,
+        mut visit: impl FnMut(u32) -> bool,
+        mut seen: impl FnMut(u32, u32),
+    ) {
         if self.order.is_empty() || !ray.is_valid() {
             return;
         }
@@ -232,6 +243,7 @@ impl TwoLevel {
         if enter(root, limit()).is_none() {
             return;
         }
+        seen(0, 0);
         if root.is_leaf() {
             // One instance: no walk (and no stack to set up).
             for &inst in &self.order[root.first as usize..(root.first + root.count) as usize] {
@@ -243,15 +255,18 @@ impl TwoLevel {
         }
         // A walk keeps at most one sibling per level: depth is at most `TOP_DEPTH` plus the
         // halvings by count past it (32 at most).
-        let mut stack = [(0u32, 0.0f32); TOP_DEPTH + 40];
+        let mut stack = [(0u32, 0.0f32, 0u32); TOP_DEPTH + 40];
         let mut sp = 0;
-        stack[sp] = (0, 0.0);
+        stack[sp] = (0, 0.0, 0);
         sp += 1;
         while sp > 0 {
             sp -= 1;
-            let (i, near) = stack[sp];
+            let (i, near, depth) = stack[sp];
             if near > limit() {
                 continue;
+            }
+            if i != 0 {
+                seen(i, depth);
             }
             let n = &self.nodes[i as usize];
             if n.is_leaf() {
@@ -264,8 +279,8 @@ impl TwoLevel {
             }
             let lim = limit();
             let (l, r) = (n.first, n.first + 1);
-            let a = enter(&self.nodes[l as usize], lim).map(|t| (l, t));
-            let b = enter(&self.nodes[r as usize], lim).map(|t| (r, t));
+            let a = enter(&self.nodes[l as usize], lim).map(|t| (l, t, depth + 1));
+            let b = enter(&self.nodes[r as usize], lim).map(|t| (r, t, depth + 1));
             // The farther pushed first, so the nearer is walked first.
             let (first, second) = match (a, b) {
                 (Some(a), Some(b)) if b.1 < a.1 => (Some(a), Some(b)),
@@ -326,6 +341,49 @@ impl TwoLevel {
     #[inline]
     pub fn intersect_global(&self, ray: &Ray, t_max: f32) -> Option<Hit> {
         self.intersect(ray, t_max).map(|h| self.global(h))
+    }
+
+    /// [`TwoLevel::intersect`], calling `visit` for every top-level node entered (`top` true,
+    /// its index among [`TwoLevel::top_nodes`]) and, in each instance entered, for every node
+    /// and triangle its mesh's walk visits ([`Bvh::intersect_visit`]; `top` false, indices in
+    /// that mesh's tree): the work of the two levels, for the cost views.
+    pub fn intersect_visit(
+        &self,
+        ray: &Ray,
+        t_max: f32,
+        mut visit: impl FnMut(bool, super::Visit),
+    ) -> Option<InstanceHit> {
+        if t_max.is_nan() || t_max <= 0.0 {
+            return None;
+        }
+        let best = std::cell::Cell::new(None::<InstanceHit>);
+        let visit = std::cell::RefCell::new(&mut visit);
+        self.walk_seen(
+            ray,
+            || best.get().map_or(t_max, |b| b.hit.t),
+            |i| {
+                let local = self.local(i as usize, ray);
+                let current = best.get();
+                let reach = current.map_or(t_max, |b| b.hit.t.next_up());
+                let mesh = &self.meshes[self.mesh_of[i as usize] as usize];
+                let found = mesh.intersect_visit(&local, reach, |v| (visit.borrow_mut())(false, v));
+                if let Some(h) = found {
+                    let better = match current {
+                        None => true,
+                        Some(b) => h.t < b.hit.t || (h.t == b.hit.t && i < b.instance),
+                    };
+                    if better && h.t < t_max {
+                        best.set(Some(InstanceHit {
+                            instance: i,
+                            hit: h,
+                        }));
+                    }
+                }
+                true
+            },
+            |index, depth| (visit.borrow_mut())(true, super::Visit::Node { index, depth }),
+        );
+        best.get()
     }
 
     /// The hit `h`, its triangle numbered in the list of all instances' triangles; under a

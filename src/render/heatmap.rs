@@ -3,7 +3,7 @@
 
 use glam::Vec3;
 
-use crate::bvh::{Bvh, Visit};
+use crate::bvh::{BvhNode, Tree, Visit};
 use crate::camera::CameraRays;
 use crate::geometry::Ray;
 
@@ -17,17 +17,26 @@ pub struct TraversalCost {
 }
 
 /// Traces the ray through the centre of pixel `(x, y)` and counts its traversal work.
-pub fn pixel_cost(bvh: &Bvh, cam: &CameraRays, x: u32, y: u32) -> TraversalCost {
+pub fn pixel_cost<'a>(bvh: impl Into<Tree<'a>>, cam: &CameraRays, x: u32, y: u32) -> TraversalCost {
     ray_cost(bvh, &cam.pinhole(x as f32 + 0.5, y as f32 + 0.5))
 }
 
-/// The traversal work of the closest-hit query of `ray`.
-pub fn ray_cost(bvh: &Bvh, ray: &Ray) -> TraversalCost {
+/// The traversal work of the closest-hit query of `ray`: over two levels, the top level's
+/// nodes and, in each placement entered, its mesh tree's nodes and triangles.
+pub fn ray_cost<'a>(bvh: impl Into<Tree<'a>>, ray: &Ray) -> TraversalCost {
     let mut cost = TraversalCost::default();
-    bvh.intersect_visit(ray, f32::INFINITY, |v| match v {
+    let mut count = |v: Visit| match v {
         Visit::Node { .. } => cost.nodes += 1,
         Visit::Triangle { .. } => cost.triangles += 1,
-    });
+    };
+    match bvh.into() {
+        Tree::Flat(b) => {
+            b.intersect_visit(ray, f32::INFINITY, count);
+        }
+        Tree::TwoLevel(t) => {
+            t.intersect_visit(ray, f32::INFINITY, |_, v| count(v));
+        }
+    }
     cost
 }
 
@@ -41,8 +50,9 @@ pub fn count_row(cam: &CameraRays, y: u32, row: &mut [Vec3], count: impl Fn(&Ray
 }
 
 /// [`count_row`] of the nodes each ray's traversal enters.
-pub fn cost_row(bvh: &Bvh, cam: &CameraRays, y: u32, row: &mut [Vec3]) {
-    count_row(cam, y, row, |ray| ray_cost(bvh, ray).nodes);
+pub fn cost_row<'a>(bvh: impl Into<Tree<'a>>, cam: &CameraRays, y: u32, row: &mut [Vec3]) {
+    let tree = bvh.into();
+    count_row(cam, y, row, |ray| ray_cost(tree, ray).nodes);
 }
 
 /// The colour ramp of the heatmap: dark blue (cheap) through green and yellow to red and
@@ -96,14 +106,20 @@ pub fn cost_summary(sums: &[Vec3]) -> (f32, f32) {
 }
 
 /// Number of boxes at depth `level` (root 0) that `ray` passes through anywhere along its
-/// length, whatever it hits: where boxes of one level overlap, a ray crosses several.
-pub fn boxes_on_ray(bvh: &Bvh, ray: &Ray, level: u32) -> u32 {
-    if bvh.is_empty() {
+/// length, whatever it hits: where boxes of one level overlap, a ray crosses several. Over
+/// two levels, the boxes of the top level.
+pub fn boxes_on_ray<'a>(bvh: impl Into<Tree<'a>>, ray: &Ray, level: u32) -> u32 {
+    let tree = bvh.into();
+    if tree.is_empty() {
         return 0;
     }
+    let nodes: &[BvhNode] = match tree {
+        Tree::Flat(b) => &b.nodes,
+        Tree::TwoLevel(t) => t.top_nodes(),
+    };
     let ray = crate::geometry::PreparedRay::new(ray);
     let crosses = |i: u32| {
-        let (near, far) = bvh.nodes[i as usize].aabb().slab(&ray);
+        let (near, far) = nodes[i as usize].aabb().slab(&ray);
         near.max(0.0) <= far
     };
     if !crosses(0) {
@@ -116,7 +132,7 @@ pub fn boxes_on_ray(bvh: &Bvh, ray: &Ray, level: u32) -> u32 {
             count += 1;
             continue;
         }
-        let n = &bvh.nodes[i as usize];
+        let n = &nodes[i as usize];
         if !n.is_leaf() {
             for c in [n.first, n.first + 1] {
                 if crosses(c) {
@@ -129,6 +145,13 @@ pub fn boxes_on_ray(bvh: &Bvh, ray: &Ray, level: u32) -> u32 {
 }
 
 /// [`count_row`] of the boxes of depth `level` each ray crosses.
-pub fn overlap_row(bvh: &Bvh, cam: &CameraRays, level: u32, y: u32, row: &mut [Vec3]) {
-    count_row(cam, y, row, |ray| boxes_on_ray(bvh, ray, level));
+pub fn overlap_row<'a>(
+    bvh: impl Into<Tree<'a>>,
+    cam: &CameraRays,
+    level: u32,
+    y: u32,
+    row: &mut [Vec3],
+) {
+    let tree = bvh.into();
+    count_row(cam, y, row, |ray| boxes_on_ray(tree, ray, level));
 }

@@ -13,7 +13,6 @@ use super::bvh::SceneBvh;
 use super::scene::{CurrentScene, SceneSystems};
 use super::task::Background;
 use super::worker::{Content, Job, Worker};
-use crate::bvh::Bvh;
 use crate::camera::CameraRays;
 use crate::render::cache::MovingFilter;
 use crate::render::heatmap::{cost_row, cost_summary, heatmap_rgba8, overlap_row};
@@ -517,7 +516,7 @@ pub(super) fn step_mode(
     film: &mut Progressive,
     settings: &ViewSettings,
     tracer: &Tracer,
-    bvh: &Bvh,
+    bvh: crate::bvh::Tree<'_>,
     cam: &CameraRays,
     budget: Duration,
     max_passes: u32,

@@ -338,15 +338,18 @@ impl Loader<'_> {
             let flip = xf(t[0] as usize).flip;
             let order: [usize; 3] = if flip { [0, 2, 1] } else { [0, 1, 2] };
             let c = order.map(|k| t[k] as usize);
-            self.buf.positions
+            self.buf
+                .positions
                 .extend(c.map(|i| xf(i).full.transform_point3(p.positions[i].as_dvec3())));
             let turn =
                 |i: usize, n: Vec3| (xf(i).normal * n.as_dvec3()).normalize_or_zero().as_vec3();
-            self.buf.normals.push(match (&p.normals, &p.corner_normals) {
-                (Some(n), _) => Some(c.map(|i| turn(i, n[i]))),
-                (None, Some(cn)) => Some(order.map(|k| turn(t[k] as usize, cn[ti][k]))),
-                (None, None) => None,
-            });
+            self.buf
+                .normals
+                .push(match (&p.normals, &p.corner_normals) {
+                    (Some(n), _) => Some(c.map(|i| turn(i, n[i]))),
+                    (None, Some(cn)) => Some(order.map(|k| turn(t[k] as usize, cn[ti][k]))),
+                    (None, None) => None,
+                });
             self.buf.uvs.push(match &p.uvs {
                 Some(uv) => c.map(|i| uv[i]),
                 None => [Vec2::ZERO; 3],

@@ -186,7 +186,7 @@ pub(super) fn trace_still(
         film,
         &job.settings,
         &t,
-        &job.bvh,
+        job.tree(),
         cam,
         STILL_SLICE,
         target,
