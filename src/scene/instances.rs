@@ -68,8 +68,7 @@ impl Instances {
         let mut placed = 0u64;
         for (i, p) in placements.iter().enumerate() {
             let mesh = meshes.get(p.mesh as usize).ok_or(PlaceError::NoMesh(i))?;
-            let det = p.to_world.matrix3.determinant();
-            if !p.to_world.is_finite() || det == 0.0 || !det.is_finite() {
+            if !invertible(&p.to_world) {
                 return Err(PlaceError::Singular(i));
             }
             first.push(placed as u32);
@@ -91,8 +90,7 @@ impl Instances {
         let mut placements = self.placements.clone();
         for &(i, m) in moves {
             let p = placements.get_mut(i).ok_or(PlaceError::NoMesh(i))?;
-            let det = m.matrix3.determinant();
-            if !m.is_finite() || det == 0.0 || !det.is_finite() {
+            if !invertible(&m) {
                 return Err(PlaceError::Singular(i));
             }
             p.to_world = m;
@@ -289,6 +287,13 @@ pub(crate) fn place(
     }
     let meshes = shared.into_iter().map(std::sync::Arc::new).collect();
     Instances::new(meshes, list, mesh.triangles.len() as u64)
+}
+
+/// Whether `m` and its inverse are finite and `m` does not flatten space: the placements the
+/// top level takes ([`crate::bvh::TwoLevel::new`] checks the same).
+fn invertible(m: &Affine3A) -> bool {
+    let det = m.matrix3.determinant();
+    m.is_finite() && det != 0.0 && det.is_finite() && m.inverse().is_finite()
 }
 
 /// Whether `m` mirrors (turns the winding of a triangle around).

@@ -56,9 +56,15 @@ fn append_optional<T: Copy>(
 
 impl Mesh {
     /// Appends another mesh, shifting its material ids by `material_offset`.
-    pub fn append(&mut self, other: Mesh, material_offset: u32) {
-        if self.triangles.is_empty() {
-            self.origin = other.origin;
+    pub fn append(&mut self, mut other: Mesh, material_offset: u32) {
+        if self.triangles.is_empty() && self.normals.is_empty() && self.material_ids.is_empty() {
+            // Nothing to keep: the other mesh taken whole, not copied.
+            other
+                .material_ids
+                .iter_mut()
+                .for_each(|m| *m += material_offset);
+            *self = other;
+            return;
         }
         let delta = other.origin - self.origin;
         if delta == DVec3::ZERO {

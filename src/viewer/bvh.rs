@@ -54,6 +54,9 @@ pub struct SceneBvh {
     /// For a scene that places meshes many times, the two levels rays are traced through
     /// (with `bvh` as one of their meshes' trees).
     pub placed: Option<Arc<TwoLevel>>,
+    /// Whether the scene the trees were built for places meshes many times (then rays are
+    /// traced only through `placed`, never through `bvh` alone).
+    pub needs_placed: bool,
     /// What it was built from.
     pub key: Option<BvhKey>,
     /// Builds installed since start (refits included).
@@ -79,10 +82,12 @@ impl SceneBvh {
     /// of a scene that places meshes many times, else the one tree.
     pub fn tracing(&self, scene: u64) -> Option<Tree<'_>> {
         let own = self.for_scene(scene)?;
-        Some(match &self.placed {
-            Some(t) => Tree::TwoLevel(t),
-            None => Tree::Flat(own),
-        })
+        match (&self.placed, self.needs_placed) {
+            (Some(t), _) => Some(Tree::TwoLevel(t)),
+            (None, false) => Some(Tree::Flat(own)),
+            // Its placements could not be placed (said in the log): nothing to trace.
+            (None, true) => None,
+        }
     }
 }
 
@@ -154,6 +159,7 @@ fn rebuild_bvh(
                 }
                 bvh.bvh = Some(tree);
                 bvh.placed = placed;
+                bvh.needs_placed = !scene.scene.instances.is_empty();
                 bvh.key = Some(key);
                 bvh.builds += 1;
             }

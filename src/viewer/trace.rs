@@ -584,7 +584,10 @@ fn send_job(
     let Ok((transform, projection)) = camera.single() else {
         return;
     };
-    let Some(tree) = bvh.for_scene(current.generation) else {
+    let (Some(tree), Some(_)) = (
+        bvh.for_scene(current.generation),
+        bvh.tracing(current.generation),
+    ) else {
         stats.waiting = Some("building BVH");
         return;
     };
