@@ -320,16 +320,7 @@ impl TwoLevel {
             // Up to and including the best distance, so a tie is seen and decided.
             let reach = current.map_or(t_max, |b| b.hit.t.next_up());
             if let Some(h) = self.meshes[mesh as usize].intersect(&local, reach) {
-                let better = match current {
-                    None => true,
-                    Some(b) => h.t < b.hit.t || (h.t == b.hit.t && i < b.instance),
-                };
-                if better && h.t < t_max {
-                    best.set(Some(InstanceHit {
-                        instance: i,
-                        hit: h,
-                    }));
-                }
+                offer(&best, i, h, t_max);
             }
             true
         });
@@ -368,16 +359,7 @@ impl TwoLevel {
                 let mesh = &self.meshes[self.mesh_of[i as usize] as usize];
                 let found = mesh.intersect_visit(&local, reach, |v| (visit.borrow_mut())(false, v));
                 if let Some(h) = found {
-                    let better = match current {
-                        None => true,
-                        Some(b) => h.t < b.hit.t || (h.t == b.hit.t && i < b.instance),
-                    };
-                    if better && h.t < t_max {
-                        best.set(Some(InstanceHit {
-                            instance: i,
-                            hit: h,
-                        }));
-                    }
+                    offer(&best, i, h, t_max);
                 }
                 true
             },
@@ -445,6 +427,22 @@ impl TwoLevel {
             },
         );
         blocked
+    }
+}
+
+/// Keeps `h`, a hit in instance `i`, when it is nearer than the best so far (or as near, in
+/// a lower instance) and before `t_max`.
+#[inline]
+fn offer(best: &std::cell::Cell<Option<InstanceHit>>, i: u32, h: Hit, t_max: f32) {
+    let better = match best.get() {
+        None => true,
+        Some(b) => h.t < b.hit.t || (h.t == b.hit.t && i < b.instance),
+    };
+    if better && h.t < t_max {
+        best.set(Some(InstanceHit {
+            instance: i,
+            hit: h,
+        }));
     }
 }
 

@@ -130,10 +130,16 @@ impl Instances {
         std::mem::size_of_val(&self.placements[..]) + std::mem::size_of_val(&self.first[..])
     }
 
+    /// The placement (its index) that placed triangle `k` belongs to.
+    #[inline]
+    pub fn placement_of(&self, k: u32) -> usize {
+        self.first.partition_point(|&f| f <= k) - 1
+    }
+
     /// The placement of placed triangle `k`, its mesh, and the triangle's index in the mesh.
     #[inline]
     pub fn locate(&self, k: u32) -> (&Instance, &Mesh, usize) {
-        let i = self.first.partition_point(|&f| f <= k) - 1;
+        let i = self.placement_of(k);
         let p = &self.placements[i];
         (
             p,

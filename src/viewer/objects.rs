@@ -191,14 +191,7 @@ fn pick(
     let placement = tree
         .intersect(&ray, f32::INFINITY)
         .filter(|h| h.prim >= own)
-        .map(|h| {
-            let placed = &current.scene.instances;
-            let k = h.prim - own;
-            (0..placed.placements().len())
-                .rev()
-                .find(|&i| placed.first_triangle(i) <= k)
-                .unwrap_or(0)
-        });
+        .map(|h| current.scene.instances.placement_of(h.prim - own));
     selection.0 = placement.and_then(|i| {
         objects
             .iter()
