@@ -188,6 +188,47 @@ fn node_transforms_compose_and_instances_and_mirrors_are_placed() {
     );
 }
 
+/// Each node placing a mesh no other node uses is an object of the scene's own triangles,
+/// named by the node (or its mesh, or its index); a mesh several nodes use is one object per
+/// node.
+#[test]
+fn nodes_are_the_scenes_objects() {
+    use tracery::scene::Place;
+    let dir = tempfile::tempdir().unwrap();
+    let nodes = json!([
+        {"name": "left", "mesh": 0},
+        {"mesh": 1, "translation": [3.0, 0.0, 0.0]},
+        {"mesh": 2, "translation": [6.0, 0.0, 0.0]},
+        {"mesh": 2, "translation": [9.0, 0.0, 0.0]}
+    ]);
+    let d = doc(nodes, json!({}));
+    let prim = d["meshes"][0].clone();
+    let mut named = prim.clone();
+    named["name"] = json!("middle");
+    let d = {
+        let mut d = d;
+        d["meshes"] = json!([prim.clone(), named, prim]);
+        d
+    };
+    let s = Scene::load(&write(dir.path(), "objects.gltf", &d)).unwrap();
+    let got: Vec<(&str, Place)> = s
+        .objects
+        .iter()
+        .map(|o| (o.name.as_str(), o.place))
+        .collect();
+    assert_eq!(
+        got,
+        [
+            ("left", Place::Own { first: 0, count: 1 }),
+            ("middle", Place::Own { first: 1, count: 1 }),
+            ("mesh 0 #0", Place::Placed(0)),
+            ("mesh 0 #1", Place::Placed(1)),
+        ]
+    );
+    assert_eq!(s.object_of(1), Some(1));
+    assert_eq!(s.object_of(3), Some(3));
+}
+
 /// Metallic-roughness materials as docs/formats.md's glTF table says.
 #[test]
 fn materials_map_base_colour_metal_emission_alpha_and_transmission() {
@@ -1196,6 +1237,7 @@ fn quad_over_floor(top: tracery::scene::Material, uv: impl Fn(Vec3) -> Vec2, lig
         warnings: Vec::new(),
         animation: None,
         instances: Default::default(),
+        objects: Vec::new(),
     }
 }
 

@@ -1,6 +1,7 @@
 //! Scenes that place meshes many times: a scene file's `grid` holds its mesh once and renders
 //! the picture of the same scene with every copy flattened into one mesh; refused grids name
-//! the file and line.
+//! the file and line. A scene's objects: every triangle in one, and an object of the scene's
+//! own triangles lifted into a placement of its own renders the picture it had.
 
 mod common;
 
@@ -276,7 +277,7 @@ fn the_cost_views_walk_both_levels() {
     let (mut placed_hits, mut top_only) = (0, 0);
     for ray in cam.pixel_center_rays() {
         let mut top = 0;
-        let visited = two.intersect_visit(&ray, f32::INFINITY, |is_top, _| top += is_top as u32);
+        let visited = two.intersect_visit(&ray, f32::INFINITY, |i, _| top += i.is_none() as u32);
         let hit = two.intersect_global(&ray, f32::INFINITY);
         assert_eq!(visited.map(|h| two.global(h)), hit);
         let cost = ray_cost(&accel, &ray);
@@ -291,4 +292,220 @@ fn the_cost_views_walk_both_levels() {
     }
     assert!(placed_hits > 100, "{placed_hits} rays hit a placement");
     assert!(top_only > 0);
+}
+
+/// Renders `scene` through the trees it needs.
+fn picture(scene: &Scene, settings: &RenderSettings) -> Vec<glam::Vec3> {
+    let accel = Accel::for_scene(scene, &BuildOptions::sah()).unwrap();
+    render(scene, &accel, settings, &|_| {})
+        .unwrap()
+        .film
+        .mean()
+}
+
+#[test]
+fn the_cornell_box_names_its_objects_and_every_triangle_is_in_one() {
+    use tracery::scene::Place;
+    let scene = Scene::cornell_box();
+    let names: Vec<&str> = scene.objects.iter().map(|o| o.name.as_str()).collect();
+    assert_eq!(
+        names,
+        [
+            "floor",
+            "ceiling",
+            "back_wall",
+            "right_wall",
+            "left_wall",
+            "light",
+            "short_block",
+            "tall_block"
+        ]
+    );
+    let mut seen = vec![0u32; scene.triangle_count()];
+    for (i, o) in scene.objects.iter().enumerate() {
+        let Place::Own { first, count } = o.place else {
+            panic!("{}: the box places nothing twice", o.name);
+        };
+        for prim in first..first + count {
+            seen[prim as usize] += 1;
+            assert_eq!(scene.object_of(prim), Some(i), "triangle {prim}");
+        }
+    }
+    assert!(seen.iter().all(|&n| n == 1), "{seen:?}");
+    assert_eq!(scene.object_of(scene.triangle_count() as u32), None);
+
+    // A grid's copies are one object each, after the floor.
+    let grid = load(GRID).unwrap();
+    assert_eq!(grid.objects.len(), 1 + grid.instances.placements().len());
+    assert_eq!(grid.objects[0].name, "quad");
+    let own = grid.mesh.triangles.len() as u32;
+    for p in [0, 5, grid.instances.placements().len() - 1] {
+        let prim = own + grid.instances.first_triangle(p);
+        assert_eq!(
+            grid.objects[grid.object_of(prim).unwrap()].place,
+            Place::Placed(p)
+        );
+    }
+}
+
+/// Lifting the tall block out of the box's own triangles where it stands changes nothing in
+/// the picture (the same samples through the same triangles, now traced through two levels);
+/// lifted and moved, its triangles are where the new transform puts them and the rest stay.
+#[test]
+fn an_object_lifted_out_of_the_scene_renders_where_its_transform_puts_it() {
+    use glam::{Affine3A, Quat, Vec3};
+    use tracery::scene::Place;
+    let scene = Scene::cornell_box();
+    let tall = scene
+        .objects
+        .iter()
+        .position(|o| o.name == "tall_block")
+        .unwrap();
+    let Place::Own { first, count } = scene.objects[tall].place else {
+        panic!("the tall block is the box's own");
+    };
+    let (frame, local) = scene.object_frame(tall).unwrap();
+    assert!(
+        Vec3::from(local.max).abs_diff_eq(-Vec3::from(local.min), 1e-5),
+        "centred"
+    );
+
+    let lifted = scene.lifted(tall, frame).unwrap();
+    assert_eq!(lifted.objects.len(), scene.objects.len());
+    assert_eq!(lifted.objects[tall].place, Place::Placed(0));
+    assert_eq!(
+        lifted.mesh.triangles.len(),
+        scene.mesh.triangles.len() - count as usize
+    );
+    assert_eq!(lifted.triangle_count(), scene.triangle_count());
+    for i in 0..scene.objects.len() {
+        assert_eq!(lifted.objects[i].name, scene.objects[i].name);
+    }
+    for integrator in [Integrator::Direct, Integrator::Path] {
+        let (mut a, mut b) = (scene.clone(), lifted.clone());
+        a.integrator = integrator;
+        b.integrator = integrator;
+        let settings = RenderSettings {
+            width: 80,
+            height: 60,
+            spp: 16,
+            ..RenderSettings::default()
+        };
+        let (before, after) = (picture(&a, &settings), picture(&b, &settings));
+        let (mean, max, differ) = difference(&before, &after);
+        println!(
+            "{integrator}: lifted against own: mean difference {mean:.2e}, largest {max:.2e}, {differ} pixels past 1e-3"
+        );
+        assert!(mean < 2e-3, "{integrator}: mean difference {mean}");
+        assert!(
+            differ * 50 < before.len(),
+            "{integrator}: {differ} pixels differ"
+        );
+    }
+
+    // Moved: up by 0.5 and turned a quarter about its own vertical axis.
+    let to = Affine3A::from_translation(Vec3::from(frame.translation) + Vec3::new(0.0, 0.5, 0.0))
+        * Affine3A::from_quat(Quat::from_rotation_y(std::f32::consts::FRAC_PI_2));
+    let moved = scene.lifted(tall, to).unwrap().flattened();
+    let by = to * frame.inverse();
+    let placed_first = moved.mesh.triangles.len() as u32 - count;
+    let Place::Own { first: f, .. } = moved.objects[tall].place else {
+        panic!("flattened");
+    };
+    assert_eq!(f, placed_first, "the lifted block is numbered last");
+    for k in 0..count {
+        let want = scene.triangle(first + k).map(|v| by.transform_point3(v));
+        let got = moved.triangle(placed_first + k);
+        for (w, g) in want.iter().zip(&got) {
+            assert!(
+                w.abs_diff_eq(*g, 1e-4),
+                "triangle {k}: {got:?}, expected {want:?}"
+            );
+        }
+    }
+    // Every other object's triangles are where they were.
+    for (i, o) in scene.objects.iter().enumerate().filter(|(i, _)| *i != tall) {
+        let (Place::Own { first: a, count: n }, Place::Own { first: b, .. }) =
+            (o.place, moved.objects[i].place)
+        else {
+            panic!("{}: own", o.name);
+        };
+        for k in 0..n {
+            assert_eq!(scene.triangle(a + k), moved.triangle(b + k), "{}", o.name);
+        }
+    }
+    // And a ray down onto its new top meets it.
+    let moved = scene.lifted(tall, to).unwrap();
+    let accel = Accel::for_scene(&moved, &BuildOptions::sah()).unwrap();
+    let top = Vec3::from(to.translation) + Vec3::Y * (Vec3::from(local.max).y + 0.5);
+    let hit = accel
+        .tree()
+        .intersect(
+            &tracery::geometry::Ray::new(top, Vec3::NEG_Y),
+            f32::INFINITY,
+        )
+        .unwrap();
+    assert_eq!(moved.object_of(hit.prim), Some(tall));
+    // An object past the list is an error, not a panic.
+    assert!(scene.lifted(scene.objects.len(), to).is_err());
+}
+
+/// The debug ray over two levels lists the nodes both levels' walks entered, in order (the
+/// top level's and each placed mesh's), and marks the root, and a leaf of the placement hit,
+/// as holding the hit.
+#[test]
+fn the_debug_ray_lists_the_nodes_of_both_levels() {
+    use tracery::bvh::Visit;
+    use tracery::render::{EnvironmentMap, RenderPlan, Tracer};
+    let scene = load(GRID).unwrap();
+    let accel = Accel::for_scene(&scene, &BuildOptions::sah()).unwrap();
+    let Accel::TwoLevel(two) = &accel else {
+        panic!("two levels")
+    };
+    let settings = RenderSettings::default();
+    let plan = RenderPlan::new(&scene, &settings);
+    let env = EnvironmentMap::load(&scene.environment, plan.environment).unwrap();
+    let tracer = Tracer::new(&scene, &accel, plan, settings.max_depth, &env);
+    let cam = tracery::camera::CameraRays::new(&scene.camera, 32, 24);
+    let own = scene.mesh.triangles.len() as u32;
+    let mut on_placements = 0;
+    for ray in cam.pixel_center_rays() {
+        let path = tracer.debug_path(&ray);
+        let seg = &path.segments[0];
+        let mut visited = Vec::new();
+        let found = two.intersect_visit(&seg.ray, f32::INFINITY, |i, v| {
+            if let Visit::Node { index, .. } = v {
+                visited.push((i, index));
+            }
+        });
+        assert_eq!(seg.hit.map(|h| h.prim), found.map(|h| two.global(h).prim));
+        let listed: Vec<(Option<u32>, u32)> =
+            seg.nodes.iter().map(|n| (n.instance, n.index)).collect();
+        assert_eq!(listed, visited);
+        // (A ray that misses the top level's box enters nothing.)
+        if let Some(root) = seg.nodes.first() {
+            assert_eq!((root.instance, root.index), (None, 0));
+            assert_eq!(root.found_hit, seg.hit.is_some());
+        } else {
+            assert!(seg.hit.is_none());
+        }
+        if let (Some(h), Some(f)) = (seg.hit, found)
+            && h.prim >= own
+        {
+            on_placements += 1;
+            let placed: Vec<_> = seg
+                .nodes
+                .iter()
+                .filter(|n| n.instance == Some(f.instance) && n.found_hit)
+                .collect();
+            let mesh = &two.meshes[two.mesh_of(f.instance as usize) as usize];
+            assert!(
+                placed
+                    .iter()
+                    .any(|n| mesh.nodes[n.index as usize].is_leaf()),
+                "a leaf of the placement hit holds the hit"
+            );
+        }
+    }
+    assert!(on_placements > 20, "{on_placements} rays met placements");
 }

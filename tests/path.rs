@@ -29,6 +29,7 @@ fn scene(parts: Vec<(Vec<[Vec3; 3]>, Material)>, lights: Vec<Light>, camera: Cam
         warnings: Vec::new(),
         animation: None,
         instances: Default::default(),
+        objects: Vec::new(),
     }
 }
 

@@ -425,6 +425,7 @@ fn cube_on_floor(offset: Vec3) -> Scene {
         warnings: Vec::new(),
         animation: None,
         instances: Default::default(),
+        objects: Vec::new(),
     }
 }
 

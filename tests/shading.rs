@@ -32,6 +32,7 @@ fn scene(parts: Vec<(Vec<[Vec3; 3]>, Material)>, lights: Vec<Light>, env: Enviro
         warnings: Vec::new(),
         animation: None,
         instances: Default::default(),
+        objects: Vec::new(),
     }
 }
 

@@ -715,12 +715,8 @@ fn the_timeline_shows_and_plays_the_animation() {
     });
 }
 
-/// A scene that places a mesh many times has one entity per placement; changing one entity's
-/// `Transform` rebuilds the top level only, once (every mesh's tree kept), and rays meet the
-/// object where it was moved to.
-#[test]
-fn moving_an_object_rebuilds_the_top_level_only_once() {
-    use tracery::viewer::objects::SceneObject;
+/// A floor placed once and a grid of nine cubes, its trees built.
+fn grid_app() -> (App, tempfile::TempDir) {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("grid.toml");
     std::fs::write(
@@ -740,21 +736,12 @@ fn moving_an_object_rebuilds_the_top_level_only_once() {
                 .is_some()
     };
     settle(&mut app, "the grid and its trees", ready);
-    let full = builds(&app);
-    let mut q = app
-        .world_mut()
-        .query::<(Entity, &SceneObject, &Transform)>();
-    let objects: Vec<(Entity, usize, Vec3)> = q
-        .iter(app.world())
-        .map(|(e, o, t)| (e, o.placement, t.translation))
-        .collect();
-    assert_eq!(objects.len(), 9, "one entity per placement");
-    let &(e, placement, at) = objects.iter().find(|o| o.1 == 4).unwrap();
-    assert!((at - Vec3::new(1.5, 0.0, -1.5)).length() < 1e-5, "{at}");
-    let before = app.world().resource::<CurrentScene>().generation;
-    let to = at + Vec3::new(0.4, 1.0, 0.0);
-    app.world_mut().get_mut::<Transform>(e).unwrap().translation = to;
-    settle(&mut app, "the move installed", |w| {
+    (app, dir)
+}
+
+/// Settles after a move, until the scene it installs has its trees.
+fn settle_move(app: &mut App, before: u64) {
+    settle(app, "the move installed", |w| {
         let current = w.resource::<CurrentScene>();
         current.generation > before
             && w.resource::<SceneBvh>().key.map(|k| k.scene) == Some(current.generation)
@@ -762,6 +749,40 @@ fn moving_an_object_rebuilds_the_top_level_only_once() {
     for _ in 0..20 {
         app.update();
     }
+}
+
+/// A scene that places a mesh many times has one entity per object (the floor, and each
+/// placement); changing one placement's `Transform` rebuilds the top level only, once (every
+/// mesh's tree kept), and rays meet the object where it was moved to.
+#[test]
+fn moving_an_object_rebuilds_the_top_level_only_once() {
+    use tracery::scene::Place;
+    use tracery::viewer::objects::SceneObject;
+    let (mut app, _dir) = grid_app();
+    let full = builds(&app);
+    let mut q = app
+        .world_mut()
+        .query::<(Entity, &SceneObject, &Transform)>();
+    let scene = app.world().resource::<CurrentScene>().scene.clone();
+    let objects: Vec<(Entity, Place, Vec3)> = q
+        .iter(app.world())
+        .map(|(e, o, t)| (e, scene.objects[o.object].place, t.translation))
+        .collect();
+    assert_eq!(
+        objects.len(),
+        10,
+        "one entity per object: the floor and nine cubes"
+    );
+    let placement = 4;
+    let &(e, _, at) = objects
+        .iter()
+        .find(|o| o.1 == Place::Placed(placement))
+        .unwrap();
+    assert!((at - Vec3::new(1.5, 0.0, -1.5)).length() < 1e-5, "{at}");
+    let before = app.world().resource::<CurrentScene>().generation;
+    let to = at + Vec3::new(0.4, 1.0, 0.0);
+    app.world_mut().get_mut::<Transform>(e).unwrap().translation = to;
+    settle_move(&mut app, before);
     let bvh = app.world().resource::<SceneBvh>();
     assert_eq!(bvh.top_builds, 1, "the top level built once");
     assert_eq!(builds(&app), full, "no mesh's tree built again");
@@ -786,4 +807,89 @@ fn moving_an_object_rebuilds_the_top_level_only_once() {
         .intersect(&down(at + Vec3::new(0.05, 0.0, 0.1)), f32::INFINITY)
         .expect("the floor");
     assert!(hit.prim < own, "{hit:?}");
+}
+
+/// Moving an object of the scene's own triangles (the grid's floor) lifts it into a mesh of
+/// its own, placed once: one build of the trees that changed (the cubes' tree kept), the
+/// entities kept; moving it again rebuilds the top level only.
+#[test]
+fn moving_an_object_of_the_scenes_own_lifts_it_once() {
+    use tracery::scene::Place;
+    use tracery::viewer::objects::SceneObject;
+    let (mut app, _dir) = grid_app();
+    let full = builds(&app);
+    let cube_tree = app
+        .world()
+        .resource::<SceneBvh>()
+        .placed
+        .as_ref()
+        .unwrap()
+        .meshes[1]
+        .clone();
+    let mut q = app
+        .world_mut()
+        .query::<(Entity, &SceneObject, &Transform)>();
+    let (floor, object, at) = q
+        .iter(app.world())
+        .find(|(_, o, _)| o.object == 0)
+        .map(|(e, o, t)| (e, o.object, t.translation))
+        .unwrap();
+    let scene = app.world().resource::<CurrentScene>().scene.clone();
+    assert_eq!(
+        scene.objects[object].place,
+        Place::Own { first: 0, count: 2 }
+    );
+    let entities = q.iter(app.world()).count();
+
+    let before = app.world().resource::<CurrentScene>().generation;
+    let to = at + Vec3::new(0.0, -0.25, 0.0);
+    app.world_mut()
+        .get_mut::<Transform>(floor)
+        .unwrap()
+        .translation = to;
+    settle_move(&mut app, before);
+    let current = app.world().resource::<CurrentScene>();
+    assert!(current.lifted);
+    assert_eq!(
+        current.generation,
+        before + 1,
+        "one scene installed for the move"
+    );
+    assert_eq!(current.scene.objects[object].place, Place::Placed(9));
+    assert!(
+        current.scene.mesh.triangles.is_empty(),
+        "the floor was the only own object"
+    );
+    let bvh = app.world().resource::<SceneBvh>();
+    assert_eq!(builds(&app), full + 1, "one build for the lift");
+    assert_eq!(bvh.top_builds, 0);
+    let two = bvh.placed.as_ref().unwrap();
+    assert!(
+        std::sync::Arc::ptr_eq(&two.meshes[0], &cube_tree),
+        "the cubes' tree kept"
+    );
+    // A ray down between the cubes meets the floor where it was moved to.
+    let tree = bvh.tracing(current.generation).unwrap();
+    let ray = tracery::geometry::Ray::new(Vec3::new(0.75, 5.0, 0.75), Vec3::NEG_Y);
+    let hit = tree.intersect(&ray, f32::INFINITY).expect("the floor");
+    assert_eq!(current.scene.object_of(hit.prim), Some(object));
+    assert!((5.0 - hit.t - to.y).abs() < 1e-4, "{hit:?}");
+    assert_eq!(
+        app.world_mut()
+            .query::<&SceneObject>()
+            .iter(app.world())
+            .count(),
+        entities,
+        "the entities kept"
+    );
+
+    // Moved again: a placement now, so the top level alone is built.
+    let before = app.world().resource::<CurrentScene>().generation;
+    app.world_mut()
+        .get_mut::<Transform>(floor)
+        .unwrap()
+        .translation = at;
+    settle_move(&mut app, before);
+    assert_eq!(builds(&app), full + 1);
+    assert_eq!(app.world().resource::<SceneBvh>().top_builds, 1);
 }

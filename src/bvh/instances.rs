@@ -334,15 +334,16 @@ impl TwoLevel {
         self.intersect(ray, t_max).map(|h| self.global(h))
     }
 
-    /// [`TwoLevel::intersect`], calling `visit` for every top-level node entered (`top` true,
-    /// its index among [`TwoLevel::top_nodes`]) and, in each instance entered, for every node
-    /// and triangle its mesh's walk visits ([`Bvh::intersect_visit`]; `top` false, indices in
-    /// that mesh's tree): the work of the two levels, for the cost views.
+    /// [`TwoLevel::intersect`], calling `visit` for every top-level node entered (instance
+    /// `None`, its index among [`TwoLevel::top_nodes`]) and, in each instance `i` entered,
+    /// for every node and triangle its mesh's walk visits ([`Bvh::intersect_visit`];
+    /// `Some(i)`, indices in that mesh's tree): the work of the two levels, for the cost views
+    /// and the debug ray.
     pub fn intersect_visit(
         &self,
         ray: &Ray,
         t_max: f32,
-        mut visit: impl FnMut(bool, super::Visit),
+        mut visit: impl FnMut(Option<u32>, super::Visit),
     ) -> Option<InstanceHit> {
         if t_max.is_nan() || t_max <= 0.0 {
             return None;
@@ -357,13 +358,14 @@ impl TwoLevel {
                 let current = best.get();
                 let reach = current.map_or(t_max, |b| b.hit.t.next_up());
                 let mesh = &self.meshes[self.mesh_of[i as usize] as usize];
-                let found = mesh.intersect_visit(&local, reach, |v| (visit.borrow_mut())(false, v));
+                let found =
+                    mesh.intersect_visit(&local, reach, |v| (visit.borrow_mut())(Some(i), v));
                 if let Some(h) = found {
                     offer(&best, i, h, t_max);
                 }
                 true
             },
-            |index, depth| (visit.borrow_mut())(true, super::Visit::Node { index, depth }),
+            |index, depth| (visit.borrow_mut())(None, super::Visit::Node { index, depth }),
         );
         best.get()
     }

@@ -9,7 +9,7 @@ use glam::Vec3;
 use super::RayCounts;
 use super::Tracer;
 use super::surface::{reflect, transmit};
-use crate::bvh::{Bvh, Visit};
+use crate::bvh::{Bvh, BvhNode, TwoLevel, Visit};
 use crate::geometry::{Ray, offset_ray_origin};
 use crate::scene::Light;
 
@@ -27,7 +27,11 @@ pub enum SegmentKind {
 /// A BVH node a segment entered.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct EnteredNode {
-    /// Index into [`Bvh::nodes`].
+    /// The tree it is a node of: `None` for the scene's one tree, or for the top level of
+    /// two ([`crate::bvh::TwoLevel::top_nodes`]); `Some(i)` for the mesh tree of instance `i`
+    /// of the two levels (its box in that mesh's frame).
+    pub instance: Option<u32>,
+    /// Index into that tree's nodes ([`Bvh::nodes`]).
     pub index: u32,
     /// Depth, root at 0.
     pub depth: u32,
@@ -133,7 +137,7 @@ impl Tracer<'_> {
     ) {
         let (hit, nodes) = match self.bvh {
             crate::bvh::Tree::Flat(bvh) => entered_nodes(bvh, ray),
-            crate::bvh::Tree::TwoLevel(t) => (t.intersect_global(ray, f32::INFINITY), Vec::new()),
+            crate::bvh::Tree::TwoLevel(t) => entered_nodes_of_two(t, ray),
         };
         let index = path.segments.len();
         let Some(hit) = hit else {
@@ -215,8 +219,8 @@ impl Tracer<'_> {
     }
 }
 
-/// The closest hit of `ray` and the nodes its traversal entered, each marked with whether a
-/// triangle below it was hit.
+/// The closest hit of `ray` in `bvh` and every node the search entered, each marked with
+/// whether a triangle tested below it was hit.
 pub fn entered_nodes(bvh: &Bvh, ray: &Ray) -> (Option<crate::bvh::Hit>, Vec<EnteredNode>) {
     let mut order: Vec<(u32, u32)> = Vec::new();
     let mut leaf_hit: HashMap<u32, bool> = HashMap::new();
@@ -232,14 +236,96 @@ pub fn entered_nodes(bvh: &Bvh, ray: &Ray) -> (Option<crate::bvh::Hit>, Vec<Ente
             }
         }
     });
+    let found = found_below(&bvh.nodes, order.iter().map(|o| o.0), &leaf_hit);
+    let nodes = order
+        .into_iter()
+        .map(|(index, depth)| EnteredNode {
+            instance: None,
+            index,
+            depth,
+            found_hit: found.get(&index).copied().unwrap_or(false),
+        })
+        .collect();
+    (hit, nodes)
+}
+
+/// [`entered_nodes`] over two levels: the top level's nodes and, in each instance entered,
+/// its mesh tree's; a top-level leaf found a hit when a triangle of an instance walked from it
+/// was hit.
+pub fn entered_nodes_of_two(
+    two: &TwoLevel,
+    ray: &Ray,
+) -> (Option<crate::bvh::Hit>, Vec<EnteredNode>) {
+    let mut order: Vec<(Option<u32>, u32, u32)> = Vec::new();
+    // Leaves that found a hit, by tree (`None`: the top level).
+    let mut leaf_hit: HashMap<Option<u32>, HashMap<u32, bool>> = HashMap::new();
+    let (mut top_leaf, mut mesh_leaf) = (None, None);
+    let tree_of = |i: u32| &two.meshes[two.mesh_of(i as usize) as usize];
+    let hit = two.intersect_visit(ray, f32::INFINITY, |instance, v| match (instance, v) {
+        (None, Visit::Node { index, depth }) => {
+            order.push((None, index, depth));
+            top_leaf = two.top_nodes()[index as usize].is_leaf().then_some(index);
+        }
+        (Some(i), Visit::Node { index, depth }) => {
+            order.push((Some(i), index, depth));
+            mesh_leaf = tree_of(i).nodes[index as usize].is_leaf().then_some(index);
+        }
+        (Some(i), Visit::Triangle { hit, .. }) => {
+            for (tree, leaf) in [(Some(i), mesh_leaf), (None, top_leaf)] {
+                if let Some(leaf) = leaf {
+                    *leaf_hit
+                        .entry(tree)
+                        .or_default()
+                        .entry(leaf)
+                        .or_insert(false) |= hit;
+                }
+            }
+        }
+        (None, Visit::Triangle { .. }) => {}
+    });
+    let mut found: HashMap<Option<u32>, HashMap<u32, bool>> = HashMap::new();
+    let trees: std::collections::BTreeSet<Option<u32>> = order.iter().map(|o| o.0).collect();
+    let none = HashMap::new();
+    for tree in trees {
+        let nodes = match tree {
+            None => two.top_nodes(),
+            Some(i) => &tree_of(i).nodes[..],
+        };
+        let entered = order.iter().filter(|o| o.0 == tree).map(|o| o.1);
+        let leaves = leaf_hit.get(&tree).unwrap_or(&none);
+        found.insert(tree, found_below(nodes, entered, leaves));
+    }
+    let nodes = order
+        .into_iter()
+        .map(|(instance, index, depth)| EnteredNode {
+            instance,
+            index,
+            depth,
+            found_hit: found
+                .get(&instance)
+                .and_then(|f| f.get(&index))
+                .copied()
+                .unwrap_or(false),
+        })
+        .collect();
+    (hit.map(|h| two.global(h)), nodes)
+}
+
+/// Whether each of the `entered` nodes of a tree laid out as [`Bvh::nodes`] found a hit below
+/// it: a leaf when `leaf_hit` says so, an inner node when either child did.
+fn found_below(
+    nodes: &[BvhNode],
+    entered: impl Iterator<Item = u32>,
+    leaf_hit: &HashMap<u32, bool>,
+) -> HashMap<u32, bool> {
     // Children are stored after their parents: walking the entered nodes from the highest
     // index down settles every child before its parent.
     let mut found: HashMap<u32, bool> = HashMap::new();
-    let mut by_index: Vec<u32> = order.iter().map(|&(i, _)| i).collect();
+    let mut by_index: Vec<u32> = entered.collect();
     by_index.sort_unstable_by(|a, b| b.cmp(a));
     by_index.dedup();
     for i in by_index {
-        let n = &bvh.nodes[i as usize];
+        let n = &nodes[i as usize];
         let f = if n.is_leaf() {
             leaf_hit.get(&i).copied().unwrap_or(false)
         } else {
@@ -249,13 +335,5 @@ pub fn entered_nodes(bvh: &Bvh, ray: &Ray) -> (Option<crate::bvh::Hit>, Vec<Ente
         };
         found.insert(i, f);
     }
-    let nodes = order
-        .into_iter()
-        .map(|(index, depth)| EnteredNode {
-            index,
-            depth,
-            found_hit: found.get(&index).copied().unwrap_or(false),
-        })
-        .collect();
-    (hit, nodes)
+    found
 }

@@ -84,8 +84,8 @@ use toml::Spanned;
 
 use super::format::{self, Format, MeshFile};
 use super::{
-    Camera, Environment, Integrator, Light, Material, Mesh, NormalRule, Scene, Texture, line_of,
-    name_of, read_file,
+    Camera, Environment, Integrator, Light, Material, Mesh, NormalRule, Runs, Scene, Texture,
+    line_of, name_of, read_file,
 };
 use crate::geometry::shapes;
 
@@ -251,6 +251,8 @@ struct Part {
     shared: Vec<Mesh>,
     /// Their placements: a mesh of `shared` and its transform within the file.
     placed: Vec<(u32, DAffine3)>,
+    /// The objects `mesh`'s triangles make.
+    objects: Runs,
 }
 
 /// What a scene file's `[[meshes]]` make.
@@ -261,6 +263,8 @@ struct Meshes {
     shared: Vec<Mesh>,
     /// Each grid copy: its mesh in `shared` and its transform to the world.
     placed: Vec<(u32, DAffine3)>,
+    /// The objects `mesh`'s triangles make.
+    objects: Runs,
     /// The files' warnings.
     warnings: Vec<String>,
     /// The longest animation of the glTF meshes, if any has one.
@@ -474,6 +478,7 @@ impl Ctx<'_> {
         by_name: &BTreeMap<String, u32>,
     ) -> Result<Meshes> {
         let mut mesh = Mesh::default();
+        let mut objects = Runs::default();
         let mut shared = Vec::new();
         let mut placed = Vec::new();
         let mut placements = 0u64;
@@ -506,6 +511,7 @@ impl Ctx<'_> {
                 materials: part_materials,
                 shared: inner,
                 placed: inner_placed,
+                objects: part_objects,
             } = self.mesh_part(m, &span, &mut warnings, &mut animation)?;
             // The bounds, checked before a placement is made: each copy places the entry's
             // mesh and the meshes its file places many times.
@@ -603,6 +609,7 @@ impl Ctx<'_> {
                 // Placed once (a grid of one copy too): with the scene's own triangles, traced
                 // through one tree without a top level.
                 part.transform(&(copies[0] * transform));
+                objects.extend(part_objects, None);
                 mesh.append(part, 0);
             } else {
                 let index = shared.len() as u32;
@@ -612,6 +619,7 @@ impl Ctx<'_> {
         }
         Ok(Meshes {
             mesh,
+            objects,
             shared,
             placed,
             warnings,
@@ -687,11 +695,16 @@ impl Ctx<'_> {
                 if let Some(a) = loaded.animation {
                     *animation = Some(animation.map_or(a, |b| b.max(a)));
                 }
+                let mut objects = loaded.objects;
+                if objects.is_empty() {
+                    objects.push(name_of(&file), loaded.mesh.triangles.len());
+                }
                 Part {
                     mesh: loaded.mesh,
                     materials: loaded.materials,
                     shared: loaded.shared,
                     placed: loaded.placed,
+                    objects,
                 }
             }
             (None, Some(shape)) => {
@@ -711,11 +724,19 @@ impl Ctx<'_> {
                     ShapeDef::Sphere => Mesh::smooth_sphere(tris),
                     _ => Mesh::from_triangles(tris, 0),
                 };
+                let mut objects = Runs::default();
+                let name = match shape {
+                    ShapeDef::Sphere => "sphere",
+                    ShapeDef::Cube => "cube",
+                    ShapeDef::Quad => "quad",
+                };
+                objects.push(name, part.triangles.len());
                 Part {
                     mesh: part,
                     materials: vec![Material::default()],
                     shared: Vec::new(),
                     placed: Vec::new(),
+                    objects,
                 }
             }
             _ => {
@@ -818,6 +839,7 @@ pub fn parse_at(
     let (mut materials, by_name) = ctx.materials(&def.materials)?;
     let Meshes {
         mut mesh,
+        objects,
         shared,
         placed,
         warnings,
@@ -873,8 +895,15 @@ pub fn parse_at(
     let environment = ctx.environment(&def.environment)?;
     let render = def.render.unwrap_or_default();
 
+    let name = name_of(path);
     Ok(Scene {
-        name: name_of(path),
+        objects: super::objects::list(
+            &objects,
+            mesh.triangles.len(),
+            instances.placements(),
+            &name,
+        ),
+        name,
         mesh,
         materials,
         lights,

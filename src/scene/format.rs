@@ -10,7 +10,7 @@ use std::path::Path;
 use anyhow::{Result, bail};
 
 use super::gltf::{GltfCamera, GltfLight};
-use super::{Material, Mesh, NormalRule, gltf, obj, ply};
+use super::{Material, Mesh, NormalRule, Runs, gltf, obj, ply};
 
 /// A kind of file a scene comes from.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -84,6 +84,8 @@ pub struct MeshFile {
     pub shared: Vec<Mesh>,
     /// Their placements: a mesh of `shared` and its transform to the world.
     pub placed: Vec<(u32, glam::DAffine3)>,
+    /// The objects `mesh`'s triangles make, as the file names them (empty: one, the file).
+    pub objects: Runs,
 }
 
 impl MeshFile {
@@ -98,6 +100,7 @@ impl MeshFile {
             animation: None,
             shared: Vec::new(),
             placed: Vec::new(),
+            objects: Runs::default(),
         }
     }
 }

@@ -35,6 +35,8 @@ pub enum PlaceError {
     Singular(usize),
     /// The placements hold more triangles than one scene can number.
     TooManyTriangles(u64),
+    /// An object past the scene's list ([`super::Scene::lifted`]).
+    NoObject(usize),
 }
 
 impl std::fmt::Display for PlaceError {
@@ -45,6 +47,7 @@ impl std::fmt::Display for PlaceError {
                 f,
                 "placement {i}'s transform is not finite or cannot be inverted (a zero scale?)"
             ),
+            PlaceError::NoObject(i) => write!(f, "the scene has no object {i}"),
             PlaceError::TooManyTriangles(n) => write!(
                 f,
                 "the placements make {n} triangles, more than the {MAX_PLACED} one scene can number"

@@ -244,6 +244,28 @@ impl Mesh {
         Aabb::of_finite_points(self.triangles.iter().flatten().copied())
     }
 
+    /// Takes triangles `range` out (with everything they have: normals, materials, texture
+    /// coordinates, tangents) into a mesh of the same origin; the triangles after them move
+    /// down.
+    pub fn split_off(&mut self, range: std::ops::Range<usize>) -> Mesh {
+        fn take<T>(v: &mut Vec<T>, range: &std::ops::Range<usize>) -> Vec<T> {
+            if v.is_empty() {
+                Vec::new()
+            } else {
+                v.drain(range.clone()).collect()
+            }
+        }
+        Mesh {
+            triangles: take(&mut self.triangles, &range),
+            normals: take(&mut self.normals, &range),
+            material_ids: take(&mut self.material_ids, &range),
+            uvs: take(&mut self.uvs, &range),
+            uvs1: take(&mut self.uvs1, &range),
+            tangents: take(&mut self.tangents, &range),
+            origin: self.origin,
+        }
+    }
+
     /// The bounding box in the frame of another local origin `origin` (world coordinates):
     /// where this mesh lies as seen by a mesh placed at `origin`.
     pub fn bounds_around(&self, origin: DVec3) -> Aabb {

@@ -16,6 +16,7 @@ mod mesh;
 mod meshopt;
 pub mod normals;
 pub mod obj;
+pub mod objects;
 pub mod pbr;
 pub mod ply;
 pub mod tangents;
@@ -35,6 +36,7 @@ pub use light::{Light, spot_falloff};
 pub use material::{AlphaMode, Material};
 pub use mesh::{Mesh, face_normal, local_frame};
 pub use normals::NormalRule;
+pub use objects::{Object, Place, Runs};
 pub use texture::{Texture, Wrap};
 
 /// How light is gathered at the surfaces the camera sees.
@@ -84,6 +86,9 @@ pub struct Scene {
     /// Meshes placed more than once (a glTF mesh many nodes use, a scene file's `grid`), held
     /// once each: triangles `n..` of the scene, after [`Scene::mesh`]'s.
     pub instances: Instances,
+    /// The objects the triangles make (what the files name): runs of [`Scene::mesh`]'s
+    /// triangles and placements of [`Scene::instances`]' meshes, every triangle in one.
+    pub objects: Vec<Object>,
     /// Materials the triangles refer to.
     pub materials: Vec<Material>,
     /// Light sources.
@@ -181,6 +186,7 @@ impl Scene {
             materials
         };
         Scene {
+            objects: objects::list(&Runs::default(), mesh.triangles.len(), &[], &name),
             name,
             mesh,
             materials,
@@ -283,9 +289,19 @@ impl Scene {
         let mut scene = self.clone();
         scene.instances = Instances::default();
         let origin = scene.mesh.origin;
+        let own = self.mesh.triangles.len() as u32;
         for i in 0..self.instances.placements().len() {
             // In the scene's frame already: appended without moving a vertex.
             scene.mesh.append(self.instances.placed_mesh(i, origin), 0);
+        }
+        for o in &mut scene.objects {
+            if let Place::Placed(p) = o.place {
+                let first = own + self.instances.first_triangle(p);
+                let count = self.instances.meshes[self.instances.placements()[p].mesh as usize]
+                    .triangles
+                    .len() as u32;
+                o.place = Place::Own { first, count };
+            }
         }
         scene
     }

@@ -210,6 +210,8 @@ pub fn load_from(
     let mut first_position = 0usize;
 
     let mut mesh = Mesh::default();
+    let mut objects = super::Runs::default();
+    let stem = super::name_of(path);
     for model in &models {
         let m = &model.mesh;
         let material = match m.material_id {
@@ -222,6 +224,7 @@ pub fn load_from(
         let count = m.positions.len() / 3;
         let positions = &local[first_position..first_position + count];
         first_position += count;
+        let before = mesh.triangles.len();
         append_model(
             &mut mesh,
             m,
@@ -230,6 +233,13 @@ pub fn load_from(
             (&groups, &mut next_face),
             rule,
         );
+        // tobj calls what no `o` or `g` line names `unnamed_object`: the file's name is
+        // better.
+        let name = match model.name.as_str() {
+            "" | "unnamed_object" => stem.as_str(),
+            n => n,
+        };
+        objects.push(name, mesh.triangles.len() - before);
     }
     if !mesh.uvs.is_empty() {
         mesh.uvs.resize(mesh.triangles.len(), [Vec2::ZERO; 3]);
@@ -263,7 +273,9 @@ pub fn load_from(
             super::tangents::mikktspace(&mesh.triangles, &mesh.normals, &mesh.uvs, mapped);
     }
     mesh.origin = origin;
-    Ok(MeshFile::of_mesh(mesh, mats, warnings))
+    let mut file = MeshFile::of_mesh(mesh, mats, warnings);
+    file.objects = objects;
+    Ok(file)
 }
 
 /// The OBJ text parsed by tobj, with its MTL files read through `read_mtl` and checked first:

@@ -182,6 +182,7 @@ fn rebuild_bvh(
         && key.scene == from
         && key.options == settings.0
         && building.job.key().is_none()
+        && !scene.lifted
     {
         let own = !scene.scene.mesh.triangles.is_empty();
         match Accel::place(&scene.scene, two.meshes.clone(), own) {
@@ -202,12 +203,23 @@ fn rebuild_bvh(
     }
     let triangles = scene.scene.clone();
     let options = settings.0;
+    // Objects lifted out of the scene's own triangles: the meshes placed before keep their
+    // trees (the lifted ones come after them), the own triangles' and the new meshes' are
+    // built.
+    let kept: Vec<Arc<Bvh>> = match (scene.moved_from, bvh.key, &bvh.placed) {
+        (Some(from), Some(key), Some(two))
+            if scene.lifted && key.scene == from && key.options == options =>
+        {
+            two.meshes.iter().skip(1).cloned().collect()
+        }
+        _ => Vec::new(),
+    };
     // Another instant of the same file: the current tree, refitted (a copy: the pictures
     // under way keep tracing the old one).
     let previous = bvh
         .bvh
         .clone()
-        .filter(|b| !scene.reframe && b.options == options);
+        .filter(|b| !scene.reframe && !scene.lifted && b.options == options);
     let built_cost = bvh.built_cost;
     building.job.start(wanted, "tracery-bvh", move || {
         let (own, update) = match previous {
@@ -221,17 +233,23 @@ fn rebuild_bvh(
                 None,
             ),
         };
-        (own.clone(), update, placed_trees(&triangles, own, &options))
+        (
+            own.clone(),
+            update,
+            placed_trees(&triangles, own, kept, &options),
+        )
     });
     building.started = Some(Instant::now());
 }
 
 /// The two levels of a scene that places meshes many times (`None` for one that does not),
-/// `own` the tree of its own triangles; a placement the top level refuses is logged and the
-/// scene traced without its placements.
+/// `own` the tree of its own triangles, `kept` the trees of its first meshes where they are
+/// built already; a placement the top level refuses is logged and the scene traced without
+/// its placements.
 fn placed_trees(
     scene: &crate::scene::Scene,
     own: Arc<Bvh>,
+    kept: Vec<Arc<Bvh>>,
     options: &BuildOptions,
 ) -> Option<Arc<TwoLevel>> {
     if scene.instances.is_empty() {
@@ -242,10 +260,10 @@ fn placed_trees(
     if has_own {
         meshes.push(own);
     }
+    let reused = kept.len().min(scene.instances.meshes.len());
+    meshes.extend(kept.into_iter().take(reused));
     meshes.extend(
-        scene
-            .instances
-            .meshes
+        scene.instances.meshes[reused..]
             .iter()
             .map(|m| Arc::new(Bvh::build(&m.triangles, options))),
     );

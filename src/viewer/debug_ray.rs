@@ -1,13 +1,16 @@
 //! The debug ray: click a pixel to shoot its ray; the path is drawn with every bounce, the
 //! normal at each hit, the shadow ray to each light coloured by what passes, and the BVH
-//! nodes the ray entered (dim red where it found nothing).
+//! nodes the ray entered (dim red where it found nothing): in a scene that places meshes, the
+//! top level's boxes and those of each placed mesh's tree it walked, carried by the placement.
 
 use bevy::prelude::*;
+use glam::Affine3A;
 
 use super::UiFocus;
 use super::bvh::SceneBvh;
 use super::scene::{CurrentScene, SceneLoading};
 use super::trace::{LoadedEnvironment, TraceCamera, TraceSystems, ViewSettings, ViewportSize};
+use crate::bvh::Tree;
 use crate::geometry::Ray;
 use crate::render::Tracer;
 use crate::render::debug::{DebugPath, SegmentKind, ShadowState};
@@ -239,22 +242,38 @@ fn draw(
         gizmos.line(s.from, s.to, shadow_color(s.state()));
     }
     if debug.show_nodes
-        && let Some(tree) = bvh.for_scene(current.generation)
+        && let Some(tree) = bvh.tracing(current.generation)
     {
         for seg in &debug.path.segments {
             for n in &seg.nodes {
-                let b = tree.nodes[n.index as usize].aabb();
                 let c = if n.found_hit {
                     Color::srgba(1.0, 1.0, 1.0, 0.7)
                 } else {
                     Color::srgba(1.0, 0.25, 0.25, 0.45)
                 };
-                gizmos.aabb_3d(
-                    bevy::math::bounding::Aabb3d {
-                        min: b.min,
-                        max: b.max,
-                    },
-                    Transform::IDENTITY,
+                // A box of the scene's tree or of the top level is drawn as it is; one of a
+                // placed mesh's tree is carried by its placement.
+                let (b, to_world) = match (tree, n.instance) {
+                    (Tree::Flat(b), _) => (b.nodes[n.index as usize].aabb(), Affine3A::IDENTITY),
+                    (Tree::TwoLevel(t), None) => {
+                        (t.top_nodes()[n.index as usize].aabb(), Affine3A::IDENTITY)
+                    }
+                    (Tree::TwoLevel(t), Some(i)) => {
+                        let mesh = &t.meshes[t.mesh_of(i as usize) as usize];
+                        (
+                            mesh.nodes[n.index as usize].aabb(),
+                            t.to_mesh(i as usize).inverse(),
+                        )
+                    }
+                };
+                let (lo, hi) = (Vec3::from(b.min), Vec3::from(b.max));
+                gizmos.cube(
+                    to_world
+                        * Affine3A::from_scale_rotation_translation(
+                            hi - lo,
+                            Quat::IDENTITY,
+                            (lo + hi) * 0.5,
+                        ),
                     c,
                 );
             }

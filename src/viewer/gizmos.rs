@@ -18,6 +18,7 @@ use super::objects::{SceneObject, Selection};
 use super::scene::CurrentScene;
 use super::trace::{RenderMode, ViewSettings};
 use crate::bvh::{Bvh, BvhNode, TwoLevel};
+use crate::scene::Place;
 
 /// Draws the BVH level and leaf gizmos.
 pub struct BvhGizmoPlugin;
@@ -200,18 +201,24 @@ fn index_bvh(
     let Some(tree) = bvh.for_scene(current.generation) else {
         return;
     };
-    let picked = selection.0.and_then(|e| objects.get(e).ok());
+    // A picked object placed by a placement: its mesh's own tree, where it stands.
+    let picked = selection.0.and_then(|e| objects.get(e).ok()).and_then(|o| {
+        let object = current.scene.objects.get(o.object)?;
+        match object.place {
+            Place::Placed(p) => Some((object, current.scene.instances.placements().get(p)?)),
+            Place::Own { .. } => None,
+        }
+    });
     let (want, to_world, what) = match (&bvh.placed, picked) {
-        (Some(two), Some(o)) => {
+        (Some(two), Some((object, p))) => {
             let shift = !current.scene.mesh.triangles.is_empty() as usize;
-            let Some(p) = current.scene.instances.placements().get(o.placement) else {
+            let Some(mesh) = two.meshes.get(p.mesh as usize + shift).cloned() else {
                 return;
             };
-            let mesh = two.meshes[o.mesh as usize + shift].clone();
             (
                 Indexed::Tree(mesh),
                 p.to_world,
-                format!("the BVH of mesh {} (#{})", o.mesh, o.placement),
+                format!("the BVH of {} (mesh {})", object.name, p.mesh),
             )
         }
         (Some(two), None) => (

@@ -23,6 +23,7 @@ use crate::render::debug::ShadowState;
 use crate::render::heatmap::heat_color;
 use crate::sampling::SamplerKind;
 use crate::scene::Integrator;
+use crate::scene::Place;
 
 /// The inspector window, the status line and the key help.
 pub struct InspectorPlugin {
@@ -345,31 +346,46 @@ fn inspector(
     Ok(())
 }
 
-/// The picked object: its name, mesh and triangles, and where it stands; the objects of a
-/// scene that places meshes many times, when none is picked.
+/// The scene's objects (how many; how many of them are placements of meshes held once) and
+/// the picked one: its name, triangles and where it stands.
 fn object_section(
     ui: &mut egui::Ui,
     current: &CurrentScene,
     selection: &Selection,
     objects: &Objects,
 ) {
-    let placed = &current.scene.instances;
-    if placed.is_empty() {
+    let scene = &current.scene;
+    if scene.objects.is_empty() {
         return;
     }
     egui::CollapsingHeader::new("Objects")
         .default_open(true)
         .show(ui, |ui| {
-            ui.label(format!(
-                "{} placements of {} meshes (click one to pick it)",
-                placed.placements().len(),
-                placed.meshes.len()
-            ));
+            let placed = &scene.instances;
+            if placed.is_empty() {
+                ui.label(format!(
+                    "{} objects (click one to pick it)",
+                    scene.objects.len()
+                ));
+            } else {
+                ui.label(format!(
+                    "{} objects, {} of them placements of {} meshes (click one to pick it)",
+                    scene.objects.len(),
+                    placed.placements().len(),
+                    placed.meshes.len()
+                ));
+            }
             let Some((o, name, t)) = selection.0.and_then(|e| objects.get(e).ok()) else {
                 return;
             };
             ui.label(egui::RichText::new(name.as_str()).strong());
-            ui.label(format!("{} triangles (mesh {})", o.triangles, o.mesh));
+            let how = match scene.objects.get(o.object).map(|x| x.place) {
+                Some(Place::Placed(p)) => placed.placements().get(p).map_or(String::new(), |p| {
+                    format!(" (a placement of mesh {})", p.mesh)
+                }),
+                _ => " (of the scene's own: moving it lifts it into a mesh of its own)".into(),
+            };
+            ui.label(format!("{} triangles{how}", o.triangles));
             let p = t.translation;
             ui.label(format!("at ({:.3}, {:.3}, {:.3})", p.x, p.y, p.z));
             ui.label("arrows, Page Up / Down: move; Z / X: turn; - / =: scale; Esc: let go");

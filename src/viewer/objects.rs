@@ -1,9 +1,12 @@
-//! The scene's objects as entities: each placement of a mesh the scene holds once
-//! ([`crate::scene::Instances`]) is an entity with a [`SceneObject`], a `Name` and a
-//! `Transform` (the placement), spawned whenever a scene is installed. Changing an object's
-//! `Transform` (the keys below, the inspector, or any system) installs the scene with that
-//! placement moved: the BVH system then builds the top level again and keeps every mesh's
-//! tree ([`super::bvh`]), and the picture starts over (no sample of the old place is kept).
+//! The scene's objects as entities: each object of the scene ([`crate::scene::Object`]: an
+//! OBJ object, a glTF node's mesh, a scene file's mesh entry, a grid's copy) is an entity with
+//! a [`SceneObject`], a `Name` and a `Transform`, spawned whenever a scene is installed.
+//! Changing an object's `Transform` (the keys below, the inspector, or any system) installs
+//! the scene with that object placed there: a placement is moved, and the BVH system builds
+//! the top level again and keeps every mesh's tree ([`super::bvh`]); an object among the
+//! scene's own triangles is first lifted out of them into a mesh of its own
+//! ([`crate::scene::Scene::lifted`]), which builds the own triangles' tree and the new
+//! mesh's once. The picture starts over (no sample of the old place is kept).
 //!
 //! A click selects the object under the pointer (its box drawn, its name and triangles in the
 //! inspector); the arrow keys move it across the floor, Page Up / Page Down up and down,
@@ -11,6 +14,9 @@
 
 use bevy::prelude::*;
 use glam::Affine3A;
+
+use crate::geometry::Aabb;
+use crate::scene::Place;
 
 use super::UiFocus;
 use super::bvh::SceneBvh;
@@ -52,19 +58,20 @@ impl Plugin for ObjectsPlugin {
 #[derive(SystemSet, Debug, Clone, PartialEq, Eq, Hash)]
 pub struct ObjectSystems;
 
-/// A placement of one of the scene's shared meshes.
+/// One of the scene's objects.
 #[derive(Component, Clone, Debug, PartialEq)]
 pub struct SceneObject {
-    /// Its index in the scene's placements.
-    pub placement: usize,
-    /// The mesh it places (an index into the scene's shared meshes).
-    pub mesh: u32,
-    /// Triangles of that mesh.
+    /// Its index in [`crate::scene::Scene::objects`].
+    pub object: usize,
+    /// Its triangles.
     pub triangles: usize,
-    /// The `Transform` it was spawned with: only a change from it moves the placement (a
-    /// transform with shear, which a `Transform` cannot hold, stays as the file gave it
-    /// until the object is moved).
-    spawned: Transform,
+    /// Its box in its own frame (where its `Transform` carries it).
+    pub bounds: Aabb,
+    /// The `Transform` it was spawned with, and the frame the scene gave it then: while the
+    /// object stands there, only a change from that `Transform` moves it (a transform with
+    /// shear, which a `Transform` cannot hold, stays as the file gave it until the object is
+    /// moved).
+    spawned: (Transform, Affine3A),
 }
 
 /// The object the user picked, if any.
@@ -96,25 +103,34 @@ fn spawn_objects(
         commands.entity(e).despawn();
     }
     selection.0 = None;
-    let placed = &current.scene.instances;
-    for (i, p) in placed.placements().iter().enumerate() {
-        let mesh = &placed.meshes[p.mesh as usize];
-        let transform = Transform::from_matrix(Mat4::from(p.to_world));
+    let scene = &current.scene;
+    for (i, o) in scene.objects.iter().enumerate() {
+        let Some((frame, bounds)) = scene.object_frame(i) else {
+            continue;
+        };
+        let triangles = match o.place {
+            Place::Own { count, .. } => count as usize,
+            Place::Placed(p) => scene.instances.placements().get(p).map_or(0, |p| {
+                scene.instances.meshes[p.mesh as usize].triangles.len()
+            }),
+        };
+        let transform = Transform::from_matrix(Mat4::from(frame));
         commands.spawn((
             SceneObject {
-                placement: i,
-                mesh: p.mesh,
-                triangles: mesh.triangles.len(),
-                spawned: transform,
+                object: i,
+                triangles,
+                bounds,
+                spawned: (transform, frame),
             },
             transform,
-            Name::new(format!("mesh {} #{i}", p.mesh)),
+            Name::new(o.name.clone()),
         ));
     }
 }
 
-/// Installs the scene with the placements of the objects whose `Transform` changed (and
-/// differs from what they were spawned with), once per frame however many moved.
+/// Installs the scene with the objects whose `Transform` changed (and differs from what they
+/// were spawned with) placed there, once per frame however many moved: placements moved,
+/// objects among the scene's own triangles lifted out of them.
 fn install_moves(
     mut current: ResMut<CurrentScene>,
     mut spawned: ResMut<Spawned>,
@@ -123,37 +139,55 @@ fn install_moves(
     if spawned.0 != Some(current.generation) {
         return;
     }
+    let scene = &current.scene;
     let moves: Vec<(usize, Affine3A)> = objects
         .iter()
-        .filter(|(o, t)| **t != o.spawned)
-        .map(|(o, t)| (o.placement, t.compute_affine()))
-        .filter(|(i, m)| {
-            current
-                .scene
-                .instances
-                .placements()
-                .get(*i)
-                .map(|p| p.to_world)
-                != Some(*m)
+        .filter(|(o, t)| {
+            **t != o.spawned.0 || scene.object_frame(o.object).map(|f| f.0) != Some(o.spawned.1)
         })
+        .map(|(o, t)| (o.object, t.compute_affine()))
+        .filter(|(i, m)| scene.object_frame(*i).map(|f| f.0) != Some(*m))
         .collect();
     if moves.is_empty() {
         return;
     }
-    let instances = match current.scene.instances.moved(&moves) {
-        Ok(i) => i,
+    let placement = |i: usize| match scene.objects[i].place {
+        Place::Placed(p) => Some(p),
+        Place::Own { .. } => None,
+    };
+    let placed: Vec<(usize, Affine3A)> = moves
+        .iter()
+        .filter_map(|&(i, m)| placement(i).map(|p| (p, m)))
+        .collect();
+    let lift: Vec<(usize, Affine3A)> = moves
+        .iter()
+        .copied()
+        .filter(|&(i, _)| placement(i).is_none())
+        .collect();
+    let edited = scene.instances.moved(&placed).and_then(|instances| {
+        let mut edited = (**scene).clone();
+        edited.instances = instances;
+        lift.iter().try_fold(edited, |s, &(i, m)| s.lifted(i, m))
+    });
+    let edited = match edited {
+        Ok(s) => s,
         Err(e) => {
             warn!("object not moved: {e}");
             return;
         }
     };
-    let mut scene = (*current.scene).clone();
-    scene.instances = instances;
+    for &(i, _) in &lift {
+        info!(
+            "{} lifted out of the scene's own triangles into a mesh of its own",
+            edited.objects[i].name
+        );
+    }
     let from = current.generation;
-    current.scene = std::sync::Arc::new(scene);
+    current.scene = std::sync::Arc::new(edited);
     current.generation += 1;
     current.reframe = false;
     current.moved_from = Some(from);
+    current.lifted = !lift.is_empty();
     spawned.0 = Some(current.generation);
 }
 
@@ -187,19 +221,12 @@ fn pick(
     }
     *pending = None;
     let ray = ray_through(transform, projection, viewport.0, &settings, p);
-    let own = current.scene.mesh.triangles.len() as u32;
-    let placement = tree
+    let object = tree
         .intersect(&ray, f32::INFINITY)
-        .filter(|h| h.prim >= own)
-        .map(|h| current.scene.instances.placement_of(h.prim - own));
-    selection.0 = placement.and_then(|i| {
-        objects
-            .iter()
-            .find(|(_, o)| o.placement == i)
-            .map(|(e, _)| e)
-    });
-    if let (Some(i), Some(_)) = (placement, selection.0) {
-        info!("picked placement {i}");
+        .and_then(|h| current.scene.object_of(h.prim));
+    selection.0 = object.and_then(|i| objects.iter().find(|(_, o)| o.object == i).map(|(e, _)| e));
+    if let (Some(i), Some(_)) = (object, selection.0) {
+        info!("picked {}", current.scene.objects[i].name);
     }
 }
 
@@ -208,7 +235,6 @@ fn move_keys(
     input: Res<ButtonInput<KeyCode>>,
     focus: Res<UiFocus>,
     mut selection: ResMut<Selection>,
-    current: Res<CurrentScene>,
     mut objects: Query<(&SceneObject, &mut Transform)>,
 ) {
     let Some(e) = selection.0 else {
@@ -225,15 +251,12 @@ fn move_keys(
         selection.0 = None;
         return;
     };
-    let size = current
-        .scene
-        .instances
-        .meshes
-        .get(object.mesh as usize)
-        .map_or(1.0, |m| {
-            let b = m.bounds();
-            (Vec3::from(b.max) - Vec3::from(b.min)).length() * t.scale.max_element()
-        });
+    let b = &object.bounds;
+    let size = if b.is_empty() {
+        1.0
+    } else {
+        (Vec3::from(b.max) - Vec3::from(b.min)).length() * t.scale.max_element()
+    };
     let step = (size / 20.0).max(1e-6);
     let mut moved = *t;
     for (key, by) in [
@@ -263,26 +286,21 @@ fn move_keys(
     }
 }
 
-/// The selected object's box (its mesh's box carried by its placement), in yellow.
+/// The selected object's box (its box in its own frame, carried by its `Transform`), in
+/// yellow.
 fn draw_selection(
     selection: Res<Selection>,
-    current: Res<CurrentScene>,
-    objects: Query<&SceneObject>,
+    objects: Query<(&SceneObject, &Transform)>,
     mut gizmos: Gizmos,
 ) {
-    let Some(o) = selection.0.and_then(|e| objects.get(e).ok()) else {
+    let Some((o, t)) = selection.0.and_then(|e| objects.get(e).ok()) else {
         return;
     };
-    let placed = &current.scene.instances;
-    let (Some(p), Some(mesh)) = (
-        placed.placements().get(o.placement),
-        placed.meshes.get(o.mesh as usize),
-    ) else {
+    if o.bounds.is_empty() {
         return;
-    };
-    let b = mesh.bounds();
-    let (lo, hi) = (Vec3::from(b.min), Vec3::from(b.max));
-    let box_to_world = p.to_world
+    }
+    let (lo, hi) = (Vec3::from(o.bounds.min), Vec3::from(o.bounds.max));
+    let box_to_world = t.compute_affine()
         * Affine3A::from_scale_rotation_translation(hi - lo, Quat::IDENTITY, (lo + hi) * 0.5);
     gizmos.cube(box_to_world, Color::srgb(1.0, 0.85, 0.1));
 }

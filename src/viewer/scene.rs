@@ -25,6 +25,7 @@ impl Plugin for ScenePlugin {
             time: None,
             reframe: true,
             moved_from: None,
+            lifted: false,
         })
         .init_resource::<SceneLoading>()
         .init_resource::<ViewerStatus>()
@@ -62,6 +63,10 @@ pub struct CurrentScene {
     /// When the scene is the one of this generation with objects moved
     /// ([`super::objects`]): that generation (the meshes and their trees are the same).
     pub moved_from: Option<u64>,
+    /// Whether objects were lifted out of the scene's own triangles in that move (then the
+    /// own triangles' tree and the lifted meshes' are built; the other meshes' trees are
+    /// kept).
+    pub lifted: bool,
 }
 
 /// Asks for a scene file, OBJ, PLY or glTF to be opened.
@@ -147,6 +152,7 @@ fn finish_loading(
             current.time = time;
             current.reframe = false;
             current.moved_from = None;
+            current.lifted = false;
         }
         Ok(scene) => {
             info!(
@@ -163,6 +169,7 @@ fn finish_loading(
             current.time = time;
             current.reframe = true;
             current.moved_from = None;
+            current.lifted = false;
         }
         Err(e) => {
             let msg = format!("{e:#}");

@@ -51,7 +51,7 @@ use glam::{DMat3, DMat4, DVec3, Vec2, Vec3, Vec4};
 use super::format::MeshFile;
 use super::meshopt::{self, Buffer};
 use super::pbr::{Clearcoat, SheenLayer};
-use super::{Camera, Environment, Light, Material, Mesh, NormalRule, Scene, Texture, Wrap};
+use super::{Camera, Environment, Light, Material, Mesh, NormalRule, Runs, Scene, Texture, Wrap};
 
 mod animation;
 mod buffers;
@@ -114,6 +114,12 @@ pub fn scene_of(name: String, d: MeshFile) -> Result<Scene> {
     let mut scene = Scene::from_mesh(name, mesh, d.materials);
     scene.warnings = d.warnings;
     scene.animation = d.animation;
+    scene.objects = super::objects::list(
+        &d.objects,
+        scene.mesh.triangles.len(),
+        instances.placements(),
+        &scene.name,
+    );
     if !instances.is_empty() {
         scene.instances = instances;
         let (camera, light) = super::default_view(&scene.bounds());
@@ -261,6 +267,7 @@ pub fn load_from(
         visits: 0,
         share: std::collections::HashSet::new(),
         placed: Vec::new(),
+        runs: Runs::default(),
         pose: animation::Pose::default(),
     };
 
@@ -407,6 +414,8 @@ struct Loader<'a> {
     share: std::collections::HashSet<usize>,
     /// The placements of the meshes in `share`: mesh and world transform, in node order.
     placed: Vec<(usize, DMat4)>,
+    /// The nodes placing triangles of the scene's own, named, in the order they are placed.
+    runs: Runs,
     /// The animations' nodes at the time asked for (empty without a time).
     pose: animation::Pose,
 }
@@ -483,6 +492,7 @@ impl Loader<'_> {
             animation: None,
             shared: Vec::new(),
             placed: Vec::new(),
+            objects: std::mem::take(&mut self.runs),
         })
     }
 

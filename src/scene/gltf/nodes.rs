@@ -202,6 +202,7 @@ impl Loader<'_> {
                 Some(skin) => Some(self.joint_matrices(&skin)?),
                 None => None,
             };
+            let before = self.buf.material_ids.len();
             for prim in mesh.primitives() {
                 self.place(
                     mesh.index(),
@@ -211,6 +212,11 @@ impl Loader<'_> {
                     skin.as_deref().map(Vec::as_slice),
                 )?;
             }
+            let name = node
+                .name()
+                .or(mesh.name())
+                .map_or_else(|| format!("node {index}"), str::to_string);
+            self.runs.push(name, self.buf.material_ids.len() - before);
         }
         if self.camera.is_none()
             && let Some(cam) = node.camera()
