@@ -1,8 +1,66 @@
-//! The film: f32 radiance sums with a sample count, tone mapped and sRGB-encoded to 8 bits.
+//! The film: radiance sums with a sample count, tone mapped and sRGB-encoded to 8 bits.
+//!
+//! Sums are kept in fixed point ([`Sum`]): integers add the same in any order, so a render
+//! split by sample ranges and merged gives the bits of the whole render
+//! ([`crate::render::part`]).
 
 use glam::Vec3;
 
 use crate::color::{srgb8_lookup, srgb8_lut};
+
+/// A pixel's sum of radiance samples, each channel in fixed point: integer units of
+/// [`Sum::UNIT`]` = 2^-24`. Each sample is rounded to a whole number of units once, as it is
+/// added (a sample of 1 or more loses nothing: an f32 that large is a whole number of units
+/// already), and integers add exactly, so a pixel's sum is the same bits in whatever groups
+/// and order its samples were added. A channel holds sums up to about 5.5e11 (past that it
+/// saturates).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub struct Sum(pub [i64; 3]);
+
+impl Sum {
+    /// No samples.
+    pub const ZERO: Sum = Sum([0; 3]);
+    /// Units per radiance unit.
+    pub const SCALE: f32 = 16_777_216.0;
+    /// The radiance of one unit.
+    pub const UNIT: f64 = 1.0 / 16_777_216.0;
+
+    /// The sum of the one sample `v` (finite).
+    #[inline]
+    pub fn of(v: Vec3) -> Sum {
+        // Scaling by a power of two is exact; rounding to a whole number of units is the
+        // only rounding, and the cast saturates.
+        let fixed = |x: f32| (x * Self::SCALE).round_ties_even() as i64;
+        Sum([fixed(v.x), fixed(v.y), fixed(v.z)])
+    }
+
+    /// Adds another sum (saturating).
+    #[inline]
+    pub fn add(&mut self, other: Sum) {
+        for (a, b) in self.0.iter_mut().zip(other.0) {
+            *a = a.saturating_add(b);
+        }
+    }
+
+    /// Adds the sample `v` (finite).
+    #[inline]
+    pub fn add_sample(&mut self, v: Vec3) {
+        self.add(Sum::of(v));
+    }
+
+    /// The sum as radiance.
+    #[inline]
+    pub fn to_vec3(self) -> Vec3 {
+        let f = |x: i64| (x as f64 * Self::UNIT) as f32;
+        Vec3::new(f(self.0[0]), f(self.0[1]), f(self.0[2]))
+    }
+}
+
+impl From<Sum> for Vec3 {
+    fn from(s: Sum) -> Vec3 {
+        s.to_vec3()
+    }
+}
 
 /// Accumulated radiance of an image.
 #[derive(Clone, Debug, PartialEq)]
@@ -12,7 +70,7 @@ pub struct Film {
     /// Height in pixels.
     pub height: u32,
     /// Sum of the radiance samples of each pixel, row 0 at the top.
-    pub sum: Vec<Vec3>,
+    pub sum: Vec<Sum>,
     /// Samples added to every pixel.
     pub samples: u32,
     /// Samples that were NaN or infinite and were left out (counted, never added).
@@ -25,7 +83,7 @@ impl Film {
         Self {
             width,
             height,
-            sum: vec![Vec3::ZERO; width as usize * height as usize],
+            sum: vec![Sum::ZERO; width as usize * height as usize],
             samples: 0,
             rejected: 0,
         }
@@ -34,7 +92,7 @@ impl Film {
     /// Mean radiance of each pixel (linear).
     pub fn mean(&self) -> Vec<Vec3> {
         let k = 1.0 / self.samples.max(1) as f32;
-        self.sum.iter().map(|s| *s * k).collect()
+        self.sum.iter().map(|s| s.to_vec3() * k).collect()
     }
 
     /// Tone maps (ACES fit of Narkowicz 2015, after `exposure`) and encodes sRGB to RGBA8.
@@ -119,14 +177,14 @@ pub fn tone_map(x: Vec3) -> Vec3 {
 
 /// Tone maps `sums * k` and writes sRGB RGBA8 into `out` (four bytes per value), on all
 /// cores: the encoding every picture of a film goes through, in the viewer as in PNGs.
-pub fn encode_rgba8(sums: &[Vec3], k: f32, out: &mut [u8]) {
+pub fn encode_rgba8<T: Copy + Sync + Into<Vec3>>(sums: &[T], k: f32, out: &mut [u8]) {
     use rayon::prelude::*;
     const CHUNK: usize = 4096;
     out.par_chunks_mut(CHUNK * 4)
         .zip(sums.par_chunks(CHUNK))
         .for_each(|(o, s)| {
             for (px, v) in o.chunks_exact_mut(4).zip(s) {
-                px.copy_from_slice(&encode_pixel(*v, k));
+                px.copy_from_slice(&encode_pixel((*v).into(), k));
             }
         });
 }

@@ -834,3 +834,79 @@ fn render_times_writes_one_numbered_picture_per_frame() {
         text(&o.stderr)
     );
 }
+
+/// `render --samples A..B` writes parts that `merge` adds into the file one render of all the
+/// samples writes, byte for byte; parts that do not fit are refused, naming the files.
+#[test]
+fn render_parts_merge_into_the_whole_render() {
+    let dir = tempfile::tempdir().unwrap();
+    let at = |name: &str| dir.path().join(name).to_str().unwrap().to_string();
+    let size = ["--width", "32", "--height", "24", "--seed", "3"];
+    let run = |extra: &[&str]| {
+        let mut args = vec!["render"];
+        args.extend_from_slice(&size);
+        args.extend_from_slice(extra);
+        let o = tracery(&args);
+        assert!(o.status.success(), "{}", text(&o.stderr));
+        o
+    };
+    run(&["--spp", "8", "-o", &at("whole.exr")]);
+    for (range, name) in [("0..3", "a.exr"), ("3..8", "b.exr")] {
+        let o = run(&["--samples", range, "-o", &at(name)]);
+        assert!(text(&o.stdout).contains(&format!("samples {range}")));
+    }
+    let o = tracery(&["merge", &at("b.exr"), &at("a.exr"), "-o", &at("merged.exr")]);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    assert!(
+        text(&o.stdout).contains("8 samples in every pixel"),
+        "{}",
+        text(&o.stdout)
+    );
+    assert_eq!(
+        std::fs::read(at("whole.exr")).unwrap(),
+        std::fs::read(at("merged.exr")).unwrap(),
+        "the merged picture is the whole render's"
+    );
+
+    // A part of another seed, a gap, a file that is not a part, and a part written as PNG.
+    let o = tracery(&[
+        "render",
+        "--width",
+        "32",
+        "--height",
+        "24",
+        "--seed",
+        "4",
+        "--samples",
+        "3..8",
+        "-o",
+        &at("other.exr"),
+    ]);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let refused = |args: &[&str], want: &str| {
+        let o = tracery(args);
+        assert!(!o.status.success());
+        let e = text(&o.stderr);
+        assert!(e.contains(want), "{e}");
+    };
+    refused(
+        &["merge", &at("a.exr"), &at("other.exr"), "-o", &at("m.png")],
+        "other.exr are parts of renders of different settings",
+    );
+    refused(
+        &["merge", &at("b.exr"), "-o", &at("m.png")],
+        "samples 0..3 are missing (before",
+    );
+    refused(
+        &["merge", &at("a.exr"), &at("whole.exr"), "-o", &at("m.png")],
+        "whole.exr: not a Tracery part",
+    );
+    refused(
+        &["render", "--samples", "0..2", "-o", &at("p.png")],
+        "a part (--samples) is written as EXR",
+    );
+    refused(
+        &["render", "--samples", "4..4", "-o", &at("p.exr")],
+        "holds no samples",
+    );
+}

@@ -98,7 +98,7 @@ fn progressive_passes_equal_a_one_shot_render() {
 
             p.reset();
             assert_eq!(p.passes(), 0);
-            assert!(p.sums().iter().all(|s| *s == Vec3::ZERO));
+            assert!(p.sums().iter().all(|s| *s == tracery::film::Sum::ZERO));
             assert!(p.to_rgba8(1.0).chunks(4).all(|c| c == [0, 0, 0, 255]));
         });
     }
@@ -277,11 +277,11 @@ fn debug_path_hits_equal_closest_hits() {
 fn heatmap_counts_the_nodes_the_traversal_enters() {
     let (scene, bvh) = scene_and_bvh(None);
     let cam = CameraRays::new(&scene.camera, 16, 16);
-    let mut row = vec![Vec3::ZERO; 16];
+    let mut row = vec![tracery::film::Sum::ZERO; 16];
     cost_row(&bvh, &cam, 8, &mut row);
     for (x, px) in row.iter().enumerate() {
         let c = pixel_cost(&bvh, &cam, x as u32, 8);
-        assert_eq!(px.x, c.nodes as f32);
+        assert_eq!(px.to_vec3().x, c.nodes as f32);
         assert!(c.nodes >= 1, "every ray inside the box enters the root");
     }
     // The ramp runs from dark to bright and clamps outside [0, 1].

@@ -1,4 +1,7 @@
-//! Rendering: deterministic on any thread count, sane output, bad settings rejected.
+//! Rendering: deterministic on any thread count, sane output, bad settings rejected; a render
+//! split by samples merges into its bits.
+
+mod common;
 
 use tracery::bvh::{BuildOptions, Bvh};
 use tracery::render::{RenderSettings, render};
@@ -130,7 +133,7 @@ fn tiled_render_equals_each_pixel_traced_alone() {
         for y in 0..settings.height {
             for x in 0..settings.width {
                 let pixel = (y * settings.width + x) as u64;
-                let mut sum = glam::Vec3::ZERO;
+                let mut sum = tracery::film::Sum::ZERO;
                 for s in 0..settings.spp {
                     let sampler =
                         PixelSampler::new(settings.sampler, settings.seed, pixel, 0).with_index(s);
@@ -142,7 +145,11 @@ fn tiled_render_equals_each_pixel_traced_alone() {
                         cam.pinhole(px, py)
                     };
                     let mut counts = RayCounts::default();
-                    sum += tracer.radiance(&ray, &mut PathSampler::new(sampler), &mut counts);
+                    sum.add_sample(tracer.radiance(
+                        &ray,
+                        &mut PathSampler::new(sampler),
+                        &mut counts,
+                    ));
                 }
                 assert_eq!(
                     film.sum[pixel as usize], sum,
@@ -150,5 +157,127 @@ fn tiled_render_equals_each_pixel_traced_alone() {
                 );
             }
         }
+    }
+}
+
+/// A render split by samples merges into the whole render's bits: four even parts, and uneven
+/// ones (a part of one sample among them), through the parts' files, on the Cornell box and
+/// the dragon scene; parts of another scene, a duplicate range and a gap are refused, naming
+/// the files.
+#[test]
+fn parts_of_a_render_merge_into_its_bits() {
+    use std::path::PathBuf;
+    use tracery::bvh::Accel;
+    use tracery::render::part::{Part, PartKey, merge};
+    use tracery::render::{EnvironmentMap, RenderPlan, render_samples};
+    let mut scenes = vec![Scene::cornell_box()];
+    if let Some(p) = common::external("dragon/dragon_vrip_res2.ply") {
+        assert!(p.is_file());
+        scenes.push(Scene::load(std::path::Path::new("assets/scenes/dragon.toml")).unwrap());
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let settings = RenderSettings {
+        width: 160,
+        height: 120,
+        spp: 256,
+        seed: 7,
+        ..RenderSettings::default()
+    };
+    for scene in &scenes {
+        let accel = Accel::for_scene(scene, &BuildOptions::sah()).unwrap();
+        let whole = render(scene, &accel, &settings, &|_| {}).unwrap().film;
+        let plan = RenderPlan::new(scene, &settings);
+        let env = EnvironmentMap::load(&scene.environment, plan.environment).unwrap();
+        let key = PartKey::of(scene, &settings);
+        let part = |range: std::ops::Range<u32>| -> (PathBuf, Part) {
+            let film =
+                render_samples(scene, &accel, &env, &settings, plan, range.clone(), &|_| {}).film;
+            let path = dir
+                .path()
+                .join(format!("{}_{}_{}.exr", scene.name, range.start, range.end));
+            Part {
+                film,
+                range,
+                key: key.clone(),
+            }
+            .save(&path)
+            .unwrap();
+            // Read back from its file, as `tracery merge` reads it.
+            let read = Part::load(&path).unwrap();
+            (path, read)
+        };
+        for split in [
+            vec![0..64, 64..128, 128..192, 192..256],
+            vec![100..256, 0..1, 1..100],
+        ] {
+            let parts: Vec<_> = split.into_iter().map(part).collect();
+            let merged = merge(&parts).unwrap();
+            assert_eq!(merged.samples, 256);
+            assert!(
+                merged.sum == whole.sum,
+                "{}: the merged sums differ from the whole render's",
+                scene.name
+            );
+            assert_eq!(merged.mean(), whole.mean());
+        }
+        let lit = whole
+            .mean()
+            .iter()
+            .filter(|p| p.max_element() > 0.01)
+            .count();
+        assert!(
+            lit * 2 > whole.sum.len(),
+            "{}: {lit} lit pixels",
+            scene.name
+        );
+    }
+
+    // Refusals name the files.
+    let scene = &scenes[0];
+    let accel = Accel::for_scene(scene, &BuildOptions::sah()).unwrap();
+    let small = RenderSettings {
+        width: 16,
+        height: 12,
+        spp: 4,
+        ..settings.clone()
+    };
+    let plan = RenderPlan::new(scene, &small);
+    let env = EnvironmentMap::load(&scene.environment, plan.environment).unwrap();
+    let make = |name: &str, range: std::ops::Range<u32>, key: PartKey| {
+        let film = render_samples(scene, &accel, &env, &small, plan, range.clone(), &|_| {}).film;
+        (PathBuf::from(name), Part { film, range, key })
+    };
+    let key = PartKey::of(scene, &small);
+    let other = PartKey {
+        scene: "0123456789abcdef".into(),
+        ..key.clone()
+    };
+    let cases = [
+        (
+            vec![make("a.exr", 0..2, key.clone()), make("b.exr", 2..4, other)],
+            "a.exr and b.exr are parts of renders of different scenes",
+        ),
+        (
+            vec![
+                make("a.exr", 0..2, key.clone()),
+                make("c.exr", 0..2, key.clone()),
+            ],
+            "c.exr (0..2) overlaps a.exr",
+        ),
+        (
+            vec![
+                make("a.exr", 0..2, key.clone()),
+                make("d.exr", 3..4, key.clone()),
+            ],
+            "samples 2..3 are missing (before d.exr, after a.exr)",
+        ),
+        (
+            vec![make("e.exr", 1..4, key.clone())],
+            "samples 0..1 are missing (before e.exr)",
+        ),
+    ];
+    for (parts, want) in cases {
+        let e = merge(&parts).unwrap_err().to_string();
+        assert!(e.contains(want), "{e}");
     }
 }

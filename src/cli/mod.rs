@@ -3,6 +3,7 @@
 mod bench;
 mod check_mesh;
 mod convergence;
+mod merge;
 mod render;
 mod report;
 mod stats;
@@ -35,6 +36,9 @@ enum Command {
     /// Render a scene (TOML scene file, OBJ, PLY or glTF; the built-in Cornell box by default) to PNG, or
     /// to EXR / HDR in linear radiance.
     Render(render::RenderArgs),
+    /// Add the parts of a render split by samples (`render --samples A..B`, EXR) into the
+    /// picture of the whole render: the same bits as one render of all the samples.
+    Merge(merge::MergeArgs),
     /// Build the BVH of a mesh or scene and print its statistics (median and SAH side by side).
     Stats(stats::StatsArgs),
     /// Benchmark the builders and traversal on the canonical camera rays, against Embree 3
@@ -152,6 +156,7 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
         #[cfg(feature = "viewer")]
         Some(Command::View(a)) => ok(view::run(*a)),
         Some(Command::Render(a)) => ok(render::run(a)),
+        Some(Command::Merge(a)) => ok(merge::run(a)),
         Some(Command::Stats(a)) => ok(stats::run(a)),
         Some(Command::CheckMesh(a)) => Ok(check_mesh::run(a)),
         Some(Command::Bench(a)) => ok(bench::run(a)),

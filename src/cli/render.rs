@@ -10,11 +10,11 @@ use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 use tracery::bvh::{Accel, Bvh, Tree, Update};
 use tracery::denoise::{Denoiser, Inputs};
-use tracery::film::{Film, OutputKind};
+use tracery::film::{Film, OutputKind, Sum};
 use tracery::render::aov::Aov;
 use tracery::render::{
-    EnvironmentMap, Explain, Integrator, RenderPlan, RenderSettings, render_layers,
-    render_with_plan,
+    EnvironmentMap, Explain, Integrator, RenderPlan, RenderSettings, part, render_layers,
+    render_samples, render_with_plan,
 };
 use tracery::sampling::SamplerKind;
 use tracery::scene::{Format, Scene};
@@ -91,6 +91,13 @@ pub struct RenderArgs {
     /// Frames per second of --times [default: 24].
     #[arg(long, requires = "times")]
     fps: Option<f64>,
+    /// Render only the sample indices A up to, not including, B of every pixel (--spp is not
+    /// read) and write them as a part of a render split by samples: an EXR of raw sums and
+    /// counts that `tracery merge` adds to the other parts, giving the bits of the whole
+    /// render.
+    #[arg(long, value_name = "A..B", value_parser = part::parse_range,
+          conflicts_with_all = ["times", "denoise", "aov"])]
+    samples: Option<std::ops::Range<u32>>,
 }
 
 /// Most frames one `--times` run renders.
@@ -202,7 +209,7 @@ fn render_frame(
     let settings = RenderSettings {
         width: a.width,
         height: a.height,
-        spp: a.spp,
+        spp: a.samples.as_ref().map_or(a.spp, |r| r.end - r.start),
         seed: a.seed,
         max_depth: a.max_depth,
         sampler: a.sampler,
@@ -210,6 +217,16 @@ fn render_frame(
     };
     settings.validate().map_err(anyhow::Error::msg)?;
     tracery::film::OutputKind::of(output)?;
+    if a.samples.is_some()
+        && !output
+            .extension()
+            .is_some_and(|e| e.eq_ignore_ascii_case("exr"))
+    {
+        anyhow::bail!(
+            "{}: a part (--samples) is written as EXR: give the output name .exr",
+            output.display()
+        );
+    }
     let options = a.bvh.options()?;
     let mut scene = match (&a.scene, time) {
         (Some(p), Some(t)) => {
@@ -332,6 +349,31 @@ fn finish(
     let plan = RenderPlan::new(scene, settings);
     let env = EnvironmentMap::load(&scene.environment, plan.environment)?;
     let start = Instant::now();
+    if let Some(range) = &a.samples {
+        let key = part::PartKey::of(scene, settings);
+        let out = render_samples(scene, bvh, &env, settings, plan, range.clone(), &|_| {
+            bar.inc(1)
+        });
+        let took = start.elapsed();
+        bar.finish_and_clear();
+        let path = ensure_parent(output)?;
+        part::Part {
+            film: out.film,
+            range: range.clone(),
+            key,
+        }
+        .save(&path)?;
+        println!(
+            "wrote {} (samples {}..{} of every pixel, {}x{}, in {:.2} s)",
+            path.display(),
+            range.start,
+            range.end,
+            settings.width,
+            settings.height,
+            took.as_secs_f64()
+        );
+        return Ok(());
+    }
     let out = render_with_plan(scene, bvh, &env, settings, plan, &|_| bar.inc(1));
     let took = start.elapsed();
     bar.finish_and_clear();
@@ -368,7 +410,7 @@ fn finish(
             // Kept as sums over the render's samples, so the film's mean is the denoised picture.
             let k = settings.spp as f32;
             Film {
-                sum: clean.into_iter().map(|c| c * k).collect(),
+                sum: clean.into_iter().map(|c| Sum::of(c * k)).collect(),
                 ..out.film.clone()
             }
         }

@@ -5,6 +5,7 @@ use glam::Vec3;
 
 use crate::bvh::{BvhNode, Tree, Visit};
 use crate::camera::CameraRays;
+use crate::film::Sum;
 use crate::geometry::Ray;
 
 /// Work done by the closest-hit traversal of one ray.
@@ -43,14 +44,15 @@ pub fn ray_cost<'a>(bvh: impl Into<Tree<'a>>, ray: &Ray) -> TraversalCost {
 /// Adds `count(ray)` for the camera ray through the centre of every pixel of row `y` to the
 /// `x` lane of `row` (the layout of [`super::Progressive`]'s sums, so a count image refines
 /// like the shaded one).
-pub fn count_row(cam: &CameraRays, y: u32, row: &mut [Vec3], count: impl Fn(&Ray) -> u32) {
+pub fn count_row(cam: &CameraRays, y: u32, row: &mut [Sum], count: impl Fn(&Ray) -> u32) {
     for (x, px) in row.iter_mut().enumerate() {
-        px.x += count(&cam.pinhole(x as f32 + 0.5, y as f32 + 0.5)) as f32;
+        let n = count(&cam.pinhole(x as f32 + 0.5, y as f32 + 0.5));
+        px.add_sample(Vec3::new(n as f32, 0.0, 0.0));
     }
 }
 
 /// [`count_row`] of the nodes each ray's traversal enters.
-pub fn cost_row<'a>(bvh: impl Into<Tree<'a>>, cam: &CameraRays, y: u32, row: &mut [Vec3]) {
+pub fn cost_row<'a>(bvh: impl Into<Tree<'a>>, cam: &CameraRays, y: u32, row: &mut [Sum]) {
     let tree = bvh.into();
     count_row(cam, y, row, |ray| ray_cost(tree, ray).nodes);
 }
@@ -82,25 +84,26 @@ pub fn heat_color(t: f32) -> [u8; 3] {
 
 /// Maps per-pixel node counts (the `x` lane of `sums`, one pass) to RGBA8, with `max` nodes
 /// at the top of the ramp.
-pub fn heatmap_rgba8(sums: &[Vec3], max: f32) -> Vec<u8> {
+pub fn heatmap_rgba8<T: Copy + Into<Vec3>>(sums: &[T], max: f32) -> Vec<u8> {
     let k = if max > 0.0 { 1.0 / max } else { 0.0 };
     let mut out = Vec::with_capacity(sums.len() * 4);
     for s in sums {
-        let [r, g, b] = heat_color(s.x * k);
+        let [r, g, b] = heat_color((*s).into().x * k);
         out.extend_from_slice(&[r, g, b, 255]);
     }
     out
 }
 
 /// Mean and largest node counts of an image (the `x` lane of `sums`), for the legend.
-pub fn cost_summary(sums: &[Vec3]) -> (f32, f32) {
+pub fn cost_summary<T: Copy + Into<Vec3>>(sums: &[T]) -> (f32, f32) {
     if sums.is_empty() {
         return (0.0, 0.0);
     }
     let (mut total, mut max) = (0.0f64, 0.0f32);
     for s in sums {
-        total += s.x as f64;
-        max = max.max(s.x);
+        let x = (*s).into().x;
+        total += x as f64;
+        max = max.max(x);
     }
     ((total / sums.len() as f64) as f32, max)
 }
@@ -150,7 +153,7 @@ pub fn overlap_row<'a>(
     cam: &CameraRays,
     level: u32,
     y: u32,
-    row: &mut [Vec3],
+    row: &mut [Sum],
 ) {
     let tree = bvh.into();
     count_row(cam, y, row, |ray| boxes_on_ray(tree, ray, level));

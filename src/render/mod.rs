@@ -13,6 +13,7 @@ pub mod environment;
 pub mod heatmap;
 pub mod integrator;
 pub mod light;
+pub mod part;
 pub mod plan;
 pub mod progressive;
 pub mod resample;
@@ -33,7 +34,7 @@ use rayon::prelude::*;
 
 use crate::bvh::Tree;
 use crate::camera::CameraRays;
-use crate::film::Film;
+use crate::film::{Film, Sum};
 use crate::sampling::{PathSampler, PixelSampler, SamplerKind, concentric_disk, dim};
 use crate::scene::Scene;
 
@@ -160,17 +161,33 @@ pub fn render_with_plan<'a>(
     plan: RenderPlan,
     progress: &(dyn Fn(usize) + Sync),
 ) -> RenderOutput {
+    render_samples(scene, bvh, env, settings, plan, 0..settings.spp, progress)
+}
+
+/// [`render_with_plan`] of the sample indices `samples` of every pixel alone (the render's
+/// `settings.spp` is not read): the part of a render split by samples, whose film adds to the
+/// other parts' to give the whole render's bits ([`part`]).
+pub fn render_samples<'a>(
+    scene: &'a Scene,
+    bvh: impl Into<Tree<'a>>,
+    env: &EnvironmentMap,
+    settings: &RenderSettings,
+    plan: RenderPlan,
+    samples: std::ops::Range<u32>,
+    progress: &(dyn Fn(usize) + Sync),
+) -> RenderOutput {
     let (w, h) = (settings.width, settings.height);
     let cam = CameraRays::new(&scene.camera, w, h);
     let mut film = Film::new(w, h);
     let rows_done = AtomicUsize::new(0);
     let bvh: Tree<'a> = bvh.into();
     let tracer = Tracer::new(scene, bvh, plan, settings.max_depth, env);
+    let count = samples.end.saturating_sub(samples.start);
     let samples = SampleRange {
         sampler: settings.sampler,
         seed: settings.seed,
-        first: 0,
-        count: settings.spp,
+        first: samples.start,
+        count,
     };
     let (rays, rejected) = film
         .sum
@@ -183,7 +200,7 @@ pub fn render_with_plan<'a>(
             r
         })
         .reduce(|| (RayCounts::default(), 0), |a, b| (a.0 + b.0, a.1 + b.1));
-    film.samples = settings.spp;
+    film.samples = count;
     film.rejected = rejected;
     RenderOutput { film, rays }
 }
@@ -247,7 +264,7 @@ pub fn trace_rows(
     cam: &CameraRays,
     samples: &SampleRange,
     y0: u32,
-    rows: &mut [Vec3],
+    rows: &mut [Sum],
 ) -> (RayCounts, u64) {
     trace_rows_until(tracer, cam, samples, y0, rows, &|| false)
         .expect("a render that is never cancelled completes")
@@ -261,7 +278,7 @@ pub fn trace_rows_until(
     cam: &CameraRays,
     samples: &SampleRange,
     y0: u32,
-    rows: &mut [Vec3],
+    rows: &mut [Sum],
     cancel: &(dyn Fn() -> bool + Sync),
 ) -> Option<(RayCounts, u64)> {
     use crate::bvh::PACKET;
@@ -275,12 +292,12 @@ pub fn trace_rows_until(
     // The pixel of a tile's `k`-th ray: (x0 + k % tw, row k / tw of the band).
     let at = |x0: usize, tw: usize, k: usize| k / tw * w + x0 + k % tw;
     let before = &*rows;
-    let tiles: Option<Vec<([Vec3; PACKET], RayCounts, u64)>> = (0..w.div_ceil(tile))
+    let tiles: Option<Vec<([Sum; PACKET], RayCounts, u64)>> = (0..w.div_ceil(tile))
         .into_par_iter()
         .map(|c| {
             let (x0, tw) = (c * tile, tile.min(w - c * tile));
             // The tile's sums so far, added to in order as in the film itself.
-            let mut sums = [Vec3::ZERO; PACKET];
+            let mut sums = [Sum::ZERO; PACKET];
             for (k, s) in sums[..tw * height].iter_mut().enumerate() {
                 *s = before[at(x0, tw, k)];
             }
@@ -342,7 +359,7 @@ fn trace_tile(
     samples: &SampleRange,
     corner: (usize, usize),
     size: (usize, usize),
-    sums: &mut [Vec3; crate::bvh::PACKET],
+    sums: &mut [Sum; crate::bvh::PACKET],
     cancel: &(dyn Fn() -> bool + Sync),
 ) -> Option<(RayCounts, u64)> {
     use crate::bvh::PACKET;
@@ -389,7 +406,7 @@ fn trace_tile(
         );
         for (sum, l) in sums[..n].iter_mut().zip(&radiance[..n]) {
             if l.is_finite() {
-                *sum += *l;
+                sum.add_sample(*l);
             } else {
                 rejected += 1;
             }

@@ -27,7 +27,7 @@ use rayon::prelude::*;
 
 use super::{BAND, RayCounts, SampleRange, Tracer, trace_rows_until};
 use crate::camera::CameraRays;
-use crate::film::{Film, encode_rgba8};
+use crate::film::{Film, Sum, encode_rgba8};
 use crate::sampling::SamplerKind;
 
 /// Most passes one round traces (see the module docs): long enough rounds that a tile's
@@ -40,7 +40,7 @@ pub const MAX_ROUND: u32 = 64;
 pub struct Progressive {
     width: u32,
     height: u32,
-    sum: Vec<Vec3>,
+    sum: Vec<Sum>,
     /// Samples taken in each row: `passes + round` for rows of the current round already
     /// traced.
     row_samples: Vec<u32>,
@@ -102,7 +102,7 @@ impl Progressive {
         Self {
             width,
             height,
-            sum: vec![Vec3::ZERO; n],
+            sum: vec![Sum::ZERO; n],
             row_samples: vec![0; height as usize],
             next_row: 0,
             passes: 0,
@@ -136,7 +136,7 @@ impl Progressive {
     /// Forgets every sample (the camera, scene or settings changed). Keeps the row-time
     /// estimate, which still describes the scene well enough to plan the next batch.
     pub fn reset(&mut self) {
-        self.sum.fill(Vec3::ZERO);
+        self.sum.fill(Sum::ZERO);
         self.row_samples.fill(0);
         self.next_row = 0;
         self.passes = 0;
@@ -157,7 +157,7 @@ impl Progressive {
         &mut self,
         budget: Duration,
         max_passes: u32,
-        rows: impl Fn(u32, (u32, u32), &mut [Vec3]) -> Option<(RayCounts, u64)> + Sync,
+        rows: impl Fn(u32, (u32, u32), &mut [Sum]) -> Option<(RayCounts, u64)> + Sync,
     ) -> StepReport {
         let start = Instant::now();
         let mut report = StepReport::default();
@@ -320,13 +320,13 @@ impl Progressive {
         let mut out = Vec::with_capacity(self.sum.len());
         for (row, &n) in self.sum.chunks(w.max(1)).zip(&self.row_samples) {
             let k = if n == 0 { 0.0 } else { 1.0 / n as f32 };
-            out.extend(row.iter().map(|s| *s * k));
+            out.extend(row.iter().map(|s| s.to_vec3() * k));
         }
         out
     }
 
     /// The raw per-pixel sums (row 0 at the top).
-    pub fn sums(&self) -> &[Vec3] {
+    pub fn sums(&self) -> &[Sum] {
         &self.sum
     }
 }
