@@ -815,6 +815,45 @@ fn render_times_writes_one_numbered_picture_per_frame() {
     let o = tracery(&args);
     assert!(o.status.success(), "{}", text(&o.stderr));
     assert_eq!(image::open(&alone).unwrap().to_rgb8(), frame(1));
+    // A part of the clip (`--frames 1..3`, another machine's share): those frames alone,
+    // under their own numbers, the pictures of the whole clip's.
+    let part = dir.path().join("part/f_###.png");
+    let mut args = vec![
+        "render",
+        skin.to_str().unwrap(),
+        "--times",
+        "0..1",
+        "--fps",
+        "3",
+        "--frames",
+        "1..3",
+        "-o",
+        part.to_str().unwrap(),
+    ];
+    args.extend(small);
+    let o = tracery(&args);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    assert!(
+        text(&o.stdout).contains("rendered 2 of 3 frames"),
+        "{}",
+        text(&o.stdout)
+    );
+    assert!(!dir.path().join("part/f_000.png").exists());
+    for i in 1..3 {
+        let p = dir.path().join(format!("part/f_{i:03}.png"));
+        assert_eq!(image::open(p).unwrap().to_rgb8(), frame(i), "frame {i}");
+    }
+    let past = args
+        .iter()
+        .map(|a| if *a == "1..3" { "2..5" } else { a })
+        .collect::<Vec<_>>();
+    let o = tracery(&past);
+    assert!(!o.status.success());
+    assert!(
+        text(&o.stderr).contains("the clip has 3 frames"),
+        "{}",
+        text(&o.stderr)
+    );
 
     let plain = dir.path().join("frame.png");
     let mut args = vec![

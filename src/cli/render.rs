@@ -98,6 +98,10 @@ pub struct RenderArgs {
     #[arg(long, value_name = "A..B", value_parser = part::parse_range,
           conflicts_with_all = ["times", "denoise", "aov"])]
     samples: Option<std::ops::Range<u32>>,
+    /// With --times: render only the frames numbered A up to, not including, B (a part of the
+    /// clip, to split it across machines; each frame is written under its own number).
+    #[arg(long, value_name = "A..B", value_parser = part::parse_range, requires = "times")]
+    frames: Option<std::ops::Range<u32>>,
 }
 
 /// Most frames one `--times` run renders.
@@ -173,18 +177,34 @@ pub fn run(a: RenderArgs) -> Result<()> {
             range.1
         );
     }
-    let frames = frame_times(range, fps);
+    let mut frames = frame_times(range, fps);
     let n = frames.len();
+    if let Some(part) = &a.frames {
+        if part.end as usize > n {
+            anyhow::bail!(
+                "--frames {}..{}: the clip has {n} frames (0..{n})",
+                part.start,
+                part.end
+            );
+        }
+        frames.retain(|(i, _)| part.contains(&(*i as u32)));
+    }
     let start = Instant::now();
     // Each frame's tree, refitted to the next frame's triangles where it can be.
     let mut tree = None;
-    for (i, t) in frames {
+    let rendered = frames.len();
+    for (k, (i, t)) in frames.into_iter().enumerate() {
         let path = frame_path(&a.output, i).expect("checked above");
         eprintln!("frame {}/{n}: t = {t:.4} s", i + 1);
-        render_frame(&a, Some(t), &path, i == 0, &mut tree)?;
+        render_frame(&a, Some(t), &path, k == 0, &mut tree)?;
     }
+    let of = if rendered == n {
+        String::new()
+    } else {
+        format!(" of {n}")
+    };
     println!(
-        "rendered {n} frames ({:.3} to {:.3} s at {fps} fps) in {:.1} s",
+        "rendered {rendered}{of} frames ({:.3} to {:.3} s at {fps} fps) in {:.1} s",
         range.0,
         range.1,
         start.elapsed().as_secs_f64()
@@ -346,14 +366,18 @@ fn finish(
         )
         .expect("valid template"),
     );
+    let log = LogProgress::new(settings.height as u64);
+    // Called with the rows finished so far, from any thread.
+    let progress = |rows: usize| {
+        bar.set_position(bar.position().max(rows as u64));
+        log.at(rows as u64);
+    };
     let plan = RenderPlan::new(scene, settings);
     let env = EnvironmentMap::load(&scene.environment, plan.environment)?;
     let start = Instant::now();
     if let Some(range) = &a.samples {
         let key = part::PartKey::of(scene, settings);
-        let out = render_samples(scene, bvh, &env, settings, plan, range.clone(), &|_| {
-            bar.inc(1)
-        });
+        let out = render_samples(scene, bvh, &env, settings, plan, range.clone(), &progress);
         let took = start.elapsed();
         bar.finish_and_clear();
         let path = ensure_parent(output)?;
@@ -374,7 +398,7 @@ fn finish(
         );
         return Ok(());
     }
-    let out = render_with_plan(scene, bvh, &env, settings, plan, &|_| bar.inc(1));
+    let out = render_with_plan(scene, bvh, &env, settings, plan, &progress);
     let took = start.elapsed();
     bar.finish_and_clear();
     let path = ensure_parent(output)?;
@@ -463,4 +487,43 @@ fn finish(
         }
     );
     Ok(())
+}
+
+/// Progress lines for a log (a batch job's output, a pipe), where the bar is not drawn: one
+/// at each tenth of the rows.
+struct LogProgress {
+    total: u64,
+    /// Tenths said so far.
+    said: std::sync::atomic::AtomicU64,
+    on: bool,
+    start: Instant,
+}
+
+impl LogProgress {
+    fn new(total: u64) -> LogProgress {
+        use std::io::IsTerminal;
+        LogProgress {
+            total: total.max(1),
+            said: Default::default(),
+            on: !std::io::stderr().is_terminal(),
+            start: Instant::now(),
+        }
+    }
+
+    /// `done` rows are finished: a line when that passes another tenth of them.
+    fn at(&self, done: u64) {
+        use std::sync::atomic::Ordering;
+        if !self.on {
+            return;
+        }
+        let tenths = done.min(self.total) * 10 / self.total;
+        if self.said.fetch_max(tenths, Ordering::Relaxed) < tenths {
+            eprintln!(
+                "rendering: {}% ({done}/{} rows, {:.1} s)",
+                tenths * 10,
+                self.total,
+                self.start.elapsed().as_secs_f64()
+            );
+        }
+    }
 }
