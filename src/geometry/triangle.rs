@@ -130,6 +130,169 @@ fn sheared<const KX: usize, const KY: usize, const KZ: usize>(
     Some((t, v * inv, w * inv))
 }
 
+/// `N` rays at once, component by component, as the triangle test of
+/// [`intersect_triangle_lanes`] needs them: each ray's origin, axis permutation and shear, as
+/// [`PreparedRay::new`] made them.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct RayLanes<const N: usize> {
+    /// Origins, `[axis][lane]`.
+    pub origin: [[f32; N]; 3],
+    /// The axis permutation `[kx, ky, kz]` as selects: `[which][lane]` is whether the axis is
+    /// x (`is_x`) or y (`is_y`), else z.
+    pub is_x: [[bool; N]; 3],
+    pub is_y: [[bool; N]; 3],
+    /// Shear constants `[sx, sy, sz]`, `[which][lane]`.
+    pub shear: [[f32; N]; 3],
+}
+
+impl<const N: usize> RayLanes<N> {
+    /// No ray in any lane (every lane's parts zero, its axes x, y, z).
+    pub const EMPTY: Self = {
+        let mut is_x = [[false; N]; 3];
+        let mut is_y = [[false; N]; 3];
+        let mut i = 0;
+        while i < N {
+            is_x[0][i] = true;
+            is_y[1][i] = true;
+            i += 1;
+        }
+        RayLanes {
+            origin: [[0.0; N]; 3],
+            is_x,
+            is_y,
+            shear: [[0.0; N]; 3],
+        }
+    };
+
+    /// Lane `i`'s parts from a prepared ray.
+    #[inline(always)]
+    pub fn set(&mut self, i: usize, r: &PreparedRay) {
+        for a in 0..3 {
+            self.origin[a][i] = r.origin[a];
+            self.is_x[a][i] = r.k[a] == 0;
+            self.is_y[a][i] = r.k[a] == 1;
+            self.shear[a][i] = r.shear[a];
+        }
+    }
+}
+
+/// What [`intersect_triangle_lanes`] found: per lane the distance and barycentric
+/// coordinates of a hit (bit `i` of `hit`), or that the lane needs the scalar test's exact
+/// path (bit `i` of `exact`: an edge function exactly zero, or an overflow).
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct LaneHits<const N: usize> {
+    pub t: [f32; N],
+    pub u: [f32; N],
+    pub v: [f32; N],
+    pub hit: u32,
+    pub exact: u32,
+}
+
+/// One triangle against `N` rays, a ray a lane: the fast path of [`intersect_triangle`],
+/// operation for operation (no fused multiply-adds, the same order), so a lane's hit is the
+/// scalar test's to the bit. The axis permutation is a ray's own, so each lane picks its
+/// vertex coordinates by selects. A lane the fast path cannot decide is marked `exact`: the
+/// caller runs [`intersect_triangle`] for it (which takes the f64 path). `limit[i]` is lane
+/// `i`'s `t_max`; only the lanes of `lanes` count. Written as loops over the lanes that the
+/// compiler vectorises: the edge functions first, and the distance and its error bound only
+/// when some lane's signs agree.
+#[inline(always)]
+pub(crate) fn intersect_triangle_lanes<const N: usize>(
+    rays: &RayLanes<N>,
+    tri: &[Vec3A; 3],
+    limit: &[f32; N],
+    lanes: u32,
+) -> LaneHits<N> {
+    let mut out = LaneHits {
+        t: [0.0; N],
+        u: [0.0; N],
+        v: [0.0; N],
+        hit: 0,
+        exact: 0,
+    };
+    let [p, q, r] = tri.map(|v| v.to_array());
+    // Sheared x and y, unscaled z, and edge functions, per vertex or edge and lane.
+    let mut x = [[0.0f32; N]; 3];
+    let mut y = [[0.0f32; N]; 3];
+    let mut z = [[0.0f32; N]; 3];
+    let mut e = [[0.0f32; N]; 3];
+    let mut on = 0u32;
+    let mut zero = 0u32;
+    for i in 0..N {
+        let o = [rays.origin[0][i], rays.origin[1][i], rays.origin[2][i]];
+        let rel = |v: [f32; 3]| [v[0] - o[0], v[1] - o[1], v[2] - o[2]];
+        let (a, b, c) = (rel(p), rel(q), rel(r));
+        let pick = |v: [f32; 3], which: usize| {
+            if rays.is_x[which][i] {
+                v[0]
+            } else if rays.is_y[which][i] {
+                v[1]
+            } else {
+                v[2]
+            }
+        };
+        let (sx, sy) = (rays.shear[0][i], rays.shear[1][i]);
+        let (a_z, b_z, c_z) = (pick(a, 2), pick(b, 2), pick(c, 2));
+        let ax = pick(a, 0) - sx * a_z;
+        let ay = pick(a, 1) - sy * a_z;
+        let bx = pick(b, 0) - sx * b_z;
+        let by = pick(b, 1) - sy * b_z;
+        let cx = pick(c, 0) - sx * c_z;
+        let cy = pick(c, 1) - sy * c_z;
+        let u = cx * by - cy * bx;
+        let v = ax * cy - ay * cx;
+        let w = bx * ay - by * ax;
+        let is_zero = (u == 0.0) | (v == 0.0) | (w == 0.0);
+        let any_neg = (u < 0.0) | (v < 0.0) | (w < 0.0);
+        let any_pos = (u > 0.0) | (v > 0.0) | (w > 0.0);
+        zero |= (is_zero as u32) << i;
+        on |= ((!is_zero & !(any_neg & any_pos)) as u32) << i;
+        (x[0][i], x[1][i], x[2][i]) = (ax, bx, cx);
+        (y[0][i], y[1][i], y[2][i]) = (ay, by, cy);
+        (z[0][i], z[1][i], z[2][i]) = (a_z, b_z, c_z);
+        (e[0][i], e[1][i], e[2][i]) = (u, v, w);
+    }
+    out.exact = zero & lanes;
+    if on & lanes == 0 {
+        return out;
+    }
+    // The scalar test's decisions in its order after the signs: miss by a zero determinant,
+    // exact path on overflow, miss by the range, exact path on an infinite bound, miss within
+    // the bound, hit.
+    let mut exact = 0u32;
+    let mut hit = 0u32;
+    for i in 0..N {
+        let (u, v, w) = (e[0][i], e[1][i], e[2][i]);
+        let (a_z, b_z, c_z) = (z[0][i], z[1][i], z[2][i]);
+        let sz = rays.shear[2][i];
+        let det = u + v + w;
+        let t_scaled = (u * a_z + v * b_z + w * c_z) * sz;
+        let inv = 1.0 / det;
+        let t = t_scaled * inv;
+        let bound = t_error_bound(
+            [x[0][i], x[1][i], x[2][i]],
+            [y[0][i], y[1][i], y[2][i]],
+            [a_z, b_z, c_z],
+            [rays.shear[0][i], rays.shear[1][i], sz],
+            [u, v, w],
+            inv,
+        );
+        let signs = (on >> i) & 1 == 1;
+        let decided = signs & (det != 0.0);
+        let scaled_ok = t_scaled.is_finite();
+        let in_range = (t > 0.0) & (t < limit[i]);
+        let bound_ok = bound.is_finite();
+        exact |= ((decided & (!scaled_ok | (in_range & !bound_ok))) as u32) << i;
+        hit |= ((decided & scaled_ok & in_range & bound_ok & (t > bound)) as u32) << i;
+        out.t[i] = t;
+        out.u[i] = v * inv;
+        out.v[i] = w * inv;
+    }
+    out.exact |= exact & lanes;
+    out.hit = hit & lanes;
+    out
+}
+
 /// The arithmetic [`t_error_bound`] needs, so that one statement of the bound serves the f32
 /// fast path and the f64 exact path.
 trait BoundFloat:

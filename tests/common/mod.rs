@@ -150,6 +150,76 @@ pub fn assert_matches_brute_force(what: &str, tris: &[[Vec3; 3]], bvhs: &[&Bvh],
         rays.len(),
         &bad[..bad.len().min(5)]
     );
+    assert_bundles_match(what, &reference, bvhs, rays);
+}
+
+/// The bundle walks ([`Bvh::intersect_bundles`], [`Bvh::occluded_bundles`], sixteen rays a
+/// walk): the same closest hits as brute force, bit for bit, and the same occlusion as the
+/// single-ray walk ([`Bvh::occluded`]: the answer each ray gets alone), up to `t_max` of
+/// infinity, of the closest hit's distance, of the float after it and of half of it. (Brute
+/// force is not the reference for occlusion: a ray leaving a surface at a grazing angle may
+/// get a hit distance rounded below its leaf box's entry distance, so both walks can miss a
+/// hit that lies within a few ulps of `t_max`.)
+fn assert_bundles_match(what: &str, reference: &BruteForce, bvhs: &[&Bvh], rays: &[Ray]) {
+    let slow: Vec<Option<Hit>> = rays
+        .par_iter()
+        .map(|r| reference.closest(r, f32::INFINITY))
+        .collect();
+    let mut shadow = Vec::new();
+    for (r, s) in rays.iter().zip(&slow) {
+        shadow.push((*r, f32::INFINITY));
+        if let Some(h) = s {
+            for t_max in [h.t, h.t.next_up(), h.t * 0.5] {
+                shadow.push((*r, t_max));
+            }
+        }
+    }
+    for (k, bvh) in bvhs.iter().enumerate() {
+        let mut fast = vec![None; rays.len()];
+        fast.par_chunks_mut(256)
+            .zip(rays.par_chunks(256))
+            .for_each(|(out, rays)| bvh.intersect_bundles(rays, out));
+        let bad: Vec<_> = (0..rays.len())
+            .filter(|&i| match (fast[i], slow[i]) {
+                (None, None) => false,
+                (Some(a), Some(b)) => {
+                    a.prim != b.prim
+                        || a.t.to_bits() != b.t.to_bits()
+                        || a.u.to_bits() != b.u.to_bits()
+                        || a.v.to_bits() != b.v.to_bits()
+                }
+                _ => true,
+            })
+            .map(|i| (i, fast[i], slow[i]))
+            .collect();
+        assert!(
+            bad.is_empty(),
+            "{what}: tree {k}'s bundle walk differs from brute force on {} of {} rays, first (ray, bundle hit, brute force hit): {:?}",
+            bad.len(),
+            rays.len(),
+            &bad[..bad.len().min(5)]
+        );
+        let mut blocked = vec![false; shadow.len()];
+        blocked
+            .par_chunks_mut(256)
+            .zip(shadow.par_chunks(256))
+            .for_each(|(out, rays)| bvh.occluded_bundles(rays, out));
+        let expected: Vec<bool> = shadow
+            .par_iter()
+            .map(|(r, t_max)| bvh.occluded(r, *t_max))
+            .collect();
+        let bad: Vec<_> = (0..shadow.len())
+            .filter(|&i| blocked[i] != expected[i])
+            .map(|i| (shadow[i], blocked[i]))
+            .collect();
+        assert!(
+            bad.is_empty(),
+            "{what}: tree {k}'s bundle occlusion differs from the single-ray walk's on {} of {} shadow rays, first (ray and t_max, bundle answer): {:?}",
+            bad.len(),
+            shadow.len(),
+            &bad[..bad.len().min(5)]
+        );
+    }
 }
 
 /// Both builders with their default settings.
