@@ -108,54 +108,21 @@ impl Bvh {
     }
 
     /// [`Bvh::intersect_incoherent`] of a batch of rays (a path tracer's bounces, one from each
-    /// path of a batch), into `out` (one hit per ray, each the hit the ray gets alone): by
-    /// [`Bvh::intersect_bundles`] for a small tree, whose leaves most rays enter, else ray by
-    /// ray.
+    /// path of a batch), into `out` (one hit per ray, each the hit the ray gets alone).
     pub fn intersect_batch(&self, rays: &[Ray], out: &mut [Option<Hit>]) {
         assert_eq!(rays.len(), out.len(), "one result per ray");
-        if self.wide.bundles_pay() {
-            return self.intersect_bundles(rays, out);
-        }
         for (ray, o) in rays.iter().zip(out) {
             *o = self.intersect_incoherent(ray, f32::INFINITY);
         }
     }
 
-    /// The closest hit of each ray (`out[i]` for `rays[i]`, each the hit [`Bvh::intersect`]
-    /// gives it, bit for bit), the rays walked sixteen at a time, a ray a SIMD lane (see
-    /// [`super::wide::bundle`]): faster than single rays where the rays of a bundle enter the
-    /// same nodes (a small closed scene), slower where they part.
-    pub fn intersect_bundles(&self, rays: &[Ray], out: &mut [Option<Hit>]) {
-        assert_eq!(rays.len(), out.len(), "one result per ray");
-        const LANES: usize = super::wide::bundle::LANES;
-        let mut bests = [Best8::none(f32::INFINITY); LANES];
-        for (rays, out) in rays.chunks(LANES).zip(out.chunks_mut(LANES)) {
-            let bests = &mut bests[..rays.len()];
-            self.wide.closest_batch(rays, f32::INFINITY, bests);
-            for (o, b) in out.iter_mut().zip(bests.iter()) {
-                *o = Hit::of(*b, f32::INFINITY);
-            }
-        }
-    }
-
     /// [`Bvh::occluded`] of a batch of rays, each with its own `t_max` (a path tracer's shadow
-    /// rays, from each path of a batch), into `out` (each the answer the ray gets alone): by
-    /// [`Bvh::occluded_bundles`] for a small tree, as [`Bvh::intersect_batch`].
+    /// rays, from each path of a batch), into `out` (each the answer the ray gets alone).
     pub fn occluded_batch(&self, rays: &[(Ray, f32)], out: &mut [bool]) {
         assert_eq!(rays.len(), out.len(), "one result per ray");
-        if self.wide.bundles_pay() {
-            return self.occluded_bundles(rays, out);
-        }
         for ((ray, t_max), o) in rays.iter().zip(out) {
             *o = self.occluded(ray, *t_max);
         }
-    }
-
-    /// [`Bvh::occluded`] of each ray up to its own `t_max`, the rays walked sixteen at a time
-    /// (see [`Bvh::intersect_bundles`]).
-    pub fn occluded_bundles(&self, rays: &[(Ray, f32)], out: &mut [bool]) {
-        assert_eq!(rays.len(), out.len(), "one result per ray");
-        self.wide.occluded_batch(rays, out);
     }
 
     /// [`Bvh::intersect`], adding to `visits` the nodes and triangle blocks its walk tested:

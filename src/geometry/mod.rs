@@ -16,7 +16,6 @@ mod triangle;
 
 pub use aabb::Aabb;
 pub use ray::{PreparedRay, Ray, interpolation_error, offset_ray_origin};
-pub(crate) use triangle::{RayLanes, intersect_triangle_lanes};
 pub use triangle::{TriangleHit, intersect_triangle, intersect_triangle_t, is_degenerate};
 
 /// `gamma(n)` of Higham / pbrt: a bound on the relative error of `n` chained f32 roundings.

@@ -12,8 +12,6 @@
 //! [`crate::geometry::intersect_triangle`] operation for operation, so all of them give the
 //! same hits, bit for bit, as brute force.
 
-pub(crate) mod bundle;
-mod bundle_x86;
 mod collapse;
 pub(crate) mod kernel;
 pub mod packet;
