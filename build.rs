@@ -1,6 +1,7 @@
-//! Records the git commit the program is built from, for `tracery --version`; with the
-//! `denoise` feature, checks that Intel Open Image Denoise has been fetched (a clear message
-//! instead of the linker's) and writes its folder into the binaries' run path.
+//! Records the git commit the program is built from, for `tracery --version` and the header of
+//! every part of a split render (`render --samples`); with the `denoise` feature, checks that
+//! Intel Open Image Denoise has been fetched (a clear message instead of the linker's) and
+//! writes its folder into the binaries' run path.
 //!
 //! The build script reruns when HEAD moves (a checkout or a commit), and only then: it watches
 //! HEAD and the ref it points to, not the work tree. Outside a git checkout (a source tarball)

@@ -252,10 +252,21 @@ fn parts_of_a_render_merge_into_its_bits() {
         scene: "0123456789abcdef".into(),
         ..key.clone()
     };
+    let built_elsewhere = PartKey {
+        build: "0.1.0 (0123456)".into(),
+        ..key.clone()
+    };
     let cases = [
         (
             vec![make("a.exr", 0..2, key.clone()), make("b.exr", 2..4, other)],
             "a.exr and b.exr are parts of renders of different scenes",
+        ),
+        (
+            vec![
+                make("a.exr", 0..2, key.clone()),
+                make("e.exr", 2..4, built_elsewhere),
+            ],
+            "a.exr and e.exr were rendered by different builds of tracery",
         ),
         (
             vec![

@@ -6,8 +6,8 @@
 //! A part's EXR holds, per pixel: `R`, `G`, `B`, the raw sums as floats (to look at: divide by
 //! `count` for the picture); `count`, the samples taken (a 32-bit integer channel); and the
 //! exact sums, each channel's 64-bit integer as two 32-bit halves (`sum.R.hi`, `sum.R.lo`,
-//! ...), which [`merge`] adds. Its header names the render: the scene's hash, the settings that
-//! choose the samples' values, and the range.
+//! ...), which [`merge`] adds. Its header names the render: the build of Tracery that rendered
+//! it, the scene's hash, the settings that choose the samples' values, and the range.
 
 use std::ops::Range;
 use std::path::{Path, PathBuf};
@@ -18,9 +18,17 @@ use super::RenderSettings;
 use crate::film::{Film, Sum};
 use crate::scene::Scene;
 
+/// The build that writes parts: the program's version and the commit it was built from.
+/// Parts of one render must come from one build, since a sample's value may change from one
+/// build to the next (a new sampler, a fixed bug) while the scene and settings stay the same.
+pub const BUILD: &str = concat!(env!("CARGO_PKG_VERSION"), " (", env!("TRACERY_COMMIT"), ")");
+
 /// What every part of one render shares: merging parts whose keys differ is refused.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct PartKey {
+    /// The build of Tracery that rendered the part ([`BUILD`]; `unknown` in parts written
+    /// before parts recorded it).
+    pub build: String,
     /// The scene's hash ([`scene_hash`]).
     pub scene: String,
     /// The settings that choose the samples' values (resolution, seed, sampler, depth), as
@@ -37,6 +45,7 @@ impl PartKey {
             ..settings.clone()
         };
         PartKey {
+            build: BUILD.to_string(),
             scene: scene_hash(scene),
             settings: format!("{settings:?}"),
         }
@@ -59,6 +68,7 @@ const SCENE: &str = "tracery.scene";
 const SETTINGS: &str = "tracery.settings";
 const RANGE: &str = "tracery.samples";
 const REJECTED: &str = "tracery.rejected";
+const PROGRAM: &str = "tracery.build";
 
 impl Part {
     /// Writes the part as an EXR at `path`: written beside it under another name first and
@@ -88,6 +98,7 @@ impl Part {
         ));
         let mut attributes = LayerAttributes::named("tracery part");
         for (k, v) in [
+            (PROGRAM, self.key.build.clone()),
             (SCENE, self.key.scene.clone()),
             (SETTINGS, self.key.settings.clone()),
             (RANGE, format!("{}..{}", self.range.start, self.range.end)),
@@ -143,6 +154,7 @@ impl Part {
             _ => Err(not_part(&format!("no `{k}` attribute"))),
         };
         let key = PartKey {
+            build: text(PROGRAM).unwrap_or_else(|_| "unknown".into()),
             scene: text(SCENE)?,
             settings: text(SETTINGS)?,
         };
@@ -212,13 +224,23 @@ pub fn parse_range(s: &str) -> Result<Range<u32>, String> {
 }
 
 /// Adds the parts into the film of the whole render: refused, with the files named, when two
-/// parts are of different scenes, settings or sizes, when their ranges overlap, or when they
+/// parts are of different builds of Tracery, scenes, settings or sizes, when their ranges overlap, or when they
 /// leave a gap (the ranges must cover `0..N` for the largest end `N`).
 pub fn merge(parts: &[(PathBuf, Part)]) -> Result<Film> {
     let Some((first_path, first)) = parts.first() else {
         bail!("no parts to merge");
     };
     for (path, p) in &parts[1..] {
+        if p.key.build != first.key.build {
+            bail!(
+                "{} and {} were rendered by different builds of tracery ({} and {}): a sample's \
+                 value may differ between builds, so render every part with one build",
+                first_path.display(),
+                path.display(),
+                first.key.build,
+                p.key.build
+            );
+        }
         let what = if p.key.scene != first.key.scene {
             Some("scenes")
         } else if p.key.settings != first.key.settings {
