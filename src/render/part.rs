@@ -295,8 +295,9 @@ pub fn merge(parts: &[(PathBuf, Part)]) -> Result<Film> {
 }
 
 /// A hash of everything in `scene` that a sample's value depends on (its triangles and what
-/// they carry, placements, materials, lights, camera, environment, integrator), as 16 hex
-/// digits: parts of renders of different scenes are told apart.
+/// they carry, placements, materials and the texels of their textures, lights, camera, the
+/// environment and its files' bytes, integrator), as 16 hex digits: parts of renders of
+/// different scenes are told apart.
 pub fn scene_hash(scene: &Scene) -> String {
     let mut h = blake3::Hasher::new();
     let mut mesh = |m: &crate::scene::Mesh| {
@@ -320,6 +321,23 @@ pub fn scene_hash(scene: &Scene) -> String {
     for m in &scene.instances.meshes {
         mesh(m);
     }
+    // The images themselves: a texture or an environment file changed between two parts under
+    // the same name must not pass for the same scene.
+    for t in scene.materials.iter().flat_map(|m| m.textures()) {
+        h.update(t.texel_bytes());
+        h.update(format!("{:?}{:?}{}", t.size(), t.transform, t.uv_set).as_bytes());
+    }
+    let files: &[std::path::PathBuf] = match &scene.environment {
+        crate::scene::Environment::CubeMap { faces, .. } => faces,
+        crate::scene::Environment::Equirect { path, .. } => std::slice::from_ref(path),
+        _ => &[],
+    };
+    for f in files {
+        // An unreadable file fails the render's own load of it; its name is hashed below.
+        if let Ok(bytes) = std::fs::read(f) {
+            h.update(&bytes);
+        }
+    }
     let text = format!(
         "{:?}{:?}{:?}{:?}{:?}{}",
         scene.instances.placements(),
@@ -341,4 +359,45 @@ fn le_bytes(v: glam::Vec3) -> [u8; 12] {
         o.copy_from_slice(&x.to_le_bytes());
     }
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use std::sync::Arc;
+
+    use super::scene_hash;
+    use crate::scene::{Environment, Scene, Texture};
+
+    /// A texture or an environment file whose contents change under the same name changes the
+    /// hash, so parts rendered before and after such a change are not merged.
+    #[test]
+    fn the_hash_reads_texels_and_environment_files_not_only_names() {
+        let mut scene = Scene::cornell_box();
+        let plain = scene_hash(&scene);
+        let wall = |v: u8| {
+            let texels = vec![[v, v, v, 255]; 4];
+            Arc::new(Texture::from_rgba8("wall.png".into(), 2, 2, texels, true))
+        };
+        scene.materials[0].diffuse_map = Some(wall(10));
+        let textured = scene_hash(&scene);
+        scene.materials[0].diffuse_map = Some(wall(11));
+        let retextured = scene_hash(&scene);
+        assert!(plain != textured && textured != retextured);
+
+        let dir = std::env::temp_dir().join(format!("tracery-scene-hash-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let sky = dir.join("sky.hdr");
+        std::fs::write(&sky, b"one sky").unwrap();
+        scene.environment = Environment::Equirect {
+            path: sky.clone(),
+            intensity: 1.0,
+            rotation_deg: 0.0,
+        };
+        let before = scene_hash(&scene);
+        std::fs::write(&sky, b"another sky").unwrap();
+        let after = scene_hash(&scene);
+        std::fs::remove_dir_all(&dir).unwrap();
+        assert_ne!(before, after);
+        assert_eq!(scene_hash(&scene), scene_hash(&scene.clone()));
+    }
 }

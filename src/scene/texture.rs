@@ -122,6 +122,11 @@ impl Texture {
         self.texels.iter().all(|[r, g, b, _]| r == g && g == b)
     }
 
+    /// The texels' bytes, RGBA8 row by row from the top.
+    pub fn texel_bytes(&self) -> &[u8] {
+        self.texels.as_flattened()
+    }
+
     /// Width and height in texels.
     pub fn size(&self) -> (u32, u32) {
         (self.width, self.height)
