@@ -509,3 +509,51 @@ fn the_debug_ray_lists_the_nodes_of_both_levels() {
     }
     assert!(on_placements > 20, "{on_placements} rays met placements");
 }
+
+/// Moving the Cornell box's light (its glowing quad) carries the rectangle light those
+/// triangles show, when it is lifted out of the box's own triangles and again when its
+/// placement moves: the triangles stay inside the light, which lights the room from where they
+/// are. (Left behind, the rectangle would light the room from where the quad was while the
+/// quad glowed elsewhere as a second light.)
+#[test]
+fn a_moved_light_object_carries_its_rectangle_light() {
+    use glam::{Affine3A, Vec3};
+    use tracery::scene::Light;
+    let scene = Scene::cornell_box();
+    let light = scene
+        .objects
+        .iter()
+        .position(|o| o.name == "light")
+        .unwrap();
+    let carried = scene.lights_of(light);
+    assert_eq!(carried.len(), 1, "{:?}", scene.lights);
+    let corner = |s: &Scene| match s.lights[carried[0]] {
+        Light::Rect { corner, .. } => corner,
+        _ => panic!("a rectangle light"),
+    };
+    let step = Vec3::new(0.1, -0.5, 0.2);
+    let (frame, _) = scene.object_frame(light).unwrap();
+    let once = scene
+        .lifted(light, Affine3A::from_translation(step) * frame)
+        .unwrap();
+    assert!(corner(&once).abs_diff_eq(corner(&scene) + step, 1e-5));
+    assert_eq!(once.lights_of(light), carried);
+    let (frame, _) = once.object_frame(light).unwrap();
+    let twice = once
+        .lifted(light, Affine3A::from_translation(step) * frame)
+        .unwrap();
+    assert!(corner(&twice).abs_diff_eq(corner(&scene) + 2.0 * step, 1e-5));
+    assert_eq!(twice.lights_of(light), carried);
+    // An object that shows no light carries none.
+    let tall = scene
+        .objects
+        .iter()
+        .position(|o| o.name == "tall_block")
+        .unwrap();
+    assert!(scene.lights_of(tall).is_empty());
+    let (frame, _) = scene.object_frame(tall).unwrap();
+    let moved = scene
+        .lifted(tall, Affine3A::from_translation(step) * frame)
+        .unwrap();
+    assert_eq!(moved.lights, scene.lights);
+}

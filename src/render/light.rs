@@ -46,9 +46,6 @@ pub struct LightSet {
     pub(super) hidden_rects: bool,
 }
 
-/// Relative tolerance for a triangle lying in a rectangle light's plane and inside it.
-const COINCIDE: f32 = 1e-4;
-
 impl LightSet {
     /// Finds the scene's emissive triangles and the rectangle lights they lie in.
     pub fn new(scene: &Scene) -> Self {
@@ -94,7 +91,7 @@ impl LightSet {
             let rect = scene
                 .lights
                 .iter()
-                .position(|l| rect_contains(l, tri))
+                .position(|l| l.holds_triangle(tri))
                 .map(|i| i as u32);
             let owner = match rect {
                 Some(i) => {
@@ -142,33 +139,6 @@ impl LightSet {
         let ux = ((x - lo) / a).clamp(0.0, 1.0 - f32::EPSILON);
         (self.tris[i], Vec2::new(ux, u.y))
     }
-}
-
-/// True when `light` is a rectangle and all of `tri` lies in its plane and inside it.
-fn rect_contains(light: &Light, tri: &[Vec3; 3]) -> bool {
-    let Light::Rect {
-        corner,
-        edge_u,
-        edge_v,
-        ..
-    } = *light
-    else {
-        return false;
-    };
-    let n = edge_u.cross(edge_v);
-    let size = edge_u.length() + edge_v.length();
-    let Some(nu) = n.try_normalize() else {
-        return false;
-    };
-    // Coordinates along the edges by the dual basis (the edges need not be perpendicular).
-    let du = edge_v.cross(n);
-    let dv = n.cross(edge_u);
-    let (su, sv) = (edge_u.dot(du), edge_v.dot(dv));
-    let inside = |x: f32| (-COINCIDE..=1.0 + COINCIDE).contains(&x);
-    tri.iter().all(|&p| {
-        let d = p - corner;
-        d.dot(nu).abs() <= COINCIDE * size && inside(d.dot(du) / su) && inside(d.dot(dv) / sv)
-    })
 }
 
 /// Power heuristic for a strategy with `n` samples of density `p` against one of density `q`.

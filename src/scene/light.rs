@@ -1,6 +1,6 @@
 //! Light sources: points, spots, rectangles (and the emissive triangles of the materials).
 
-use glam::Vec3;
+use glam::{Affine3A, Vec3};
 
 /// A light source.
 #[derive(Clone, Debug, PartialEq)]
@@ -51,7 +51,67 @@ pub enum Light {
     },
 }
 
+/// Relative tolerance for a triangle lying in a rectangle light's plane and inside it.
+const COINCIDE: f32 = 1e-4;
+
 impl Light {
+    /// True when the light is a rectangle and all of `tri` lies in its plane and inside it
+    /// (within a relative `1e-4`): emissive triangles that show the rectangle, such as the
+    /// Cornell box's ceiling light, are one light with it.
+    pub fn holds_triangle(&self, tri: &[Vec3; 3]) -> bool {
+        let Light::Rect {
+            corner,
+            edge_u,
+            edge_v,
+            ..
+        } = *self
+        else {
+            return false;
+        };
+        let n = edge_u.cross(edge_v);
+        let size = edge_u.length() + edge_v.length();
+        let Some(nu) = n.try_normalize() else {
+            return false;
+        };
+        // Coordinates along the edges by the dual basis (the edges need not be perpendicular).
+        let du = edge_v.cross(n);
+        let dv = n.cross(edge_u);
+        let (su, sv) = (edge_u.dot(du), edge_v.dot(dv));
+        let inside = |x: f32| (-COINCIDE..=1.0 + COINCIDE).contains(&x);
+        tri.iter().all(|&p| {
+            let d = p - corner;
+            d.dot(nu).abs() <= COINCIDE * size && inside(d.dot(du) / su) && inside(d.dot(dv) / sv)
+        })
+    }
+
+    /// The light carried by `by`: its position, direction, corner and edges transformed (a
+    /// spot's axis made unit length again).
+    pub fn moved(&self, by: Affine3A) -> Light {
+        let mut l = self.clone();
+        match &mut l {
+            Light::Point { position, .. } => *position = by.transform_point3(*position),
+            Light::Spot {
+                position,
+                direction,
+                ..
+            } => {
+                *position = by.transform_point3(*position);
+                *direction = by.transform_vector3(*direction).normalize_or(*direction);
+            }
+            Light::Rect {
+                corner,
+                edge_u,
+                edge_v,
+                ..
+            } => {
+                *corner = by.transform_point3(*corner);
+                *edge_u = by.transform_vector3(*edge_u);
+                *edge_v = by.transform_vector3(*edge_v);
+            }
+        }
+        l
+    }
+
     /// Where a point or spot light is and the radiant intensity it sends towards `p` (a
     /// spot's scaled by its cone's fall-off, [`spot_falloff`]); `None` where a spot sends
     /// nothing (no shadow ray is needed there) and for a rectangle light, which is not a point.

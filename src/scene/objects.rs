@@ -163,12 +163,24 @@ impl Scene {
     /// [`Scene::object_frame`] gives them) placed once. Lifting numbers the triangles anew (the
     /// scene's own after it, then the placements with the new one last); every object keeps
     /// its index in [`Scene::objects`].
+    ///
+    /// A rectangle light that emissive triangles of the object lie in ([`super::Light::holds_triangle`]:
+    /// the light they show) moves with the object, so the light is where its triangles are.
     pub fn lifted(&self, i: usize, to_world: Affine3A) -> Result<Scene, PlaceError> {
         let object = self.objects.get(i).ok_or(PlaceError::NoObject(i))?;
+        let (frame, _) = self.object_frame(i).ok_or(PlaceError::NoObject(i))?;
+        let carried = self.lights_of(i);
+        let by = to_world * frame.inverse();
+        let carry = |scene: &mut Scene| {
+            for &l in &carried {
+                scene.lights[l] = scene.lights[l].moved(by);
+            }
+        };
         let (first, count) = match object.place {
             Place::Placed(p) => {
                 let mut scene = self.clone();
                 scene.instances = self.instances.moved(&[(p, to_world)])?;
+                carry(&mut scene);
                 return Ok(scene);
             }
             Place::Own { first, count } => (first, count),
@@ -200,7 +212,40 @@ impl Scene {
             }
         }
         scene.objects[i].place = Place::Placed(placement);
+        carry(&mut scene);
         Ok(scene)
+    }
+
+    /// The rectangle lights that some emissive triangle of object `i` lies in.
+    pub fn lights_of(&self, i: usize) -> Vec<usize> {
+        let Some(object) = self.objects.get(i) else {
+            return Vec::new();
+        };
+        let own = self.mesh.triangles.len() as u32;
+        let prims = match object.place {
+            Place::Own { first, count } => first..first + count,
+            Place::Placed(p) => {
+                let Some(placement) = self.instances.placements().get(p) else {
+                    return Vec::new();
+                };
+                let first = own + self.instances.first_triangle(p);
+                let n = self.instances.meshes[placement.mesh as usize]
+                    .triangles
+                    .len() as u32;
+                first..first + n
+            }
+        };
+        let glowing: Vec<[Vec3; 3]> = prims
+            .filter(|&prim| {
+                self.materials
+                    .get(self.material_id(prim) as usize)
+                    .is_some_and(|m| m.is_emissive())
+            })
+            .map(|prim| self.triangle(prim))
+            .collect();
+        (0..self.lights.len())
+            .filter(|&l| glowing.iter().any(|t| self.lights[l].holds_triangle(t)))
+            .collect()
     }
 }
 
