@@ -68,7 +68,7 @@ const SCENE: &str = "tracery.scene";
 const SETTINGS: &str = "tracery.settings";
 const RANGE: &str = "tracery.samples";
 const REJECTED: &str = "tracery.rejected";
-const PROGRAM: &str = "tracery.build";
+const BUILT_BY: &str = "tracery.build";
 
 impl Part {
     /// Writes the part as an EXR at `path`: written beside it under another name first and
@@ -98,7 +98,7 @@ impl Part {
         ));
         let mut attributes = LayerAttributes::named("tracery part");
         for (k, v) in [
-            (PROGRAM, self.key.build.clone()),
+            (BUILT_BY, self.key.build.clone()),
             (SCENE, self.key.scene.clone()),
             (SETTINGS, self.key.settings.clone()),
             (RANGE, format!("{}..{}", self.range.start, self.range.end)),
@@ -154,7 +154,7 @@ impl Part {
             _ => Err(not_part(&format!("no `{k}` attribute"))),
         };
         let key = PartKey {
-            build: text(PROGRAM).unwrap_or_else(|_| "unknown".into()),
+            build: text(BUILT_BY).unwrap_or_else(|_| "unknown".into()),
             scene: text(SCENE)?,
             settings: text(SETTINGS)?,
         };
@@ -224,8 +224,8 @@ pub fn parse_range(s: &str) -> Result<Range<u32>, String> {
 }
 
 /// Adds the parts into the film of the whole render: refused, with the files named, when two
-/// parts are of different builds of Tracery, scenes, settings or sizes, when their ranges overlap, or when they
-/// leave a gap (the ranges must cover `0..N` for the largest end `N`).
+/// parts are of different builds of Tracery, scenes, settings or sizes, when their ranges
+/// overlap, or when they leave a gap (the ranges must cover `0..N` for the largest end `N`).
 pub fn merge(parts: &[(PathBuf, Part)]) -> Result<Film> {
     let Some((first_path, first)) = parts.first() else {
         bail!("no parts to merge");

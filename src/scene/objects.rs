@@ -164,8 +164,9 @@ impl Scene {
     /// scene's own after it, then the placements with the new one last); every object keeps
     /// its index in [`Scene::objects`].
     ///
-    /// A rectangle light that emissive triangles of the object lie in ([`super::Light::holds_triangle`]:
-    /// the light they show) moves with the object, so the light is where its triangles are.
+    /// A rectangle light that emissive triangles of the object lie in (the light they show:
+    /// [`super::Light::holds_triangle`]) moves with the object, so the light is where its
+    /// triangles are.
     pub fn lifted(&self, i: usize, to_world: Affine3A) -> Result<Scene, PlaceError> {
         let object = self.objects.get(i).ok_or(PlaceError::NoObject(i))?;
         let (frame, _) = self.object_frame(i).ok_or(PlaceError::NoObject(i))?;
@@ -185,7 +186,6 @@ impl Scene {
             }
             Place::Own { first, count } => (first, count),
         };
-        let (frame, _) = self.object_frame(i).ok_or(PlaceError::NoObject(i))?;
         let centre = Vec3::from(frame.translation);
         let mut scene = self.clone();
         let range = first as usize..(first + count) as usize;
