@@ -471,8 +471,9 @@ fn world_box(b: &Aabb, m: &Affine3A) -> Aabb {
     }
 }
 
-/// The top level over `boxes`: a binned SAH on the boxes' centres, one instance per leaf
-/// (an empty box, an instance of an empty mesh, is left out of the tree).
+/// The top level over `boxes`: a binned SAH on the boxes' centres, and for nodes of at most
+/// [`TOP_SWEEP`] instances an exact sweep over every split of their centres in order; one
+/// instance per leaf (an empty box, an instance of an empty mesh, is left out of the tree).
 fn build_top(boxes: &[Aabb]) -> (Vec<BvhNode>, Vec<u32>) {
     let mut order: Vec<u32> = (0..boxes.len() as u32)
         .filter(|&i| !boxes[i as usize].is_empty())
@@ -486,24 +487,24 @@ fn build_top(boxes: &[Aabb]) -> (Vec<BvhNode>, Vec<u32>) {
     if order.is_empty() {
         return (vec![empty], order);
     }
-    let centres: Vec<Vec3A> = boxes.iter().map(|b| (b.min + b.max) * 0.5).collect();
+    // The boxes in `order`'s order, moved with it as it is partitioned, so that every pass
+    // over a node's instances reads them in sequence rather than through the indices.
+    let mut items: Vec<Aabb> = order.iter().map(|&i| boxes[i as usize]).collect();
+    let mut bin_of = vec![0u8; items.len()];
+    let mut scratch = (vec![Aabb::EMPTY; items.len()], vec![0u32; items.len()]);
     let mut nodes = Vec::with_capacity(2 * order.len());
     nodes.extend([empty, empty]);
-    let spread_of = |range: &[u32]| {
-        let mut spread = Aabb::EMPTY;
-        for &i in range {
-            spread.grow_point(centres[i as usize]);
-        }
-        spread
-    };
     // (node, start, end, depth, the centres' box): each node's box is made from its bins
-    // (or its one instance), and its children's centre boxes as it is split, so each
-    // instance is read twice per level.
-    let mut tasks = vec![(0usize, 0usize, order.len(), 0usize, spread_of(&order))];
+    // (or its instances), and its children's centre boxes as it is split.
+    let mut tasks = vec![(0usize, 0usize, order.len(), 0usize, centre_box(&items))];
     while let Some((node, start, end, depth, spread)) = tasks.pop() {
-        let range = &mut order[start..end];
+        let (items, order, bin_of) = (
+            &mut items[start..end],
+            &mut order[start..end],
+            &mut bin_of[start..end],
+        );
         if end - start == 1 {
-            nodes[node].set_aabb(&boxes[range[0] as usize]);
+            nodes[node].set_aabb(&items[0]);
             nodes[node].first = start as u32;
             nodes[node].count = 1;
             continue;
@@ -516,85 +517,271 @@ fn build_top(boxes: &[Aabb]) -> (Vec<BvhNode>, Vec<u32>) {
         } else {
             2
         };
-        let centre = |i: u32| centres[i as usize][axis];
-        let (lo, width) = (spread.min[axis], extent[axis]);
-        let scale = TOP_BINS as f32 / width;
-        // (Through i32: a float-to-usize conversion saturates at both ends, at a cost.)
-        let bin =
-            |i: u32| (((centre(i) - lo) * scale) as i32).clamp(0, TOP_BINS as i32 - 1) as usize;
-        let mut split = None;
-        if width > 0.0 && depth < TOP_DEPTH - 2 {
-            let mut counts = [0usize; TOP_BINS];
-            let mut bins = [Aabb::EMPTY; TOP_BINS];
-            for &i in range.iter() {
-                let k = bin(i);
-                counts[k] += 1;
-                bins[k] = bins[k].union(&boxes[i as usize]);
-            }
-            // Cost of splitting after bin k: the two sides' areas times their counts.
-            let mut right = [(Aabb::EMPTY, 0usize); TOP_BINS];
-            let mut acc = (Aabb::EMPTY, 0);
-            for k in (1..TOP_BINS).rev() {
-                acc = (acc.0.union(&bins[k]), acc.1 + counts[k]);
-                right[k] = acc;
-            }
-            let mut left = (Aabb::EMPTY, 0usize);
-            let mut best = (f64::INFINITY, 0usize);
-            for k in 0..TOP_BINS - 1 {
-                left = (left.0.union(&bins[k]), left.1 + counts[k]);
-                let (r, nr) = right[k + 1];
-                if left.1 == 0 || nr == 0 {
-                    continue;
-                }
-                let cost = left.0.half_area() * left.1 as f64 + r.half_area() * nr as f64;
-                if cost < best.0 {
-                    best = (cost, k);
-                }
-            }
-            nodes[node].set_aabb(&left.0.union(&bins[TOP_BINS - 1]));
-            if best.0.is_finite() {
-                split = Some(best.1);
-            }
+        let split = if items.len() == 2 {
+            Some((
+                items[0].union(&items[1]),
+                1,
+                centre_box(&items[..1]),
+                centre_box(&items[1..]),
+            ))
+        } else if !(extent[axis] > 0.0 && depth < TOP_DEPTH - 2) {
+            None
+        } else if items.len() <= TOP_SWEEP {
+            Some(sweep_split(items, order, axis))
         } else {
-            let mut bounds = Aabb::EMPTY;
-            for &i in range.iter() {
-                bounds = bounds.union(&boxes[i as usize]);
-            }
-            nodes[node].set_aabb(&bounds);
-        }
-        let (mid, left, right) = match split {
-            Some(split) => {
-                let (mut a, mut l, mut r) = (0, Aabb::EMPTY, Aabb::EMPTY);
-                for j in 0..range.len() {
-                    let i = range[j];
-                    if bin(i) <= split {
-                        l.grow_point(centres[i as usize]);
-                        range.swap(a, j);
-                        a += 1;
-                    } else {
-                        r.grow_point(centres[i as usize]);
-                    }
-                }
-                (start + a, l, r)
-            }
+            let scratch = (&mut scratch.0[start..end], &mut scratch.1[start..end]);
+            binned_split(items, order, bin_of, scratch, &spread, axis)
+        };
+        let (bounds, half, left, right) = match split {
+            Some(split) => split,
             None => {
                 // All centres at one point (or too deep): halves by count, in centre order.
-                range.sort_by(|&a, &b| centre(a).total_cmp(&centre(b)));
-                let half = range.len() / 2;
+                let mut both: Vec<(Aabb, u32)> =
+                    items.iter().copied().zip(order.iter().copied()).collect();
+                both.sort_by(|a, b| key(&a.0, axis).total_cmp(&key(&b.0, axis)));
+                for (k, (b, i)) in both.into_iter().enumerate() {
+                    (items[k], order[k]) = (b, i);
+                }
+                let half = items.len() / 2;
                 (
-                    start + half,
-                    spread_of(&range[..half]),
-                    spread_of(&range[half..]),
+                    union_of(items),
+                    half,
+                    centre_box(&items[..half]),
+                    centre_box(&items[half..]),
                 )
             }
         };
+        nodes[node].set_aabb(&bounds);
         let first = nodes.len();
         nodes.push(empty);
         nodes.push(empty);
         nodes[node].first = first as u32;
         nodes[node].count = 0;
-        tasks.push((first, start, mid, depth + 1, left));
-        tasks.push((first + 1, mid, end, depth + 1, right));
+        tasks.push((first, start, start + half, depth + 1, left));
+        tasks.push((first + 1, start + half, end, depth + 1, right));
     }
     (nodes, order)
+}
+
+/// Nodes of at most this many instances are split by [`sweep_split`].
+const TOP_SWEEP: usize = 12;
+
+/// A split's outcome: the node's box, how many instances go left, and the two sides' centre
+/// boxes.
+type Split = (Aabb, usize, Aabb, Aabb);
+
+/// Twice a box's centre along `axis` (the order of centres, without the halving).
+#[inline]
+fn key(b: &Aabb, axis: usize) -> f32 {
+    b.min[axis] + b.max[axis]
+}
+
+/// The box around the centres of `items`.
+fn centre_box(items: &[Aabb]) -> Aabb {
+    let mut spread = Aabb::EMPTY;
+    for b in items {
+        spread.grow_point((b.min + b.max) * 0.5);
+    }
+    spread
+}
+
+/// The box around all of `items`.
+fn union_of(items: &[Aabb]) -> Aabb {
+    items.iter().fold(Aabb::EMPTY, |a, b| a.union(b))
+}
+
+/// The split of a few instances with the least SAH cost among every split of their centres
+/// in order along `axis` (sorted in place, `order` with them).
+fn sweep_split(items: &mut [Aabb], order: &mut [u32], axis: usize) -> Split {
+    let n = items.len();
+    // The positions sorted by key, then the boxes moved once (when out of order).
+    let mut keys = [(0.0f32, 0u8); TOP_SWEEP];
+    for (k, b) in items.iter().enumerate() {
+        keys[k] = (key(b, axis), k as u8);
+    }
+    let keys = &mut keys[..n];
+    if !keys.is_sorted_by(|a, b| a.0 <= b.0) {
+        keys.sort_unstable_by(|a, b| a.0.total_cmp(&b.0));
+        let mut was = [Aabb::EMPTY; TOP_SWEEP];
+        let mut was_order = [0u32; TOP_SWEEP];
+        was[..n].copy_from_slice(items);
+        was_order[..n].copy_from_slice(order);
+        for (to, &(_, from)) in keys.iter().enumerate() {
+            items[to] = was[from as usize];
+            order[to] = was_order[from as usize];
+        }
+    }
+    // right[k]: the cost of the instances from k on.
+    let mut right = [0.0f64; TOP_SWEEP];
+    let mut acc = Aabb::EMPTY;
+    for k in (1..n).rev() {
+        acc.grow(&items[k]);
+        right[k] = acc.half_area() * (n - k) as f64;
+    }
+    let mut left = Aabb::EMPTY;
+    let mut best = (f64::INFINITY, 1);
+    for k in 1..n {
+        left.grow(&items[k - 1]);
+        let cost = left.half_area() * k as f64 + right[k];
+        if cost < best.0 {
+            best = (cost, k);
+        }
+    }
+    let half = best.1;
+    (
+        left.union(&items[n - 1]),
+        half,
+        centre_box(&items[..half]),
+        centre_box(&items[half..]),
+    )
+}
+
+/// The binned SAH's split of a node's instances along `axis` (partitioned in place, `order`
+/// with them), or `None` when every instance falls in one bin.
+fn binned_split(
+    items: &mut [Aabb],
+    order: &mut [u32],
+    bin_of: &mut [u8],
+    scratch: (&mut [Aabb], &mut [u32]),
+    spread: &Aabb,
+    axis: usize,
+) -> Option<Split> {
+    let lo = spread.min[axis] * 2.0;
+    let scale = TOP_BINS as f32 / ((spread.max[axis] - spread.min[axis]) * 2.0);
+    let mut counts = [0usize; TOP_BINS];
+    let mut bins = [Aabb::EMPTY; TOP_BINS];
+    let mut centres = [Aabb::EMPTY; TOP_BINS];
+    for (b, slot) in items.iter().zip(bin_of.iter_mut()) {
+        // (Through i32: a float-to-usize conversion saturates at both ends, at a cost.)
+        let k = (((key(b, axis) - lo) * scale) as i32).clamp(0, TOP_BINS as i32 - 1) as usize;
+        *slot = k as u8;
+        counts[k] += 1;
+        bins[k].grow(b);
+        centres[k].grow_point((b.min + b.max) * 0.5);
+    }
+    // Cost of splitting after bin k: the two sides' areas times their counts.
+    let mut right = [(Aabb::EMPTY, 0usize); TOP_BINS];
+    let mut acc = (Aabb::EMPTY, 0);
+    for k in (1..TOP_BINS).rev() {
+        acc = (acc.0.union(&bins[k]), acc.1 + counts[k]);
+        right[k] = acc;
+    }
+    let mut left = (Aabb::EMPTY, 0usize);
+    let mut best = (f64::INFINITY, 0usize);
+    for k in 0..TOP_BINS - 1 {
+        left = (left.0.union(&bins[k]), left.1 + counts[k]);
+        let (r, nr) = right[k + 1];
+        if left.1 == 0 || nr == 0 {
+            continue;
+        }
+        let cost = left.0.half_area() * left.1 as f64 + r.half_area() * nr as f64;
+        if cost < best.0 {
+            best = (cost, k);
+        }
+    }
+    if !best.0.is_finite() {
+        return None;
+    }
+    // Instances of bins up to `split` to the front, the rest after them, through the
+    // scratch space and without a branch on the side (a coin toss for most instances).
+    let split = best.1;
+    let mid = counts[..=split].iter().sum();
+    let (mut a, mut e) = (0, mid);
+    for (j, &k) in bin_of.iter().enumerate() {
+        let goes_left = k as usize <= split;
+        let to = if goes_left { a } else { e };
+        scratch.0[to] = items[j];
+        scratch.1[to] = order[j];
+        a += goes_left as usize;
+        e += !goes_left as usize;
+    }
+    items.copy_from_slice(scratch.0);
+    order.copy_from_slice(scratch.1);
+    let side = |bins: &[Aabb]| bins.iter().fold(Aabb::EMPTY, |a, b| a.union(b));
+    Some((
+        left.0.union(&bins[TOP_BINS - 1]),
+        mid,
+        side(&centres[..=split]),
+        side(&centres[split + 1..]),
+    ))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::rng::SplitMix64;
+
+    /// Walks the top level over `boxes`: every non-empty box in exactly one leaf, every
+    /// leaf's box its instance's, every inner node's box around its children's; returns the
+    /// depth.
+    fn check(boxes: &[Aabb]) -> usize {
+        let (nodes, order) = build_top(boxes);
+        let mut seen = vec![0u32; boxes.len()];
+        let mut deepest = 0;
+        let mut stack = vec![(0usize, 0usize)];
+        let holds = |outer: &BvhNode, min: [f32; 3], max: [f32; 3]| {
+            (0..3).all(|a| outer.min[a] <= min[a] && max[a] <= outer.max[a])
+        };
+        while let Some((k, depth)) = stack.pop() {
+            deepest = deepest.max(depth);
+            let n = &nodes[k];
+            if n.count > 0 {
+                assert_eq!(n.count, 1);
+                let i = order[n.first as usize] as usize;
+                seen[i] += 1;
+                assert_eq!((n.min, n.max), (boxes[i].min.into(), boxes[i].max.into()));
+            } else if !order.is_empty() {
+                for c in [n.first as usize, n.first as usize + 1] {
+                    assert!(holds(n, nodes[c].min, nodes[c].max), "node {k}, child {c}");
+                    stack.push((c, depth + 1));
+                }
+            }
+        }
+        for (i, b) in boxes.iter().enumerate() {
+            assert_eq!(seen[i], u32::from(!b.is_empty()), "box {i}");
+        }
+        deepest
+    }
+
+    #[test]
+    fn the_top_level_holds_every_box_once_inside_its_parents() {
+        let mut rng = SplitMix64::new(5);
+        let mut r = || rng.next_f32();
+        for n in [0usize, 1, 2, 3, 5, 11, 12, 13, 17, 40, 100, 1000, 5000] {
+            // Scattered boxes of many sizes, with repeats and an empty box now and then.
+            let mut boxes: Vec<Aabb> = (0..n)
+                .map(|_| {
+                    let c = Vec3A::new(r() * 100.0, r() * 5.0, r() * 100.0);
+                    let h = Vec3A::new(r(), r(), r()) * (r() * 10.0);
+                    Aabb {
+                        min: c - h,
+                        max: c + h,
+                    }
+                })
+                .collect();
+            for k in (0..n).step_by(7) {
+                boxes[k] = boxes[k / 2];
+            }
+            for k in (0..n).step_by(31) {
+                boxes[k] = Aabb::EMPTY;
+            }
+            check(&boxes);
+        }
+        // Every centre at one point: split by count, halving, so the depth stays that of a
+        // balanced tree.
+        let same = vec![Aabb::new(glam::Vec3::ZERO, glam::Vec3::ONE); 3000];
+        assert!(check(&same) <= 12);
+        // Boxes along one line, each a third farther out than the one before: the depth
+        // stays within the walks' stack.
+        let line: Vec<Aabb> = (0..300)
+            .map(|k| {
+                let x = 1.3f32.powi(k);
+                Aabb::new(
+                    glam::Vec3::new(x, 0.0, 0.0),
+                    glam::Vec3::new(x * 1.1, 1.0, 1.0),
+                )
+            })
+            .collect();
+        assert!(check(&line) <= TOP_DEPTH + 32);
+    }
 }
