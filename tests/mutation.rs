@@ -13,7 +13,7 @@ use std::time::Duration;
 
 use base64::Engine as _;
 use proptest::prelude::*;
-use tracery::bvh::{BuildOptions, Bvh};
+use tracery::bvh::{Accel, BuildOptions};
 use tracery::geometry::Ray;
 use tracery::render::{RenderSettings, render};
 use tracery::scene::Scene;
@@ -348,14 +348,21 @@ fn check(path: &Path, names: &[&str]) -> Result<(), TestCaseError> {
     checked(path, names).map(|_| ())
 }
 
-/// [`check`], handing back the scene that loaded and its BVH.
-fn checked(path: &Path, names: &[&str]) -> Result<Option<(Scene, Bvh)>, TestCaseError> {
+/// [`check`], handing back the scene that loaded and its trees.
+fn checked(path: &Path, names: &[&str]) -> Result<Option<(Scene, Accel)>, TestCaseError> {
     match load_bounded(path.to_path_buf()) {
         Ok(scene) => {
-            let bvh = Bvh::build(&scene.mesh.triangles, &BuildOptions::sah());
-            let b = bvh.bounds();
+            // The trees the command line builds: two levels when a mesh is placed more
+            // than once (a mutation can make two nodes share one mesh).
+            let Ok(accel) = Accel::for_scene(&scene, &BuildOptions::sah()) else {
+                return Err(TestCaseError::fail(
+                    "a loaded scene's placements are refused",
+                ));
+            };
+            let tree = accel.tree();
+            let b = tree.bounds();
             prop_assert!(
-                bvh.triangle_count() == 0 || (b.min.is_finite() && b.max.is_finite()),
+                tree.is_empty() || (b.min.is_finite() && b.max.is_finite()),
                 "root bounds not finite"
             );
             for d in [
@@ -363,10 +370,10 @@ fn checked(path: &Path, names: &[&str]) -> Result<Option<(Scene, Bvh)>, TestCase
                 glam::Vec3::NEG_Y,
                 glam::Vec3::new(0.3, -0.2, -1.0),
             ] {
-                let hit = bvh.intersect(&Ray::new(glam::Vec3::splat(0.1), d), f32::INFINITY);
+                let hit = tree.intersect(&Ray::new(glam::Vec3::splat(0.1), d), f32::INFINITY);
                 prop_assert!(hit.is_none_or(|h| h.t.is_finite() && h.t > 0.0));
             }
-            Ok(Some((scene, bvh)))
+            Ok(Some((scene, accel)))
         }
         Err(e) => {
             prop_assert!(
@@ -597,4 +604,36 @@ fn the_unmutated_files_load() {
         "{:?}",
         s.warnings
     );
+}
+
+/// A mutation the property tests found: a token spliced into the textured glTF's node list
+/// makes a second node place the mesh, so the scene places a mesh twice; it renders through
+/// the two levels the command line builds. (Through one tree over the scene's own
+/// triangles, `render` says why it cannot, rather than panicking.)
+#[test]
+fn a_mutation_that_places_a_mesh_twice_renders() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("tex.bin"), textured_bin()).unwrap();
+    let p = dir.path().join("mutant.gltf");
+    let edits = [Edit::Splice(0.8877320547527232, 48)];
+    std::fs::write(
+        &p,
+        apply(textured_gltf(Some("tex.bin")).into_bytes(), &edits),
+    )
+    .unwrap();
+    let scene = Scene::load(&p).unwrap();
+    assert!(
+        !scene.instances.is_empty(),
+        "the mutant places a mesh twice"
+    );
+    check_rendered(&p, &["mutant.gltf", "tex.bin"]).unwrap();
+    let own = tracery::bvh::Bvh::build(&scene.mesh.triangles, &BuildOptions::sah());
+    let settings = RenderSettings {
+        width: 4,
+        height: 4,
+        spp: 1,
+        ..RenderSettings::default()
+    };
+    let err = render(&scene, &own, &settings, &|_| {}).err().unwrap();
+    assert!(format!("{err}").contains("Accel::for_scene"), "{err}");
 }

@@ -139,13 +139,20 @@ pub struct RenderOutput {
 
 /// Renders `scene` with a prebuilt `bvh` and the plan the scene needs, loading the
 /// environment's images if the plan uses them. `progress` is called with the number of
-/// finished rows (from any thread).
+/// finished rows (from any thread). An error says so when the scene places meshes more than
+/// once and `bvh` is one tree (over the scene's own triangles, without the placed meshes).
 pub fn render<'a>(
     scene: &'a Scene,
     bvh: impl Into<Tree<'a>>,
     settings: &RenderSettings,
     progress: &(dyn Fn(usize) + Sync),
 ) -> anyhow::Result<RenderOutput> {
+    let bvh: Tree<'a> = bvh.into();
+    anyhow::ensure!(
+        scene.instances.is_empty() || matches!(bvh, Tree::TwoLevel(_)),
+        "the scene places meshes more than once, and one tree over its own triangles leaves \
+         them out: build its trees with `Accel::for_scene`"
+    );
     let plan = RenderPlan::new(scene, settings);
     let env = EnvironmentMap::load(&scene.environment, plan.environment)?;
     Ok(render_with_plan(scene, bvh, &env, settings, plan, progress))
