@@ -606,9 +606,9 @@ fn the_unmutated_files_load() {
     );
 }
 
-/// A mutation the property tests found: a token spliced into the textured glTF's node list
-/// makes a second node place the mesh, so the scene places a mesh twice; it renders through
-/// the two levels the command line builds. (Through one tree over the scene's own
+/// A token spliced into the textured glTF's node list that makes a second node place the
+/// mesh, so the scene places a mesh twice: it renders through the two levels the command
+/// line builds. (Through one tree over the scene's own
 /// triangles, `render` says why it cannot, rather than panicking.)
 #[test]
 fn a_mutation_that_places_a_mesh_twice_renders() {

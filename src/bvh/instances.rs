@@ -585,9 +585,9 @@ fn centre_box(items: &[Aabb]) -> Aabb {
     spread
 }
 
-/// The box around all of `items`.
-fn union_of(items: &[Aabb]) -> Aabb {
-    items.iter().fold(Aabb::EMPTY, |a, b| a.union(b))
+/// The box around all of `boxes`.
+fn union_of(boxes: &[Aabb]) -> Aabb {
+    boxes.iter().fold(Aabb::EMPTY, |a, b| a.union(b))
 }
 
 /// The split of a few instances with the least SAH cost among every split of their centres
@@ -697,12 +697,11 @@ fn binned_split(
     }
     items.copy_from_slice(scratch.0);
     order.copy_from_slice(scratch.1);
-    let side = |bins: &[Aabb]| bins.iter().fold(Aabb::EMPTY, |a, b| a.union(b));
     Some((
         left.0.union(&bins[TOP_BINS - 1]),
         mid,
-        side(&centres[..=split]),
-        side(&centres[split + 1..]),
+        union_of(&centres[..=split]),
+        union_of(&centres[split + 1..]),
     ))
 }
 
