@@ -110,7 +110,8 @@ pub(super) fn build(triangles: &[[Vec3; 3]], options: &BuildOptions) -> Bvh {
         .with_min_len(1 << 14)
         .map(PrimRef::id)
         .collect();
-    let (wide, leaf_blocks) = super::wide::collapse(&nodes, triangles, &prim_ids);
+    let (wide, leaf_blocks) =
+        super::wide::collapse(&nodes, triangles, &prim_ids, one_leaf(&nodes, &counts, prim_ids.len()));
     let mut bvh = Bvh {
         wide,
         nodes,
@@ -129,6 +130,22 @@ pub(super) fn build(triangles: &[[Vec3; 3]], options: &BuildOptions) -> Bvh {
     bvh.stats = BvhStats::new(&bvh, &counts, excluded, degenerate, build_time, phases);
     bvh
 }
+
+/// Whether the traversal layout tests the tree's `n` triangles as one root leaf: when that costs less
+/// by the SAH than the tree built (whose leaves hold at most the options' leaf size). Only a
+/// scene of a few dozen triangles can qualify, and one whose leaves' boxes overlap much: the
+/// Cornell box's 32 triangles cost 6.0 block tests as one leaf against 7.7 as its tree of four
+/// leaves (its walls' boxes span the room, and a ray from inside enters all of them).
+fn one_leaf(nodes: &[BvhNode], counts: &TreeCounts, n: usize) -> bool {
+    if nodes[0].is_leaf() || n > ONE_LEAF_MAX {
+        return false;
+    }
+    let root_area = nodes[0].aabb().half_area();
+    root_area > 0.0 && counts.sah_cost(root_area, n) > sah::C_INTERSECT * sah::leaf_tests(n)
+}
+
+/// The most triangles [`one_leaf`] considers: beyond, one leaf costs more than any tree.
+const ONE_LEAF_MAX: usize = 256;
 
 /// A node before it is filled in (and the unused slot 1).
 const EMPTY_NODE: BvhNode = BvhNode {

@@ -22,12 +22,15 @@ use crate::bvh::BvhNode;
 use crate::geometry::Aabb;
 
 /// Collapses `nodes` (the binary tree, root at 0) whose leaf slots hold the triangles
-/// `triangles[prim_ids[slot]]`. Also returns, for every binary leaf, the index of its first
-/// block (the blocks of a leaf are consecutive; 0 for inner nodes).
+/// `triangles[prim_ids[slot]]`, or lays them out as one root leaf with `one_leaf` (the
+/// builder found testing them all together cheaper than the tree). Also returns, for every
+/// binary leaf, the index of its first block (the blocks of a leaf are consecutive; 0 for
+/// inner nodes).
 pub fn collapse(
     nodes: &[BvhNode],
     triangles: &[[Vec3; 3]],
     prim_ids: &[u32],
+    one_leaf: bool,
 ) -> (WideBvh, Vec<u32>) {
     let mut out = WideBvh::default();
     out.set_kernel(Kernel::detect())
@@ -36,10 +39,11 @@ pub fn collapse(
     if prim_ids.is_empty() {
         return (out, leaf_blocks);
     }
-    if nodes[0].is_leaf() || prim_ids.len() > Child::MAX_FIRST_BLOCK as usize {
-        // One root leaf: the tree is one leaf, or it has more blocks than a leaf word can
-        // address (over 500 million triangles, hundreds of gigabytes): every binary leaf's
-        // blocks in slot order, tested one after the other, correct if slow.
+    if one_leaf || nodes[0].is_leaf() || prim_ids.len() > Child::MAX_FIRST_BLOCK as usize {
+        // One root leaf: asked for, the tree is one leaf, or it has more blocks than a leaf
+        // word can address (over 500 million triangles, hundreds of gigabytes): every binary
+        // leaf's blocks in slot order, tested one after the other (correct if slow for the
+        // last).
         let mut sources = Vec::new();
         let mut leaves: Vec<usize> = (0..nodes.len())
             .filter(|&i| i != 1 && nodes[i].is_leaf())
@@ -797,7 +801,9 @@ mod tests {
             let root_area = bvh.nodes[0].aabb().half_area() as f32;
             let exhaustive = exhaustive_cost(&bvh.nodes);
             let planned = plan.cost[0][0] as f64;
-            let made = wide_cost(&bvh.wide, root_area);
+            // The collapse itself, even where the builder lays the tree out as one leaf.
+            let (wide, _) = collapse(&bvh.nodes, &tris, &bvh.prim_ids, false);
+            let made = wide_cost(&wide, root_area);
             let tolerance = 1e-5 * exhaustive;
             assert!(
                 (planned - exhaustive).abs() <= tolerance,
