@@ -231,20 +231,43 @@ fn laine_karras(mut v: u32, seed: u32) -> u32 {
 }
 
 /// Shirley-Chiu concentric map of the unit square onto the unit disk (keeps strata intact).
+///
+/// The point's angle is `pi/4 * o.y / o.x` where `|o.x| > |o.y|`, else `pi/2 - pi/4 * o.x /
+/// o.y`; both come from the sine and cosine of `a = pi/4 * (the smaller over the larger)`,
+/// `|a| <= pi/4` ([`sin_cos_octant`]), swapped for the second.
+#[inline]
 pub fn concentric_disk(u: glam::Vec2) -> glam::Vec2 {
     let o = 2.0 * u - glam::Vec2::ONE;
     if o == glam::Vec2::ZERO {
         return glam::Vec2::ZERO;
     }
-    let (r, theta) = if o.x.abs() > o.y.abs() {
-        (o.x, std::f32::consts::FRAC_PI_4 * (o.y / o.x))
+    let steep = o.x.abs() <= o.y.abs();
+    let (r, a) = if steep {
+        (o.y, std::f32::consts::FRAC_PI_4 * (o.x / o.y))
     } else {
-        (
-            o.y,
-            std::f32::consts::FRAC_PI_2 - std::f32::consts::FRAC_PI_4 * (o.x / o.y),
-        )
+        (o.x, std::f32::consts::FRAC_PI_4 * (o.y / o.x))
     };
-    r * glam::Vec2::new(theta.cos(), theta.sin())
+    let (sin, cos) = sin_cos_octant(a);
+    // cos(pi/2 - a) = sin a, sin(pi/2 - a) = cos a.
+    r * if steep {
+        glam::Vec2::new(sin, cos)
+    } else {
+        glam::Vec2::new(cos, sin)
+    }
+}
+
+/// `(sin a, cos a)` for `|a| <= pi/4`, by polynomials with no branch and no call, so that
+/// loops over many angles (the plain step's sixteen lanes) vectorise: the odd polynomial of
+/// degree 7 and the even one of degree 8 of Cephes' single-precision `sinf` and `cosf`
+/// (Moshier), evaluated by Horner's rule without fused multiply-adds, so every build and vector
+/// width gives the same bits. Within 0.76 ulp of the exact sine and 1.25 ulp of the cosine over
+/// the range (a test checks 1.5 against f64).
+#[inline(always)]
+pub fn sin_cos_octant(a: f32) -> (f32, f32) {
+    let z = a * a;
+    let sin = a + a * z * (-1.666_665_5e-1 + z * (8.332_161e-3 + z * -1.951_529_6e-4));
+    let cos = 1.0 - 0.5 * z + z * z * (4.166_664_6e-2 + z * (-1.388_731_6e-3 + z * 2.443_315_7e-5));
+    (sin, cos)
 }
 
 /// Cosine-weighted direction about `n` (Malley's method on the concentric disk).

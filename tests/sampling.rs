@@ -4,7 +4,7 @@ use glam::Vec2;
 use tracery::bvh::{BuildOptions, Bvh};
 use tracery::camera::CameraRays;
 use tracery::render::{EnvironmentMap, RenderPlan, RenderSettings, render_with_plan};
-use tracery::sampling::{PixelSampler, SamplerKind, concentric_disk, dim};
+use tracery::sampling::{PixelSampler, SamplerKind, concentric_disk, dim, sin_cos_octant};
 use tracery::scene::Scene;
 
 #[test]
@@ -59,6 +59,32 @@ fn concentric_map_stays_in_the_disk_and_keeps_the_centre() {
     }
     // The square's edge lands on the circle.
     assert!((concentric_disk(Vec2::new(1.0, 0.5)).length() - 1.0).abs() < 1e-6);
+}
+
+/// Distance in units in the last place between `got` and the f64 value `exact`.
+fn ulps(got: f32, exact: f64) -> f64 {
+    let rounded = exact as f32;
+    let ulp = (rounded.next_up() - rounded) as f64;
+    (got as f64 - exact).abs() / ulp
+}
+
+#[test]
+fn the_octant_sine_and_cosine_are_within_one_and_a_half_ulp() {
+    let mut worst = (0.0f64, 0.0f64);
+    let steps = 1 << 20;
+    for i in -steps..=steps {
+        let a = std::f32::consts::FRAC_PI_4 * (i as f32 / steps as f32);
+        let (sin, cos) = sin_cos_octant(a);
+        let (es, ec) = (a as f64).sin_cos();
+        worst.0 = worst.0.max(if a == 0.0 { sin.abs() as f64 } else { ulps(sin, es) });
+        worst.1 = worst.1.max(ulps(cos, ec));
+    }
+    assert!(worst.0 <= 1.5 && worst.1 <= 1.5, "sine, cosine: {worst:?} ulp");
+    // The disk's points have unit radius on its rim, to rounding.
+    for i in 0..=64 {
+        let p = concentric_disk(Vec2::new(1.0, i as f32 / 64.0));
+        assert!((p.length() - 1.0).abs() < 4e-7, "{p}");
+    }
 }
 
 #[test]

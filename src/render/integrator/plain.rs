@@ -12,7 +12,7 @@
 //! samples, bounce and random numbers as the general step, bit for bit (a test renders with
 //! and without this path).
 
-use std::f32::consts::{FRAC_1_PI, FRAC_PI_2, FRAC_PI_4};
+use std::f32::consts::{FRAC_1_PI, FRAC_PI_4};
 
 use glam::Vec3;
 
@@ -21,7 +21,7 @@ use crate::bvh::Hit;
 use crate::geometry::{Ray, gamma, offset_ray_origin};
 use crate::render::light::{RectLight, ShadowRay, power};
 use crate::render::{RayCounts, Tracer};
-use crate::sampling::{SamplerKind, point};
+use crate::sampling::{SamplerKind, point, sin_cos_octant};
 
 /// Lanes of a chunk.
 pub(super) const W: usize = 16;
@@ -382,33 +382,26 @@ fn bounce(t: &Tracer, c: &mut Chunk) {
     let go: [bool; W] =
         std::array::from_fn(|j| j < c.n && !(c.depth[j] == t.max_depth && nothing_to_find));
     let (ux, uy) = draw(c, &go);
-    // The concentric disk's angle and radius (`sampling::concentric_disk`).
-    let mut theta = [0.0; W];
-    let mut r = [0.0; W];
-    let mut centre = [false; W];
+    // The concentric disk's point (`sampling::concentric_disk`, the same operations).
+    let mut dx = [0.0; W];
+    let mut dy = [0.0; W];
     for j in 0..W {
         let (ox, oy) = (2.0 * ux[j] - 1.0, 2.0 * uy[j] - 1.0);
-        centre[j] = ox == 0.0 && oy == 0.0;
-        (r[j], theta[j]) = if ox.abs() > oy.abs() {
-            (ox, FRAC_PI_4 * (oy / ox))
+        let centre = ox == 0.0 && oy == 0.0;
+        let steep = ox.abs() <= oy.abs();
+        let (r, a) = if steep {
+            (oy, FRAC_PI_4 * (ox / oy))
         } else {
-            (oy, FRAC_PI_2 - FRAC_PI_4 * (ox / oy))
+            (ox, FRAC_PI_4 * (oy / ox))
         };
-    }
-    // The standard library's cosine and sine, lane by lane: the same values as the general
-    // step's.
-    let mut cs = [(0.0f32, 0.0f32); W];
-    for j in 0..c.n {
-        cs[j] = (theta[j].cos(), theta[j].sin());
+        let (sin, cos) = sin_cos_octant(a);
+        let (x, y) = if steep { (sin, cos) } else { (cos, sin) };
+        (dx[j], dy[j]) = if centre { (0.0, 0.0) } else { (r * x, r * y) };
     }
     let mut survive = [0.0; W];
     let mut roulette = [false; W];
     for j in 0..W {
-        let (dx, dy) = if centre[j] {
-            (0.0, 0.0)
-        } else {
-            (r[j] * cs[j].0, r[j] * cs[j].1)
-        };
+        let (dx, dy) = (dx[j], dy[j]);
         let z = (1.0 - (dx * dx + dy * dy)).max(0.0).sqrt();
         let n = [c.shading[0][j], c.shading[1][j], c.shading[2][j]];
         // glam's `any_orthonormal_pair` (Duff et al. 2017).
