@@ -76,10 +76,17 @@ fn the_octant_sine_and_cosine_are_within_one_and_a_half_ulp() {
         let a = std::f32::consts::FRAC_PI_4 * (i as f32 / steps as f32);
         let (sin, cos) = sin_cos_octant(a);
         let (es, ec) = (a as f64).sin_cos();
-        worst.0 = worst.0.max(if a == 0.0 { sin.abs() as f64 } else { ulps(sin, es) });
+        worst.0 = worst.0.max(if a == 0.0 {
+            sin.abs() as f64
+        } else {
+            ulps(sin, es)
+        });
         worst.1 = worst.1.max(ulps(cos, ec));
     }
-    assert!(worst.0 <= 1.5 && worst.1 <= 1.5, "sine, cosine: {worst:?} ulp");
+    assert!(
+        worst.0 <= 1.5 && worst.1 <= 1.5,
+        "sine, cosine: {worst:?} ulp"
+    );
     // The disk's points have unit radius on its rim, to rounding.
     for i in 0..=64 {
         let p = concentric_disk(Vec2::new(1.0, i as f32 / 64.0));

@@ -74,6 +74,76 @@ fn batch_queries_agree_with_brute_force() {
     }
 }
 
+/// Where the tree is one leaf (the Cornell box's 32 triangles), the batch queries test the
+/// rays in groups of one axis permutation: each ray still gets the hit it gets alone, bit for
+/// bit (distance and barycentrics), and brute force's answers, in batches of every size, with
+/// rays from inside and outside the room, rays that cannot hit (NaN, zero direction) and
+/// shadow rays whose limit is zero or below among them.
+#[test]
+fn batch_queries_on_one_leaf_agree_with_single_rays() {
+    let tris = tracery::scene::Scene::cornell_box().mesh.triangles;
+    let bf = BruteForce::new(&tris);
+    let mut rays = common::random_rays(&tris, 4000, 17);
+    for (i, r) in rays.iter_mut().enumerate().step_by(97) {
+        *r = match i % 3 {
+            0 => Ray::new(r.origin, Vec3::ZERO),
+            1 => Ray::new(Vec3::new(f32::NAN, 1.0, 1.0), r.dir),
+            _ => Ray::new(r.origin, Vec3::new(0.0, 0.0, -1.0)),
+        };
+    }
+    let t_maxes: Vec<f32> = (0..rays.len())
+        .map(|i| [0.0, -1.0, 0.5, 2.0, 8.0, f32::INFINITY][i % 6])
+        .collect();
+    let sah = Bvh::build(&tris, &tracery::bvh::BuildOptions::sah());
+    assert!(sah.wide.root_leaf.is_some() && sah.wide.nodes.is_empty());
+    for (name, bvh) in common::all_bvhs(&tris) {
+        let mut start = 0;
+        for size in [1usize, 3, 64, 65, 300, 1024].iter().cycle() {
+            if start >= rays.len() {
+                break;
+            }
+            let end = (start + size).min(rays.len());
+            let batch = &rays[start..end];
+            let mut hits = vec![None; batch.len()];
+            bvh.intersect_batch(batch, &mut hits);
+            let shadow: Vec<(Ray, f32)> = batch
+                .iter()
+                .zip(&t_maxes[start..end])
+                .map(|(r, &t)| (*r, t))
+                .collect();
+            let mut blocked = vec![true; batch.len()];
+            bvh.occluded_batch(&shadow, &mut blocked);
+            for (k, r) in batch.iter().enumerate() {
+                let alone = bvh.intersect(r, f32::INFINITY);
+                let bits = |h: Option<tracery::bvh::Hit>| {
+                    h.map(|h| (h.prim, h.t.to_bits(), h.u.to_bits(), h.v.to_bits()))
+                };
+                assert_eq!(bits(hits[k]), bits(alone), "{name}, ray {}", start + k);
+                let t_max = t_maxes[start + k];
+                assert_eq!(
+                    blocked[k],
+                    bvh.occluded(r, t_max),
+                    "{name}, shadow {}",
+                    start + k
+                );
+                if !r.is_valid() {
+                    assert!(
+                        hits[k].is_none() && !blocked[k],
+                        "{name}, ray {}",
+                        start + k
+                    );
+                    continue;
+                }
+                let want = bf.closest(r, f32::INFINITY);
+                assert_eq!(hits[k].map(|h| h.prim), want.map(|h| h.prim), "{name}");
+                let any = t_max > 0.0 && !bf.all_hits(r, t_max).is_empty();
+                assert_eq!(blocked[k], any, "{name}, shadow ray {}", start + k);
+            }
+            start = end;
+        }
+    }
+}
+
 #[test]
 fn for_each_hit_reports_every_hit_once() {
     let tris = shapes::random_soup(1500, 0.2, 5);

@@ -40,6 +40,46 @@ impl Hit {
     }
 }
 
+/// Calls `f(ids, rays)` for lists of up to [`PACKET`] of the `items`' rays (`ray` finds an
+/// item's), `ids` their indices in `items`: every item once, the rays sorted by axis
+/// permutation (the largest direction component's axis and sign, as the triangle test picks
+/// them), so that rays tested in groups of one permutation fill their groups.
+fn by_permutation<T>(items: &[T], ray: impl Fn(&T) -> &Ray, mut f: impl FnMut(&[u32], &[Ray])) {
+    const KEYS: usize = 6;
+    let key = |r: &Ray| {
+        let a = r.dir.abs();
+        let kz = if a.x >= a.y && a.x >= a.z {
+            0
+        } else if a.y >= a.z {
+            1
+        } else {
+            2
+        };
+        // NaN directions land in some bucket; the query leaves such rays out.
+        (2 * kz + (r.dir[kz] < 0.0) as usize).min(KEYS - 1)
+    };
+    let mut count = [0usize; KEYS + 1];
+    for item in items {
+        count[key(ray(item)) + 1] += 1;
+    }
+    for k in 0..KEYS {
+        count[k + 1] += count[k];
+    }
+    let mut ids = vec![0u32; items.len()];
+    for (i, item) in items.iter().enumerate() {
+        let k = key(ray(item));
+        ids[count[k]] = i as u32;
+        count[k] += 1;
+    }
+    let mut list = [Ray::new(Vec3::ZERO, Vec3::X); PACKET];
+    for chunk in ids.chunks(PACKET) {
+        for (l, &i) in list.iter_mut().zip(chunk) {
+            *l = *ray(&items[i as usize]);
+        }
+        f(chunk, &list[..chunk.len()]);
+    }
+}
+
 /// One step of a traversal, as reported by [`Bvh::intersect_visit`].
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Visit {
@@ -109,20 +149,82 @@ impl Bvh {
 
     /// [`Bvh::intersect_incoherent`] of a batch of rays (a path tracer's bounces, one from each
     /// path of a batch), into `out` (one hit per ray, each the hit the ray gets alone).
+    ///
+    /// Where the whole tree is one leaf (a scene of a few dozen triangles, see
+    /// [`crate::bvh::wide`]) and the kernel has a group test, up to [`PACKET`] rays at a time
+    /// are grouped by axis permutation and each group tested against every triangle at once,
+    /// instead of each ray against the triangles eight at a time.
     pub fn intersect_batch(&self, rays: &[Ray], out: &mut [Option<Hit>]) {
         assert_eq!(rays.len(), out.len(), "one result per ray");
+        if self.wide.groups_root_leaf_rays() {
+            by_permutation(
+                rays,
+                |r| r,
+                |ids, list| {
+                    let bests = self.root_leaf_rays(list, |_| f32::INFINITY);
+                    for (i, &id) in ids.iter().enumerate() {
+                        out[id as usize] = match &bests {
+                            Some((b, active)) if active >> i & 1 == 1 => {
+                                Hit::of(b.best(i), f32::INFINITY)
+                            }
+                            _ => None,
+                        };
+                    }
+                },
+            );
+            return;
+        }
         for (ray, o) in rays.iter().zip(out) {
             *o = self.intersect_incoherent(ray, f32::INFINITY);
         }
     }
 
     /// [`Bvh::occluded`] of a batch of rays, each with its own `t_max` (a path tracer's shadow
-    /// rays, from each path of a batch), into `out` (each the answer the ray gets alone).
+    /// rays, from each path of a batch), into `out` (each the answer the ray gets alone). A
+    /// tree that is one leaf takes the rays in groups, as [`Bvh::intersect_batch`] does.
     pub fn occluded_batch(&self, rays: &[(Ray, f32)], out: &mut [bool]) {
         assert_eq!(rays.len(), out.len(), "one result per ray");
+        if self.wide.groups_root_leaf_rays() {
+            by_permutation(
+                rays,
+                |r| &r.0,
+                |ids, list| {
+                    let limit = |i: usize| rays[ids[i] as usize].1;
+                    let bests = self.root_leaf_rays(list, limit);
+                    for (i, &id) in ids.iter().enumerate() {
+                        // Closer than the ray's own limit: something lies on it (a hit at the
+                        // limit itself ties and is kept, but does not count).
+                        out[id as usize] = bests
+                            .as_ref()
+                            .is_some_and(|(b, active)| active >> i & 1 == 1 && b.t[i] < limit(i));
+                    }
+                },
+            );
+            return;
+        }
         for ((ray, t_max), o) in rays.iter().zip(out) {
             *o = self.occluded(ray, *t_max);
         }
+    }
+
+    /// The closest hits of up to [`PACKET`] rays, ray `i` below `t_max(i)`, against the root
+    /// leaf in groups ([`crate::bvh::wide::WideBvh::root_leaf_rays`]), with the rays that
+    /// query at all (valid rays, positive limits) as bits; `None` when none does.
+    fn root_leaf_rays(&self, rays: &[Ray], t_max: impl Fn(usize) -> f32) -> Option<(Bests, u64)> {
+        let mut bests = Bests::none(f32::INFINITY);
+        let mut active = 0u64;
+        for (i, ray) in rays.iter().enumerate() {
+            let limit = t_max(i);
+            if self.query_ray(ray, limit).is_some() {
+                active |= 1 << i;
+                bests.t[i] = limit;
+            }
+        }
+        if active == 0 {
+            return None;
+        }
+        self.wide.root_leaf_rays(rays, active, &mut bests);
+        Some((bests, active))
     }
 
     /// [`Bvh::intersect`], adding to `visits` the nodes and triangle blocks its walk tested:

@@ -376,51 +376,71 @@ fn trace_tile(
     let mut rays = RayCounts::default();
     let mut rejected = 0u64;
     let thin_lens = tracer.plan.thin_lens && cam.lens_radius > 0.0;
-    let mut camera_rays = [crate::geometry::Ray::new(Vec3::ZERO, Vec3::Z); PACKET];
+    const ALL: usize = PACKET * SAMPLES_PER_BATCH;
+    let mut camera_rays = [crate::geometry::Ray::new(Vec3::ZERO, Vec3::Z); ALL];
     let first = PixelSampler::new(samples.sampler, samples.seed, 0, 0);
     let mut firsts = [first; PACKET];
-    let mut samplers = [first; PACKET];
-    let mut hits = [None; PACKET];
-    let mut radiance = [Vec3::ZERO; PACKET];
+    let mut samplers = [first; ALL];
+    let mut hits = [None; ALL];
+    let mut radiance = [Vec3::ZERO; ALL];
     let mut batch = PathBatch::default();
     let pixel_of = |k: usize| (x0 + k % tw, y0 + k / tw);
     for (k, f) in firsts[..n].iter_mut().enumerate() {
         let (x, y) = pixel_of(k);
         *f = PixelSampler::new(samples.sampler, samples.seed, y as u64 * w + x as u64, 0);
     }
-    for s in samples.first..samples.first.saturating_add(samples.count) {
+    let end = samples.first.saturating_add(samples.count);
+    let mut s = samples.first;
+    while s < end {
         if cancel() {
             return None;
         }
-        for k in 0..n {
-            let sampler = firsts[k].with_index(s);
-            let (x, y) = pixel_of(k);
-            camera_rays[k] = camera_ray(cam, &sampler, x as u32, y as u32, thin_lens);
-            samplers[k] = sampler;
+        // Up to SAMPLES_PER_BATCH samples of every pixel, sample after sample: each sample's
+        // camera rays are one packet, and all their paths one batch.
+        let m = ((end - s) as usize).min(SAMPLES_PER_BATCH);
+        for j in 0..m {
+            let at = j * n;
+            for k in 0..n {
+                let sampler = firsts[k].with_index(s + j as u32);
+                let (x, y) = pixel_of(k);
+                camera_rays[at + k] = camera_ray(cam, &sampler, x as u32, y as u32, thin_lens);
+                samplers[at + k] = sampler;
+            }
+            tracer.bvh.intersect_packet(
+                &camera_rays[at..at + n],
+                f32::INFINITY,
+                &mut hits[at..at + n],
+            );
         }
-        tracer
-            .bvh
-            .intersect_packet(&camera_rays[..n], f32::INFINITY, &mut hits[..n]);
-        rays.camera += n as u64;
+        rays.camera += (m * n) as u64;
         let paths = samplers.map(PathSampler::new);
         tracer.radiance_batch(
             &mut batch,
-            &camera_rays[..n],
-            &hits[..n],
-            &paths[..n],
+            &camera_rays[..m * n],
+            &hits[..m * n],
+            &paths[..m * n],
             &mut rays,
-            &mut radiance[..n],
+            &mut radiance[..m * n],
         );
-        for (sum, l) in sums[..n].iter_mut().zip(&radiance[..n]) {
-            if l.is_finite() {
-                sum.add_sample(*l);
-            } else {
-                rejected += 1;
+        // Added in sample order, as one sample a batch adds them.
+        for l in radiance[..m * n].chunks_exact(n) {
+            for (sum, l) in sums[..n].iter_mut().zip(l) {
+                if l.is_finite() {
+                    sum.add_sample(*l);
+                } else {
+                    rejected += 1;
+                }
             }
         }
+        s += m as u32;
     }
     Some((rays, rejected))
 }
+
+/// Samples of a tile's pixels whose paths advance as one batch ([`Tracer::radiance_batch`]):
+/// more paths a batch fill the groups of rays a small scene's batches are traced in
+/// ([`crate::bvh::Bvh::intersect_batch`]). A path's radiance does not depend on its batch.
+const SAMPLES_PER_BATCH: usize = 16;
 
 #[cfg(all(test, target_arch = "x86_64"))]
 mod tests {

@@ -110,8 +110,12 @@ pub(super) fn build(triangles: &[[Vec3; 3]], options: &BuildOptions) -> Bvh {
         .with_min_len(1 << 14)
         .map(PrimRef::id)
         .collect();
-    let (wide, leaf_blocks) =
-        super::wide::collapse(&nodes, triangles, &prim_ids, one_leaf(&nodes, &counts, prim_ids.len()));
+    let (wide, leaf_blocks) = super::wide::collapse(
+        &nodes,
+        triangles,
+        &prim_ids,
+        one_leaf(&nodes, &counts, prim_ids.len()),
+    );
     let mut bvh = Bvh {
         wide,
         nodes,

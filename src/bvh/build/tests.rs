@@ -38,7 +38,11 @@ fn a_room_of_a_few_triangles_is_one_root_leaf() {
     assert_eq!(tris.len(), 32);
     let bvh = build(&tris, &BuildOptions::sah());
     assert!(!bvh.nodes[0].is_leaf() && bvh.stats.leaves > 1);
-    assert!(bvh.stats.sah_cost > sah::leaf_tests(tris.len()), "{}", bvh.stats.sah_cost);
+    assert!(
+        bvh.stats.sah_cost > sah::leaf_tests(tris.len()),
+        "{}",
+        bvh.stats.sah_cost
+    );
     assert_eq!(bvh.wide.root_leaf, Some((0, 8)));
     assert!(bvh.wide.nodes.is_empty());
     // The same hits as the tree's layout, on rays from inside the room and from outside.

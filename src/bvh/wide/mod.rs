@@ -363,4 +363,31 @@ impl WideBvh {
     }
 }
 
+impl WideBvh {
+    /// Whether [`WideBvh::root_leaf_rays`] tests rays in groups here: the layout is one root
+    /// leaf and the kernel has a group test (AVX2, AVX-512).
+    #[inline]
+    pub(crate) fn groups_root_leaf_rays(&self) -> bool {
+        #[cfg(target_arch = "x86_64")]
+        let grouped = matches!(self.dispatch, Dispatch::Avx2(_) | Dispatch::Avx512(_));
+        #[cfg(not(target_arch = "x86_64"))]
+        let grouped = false;
+        grouped && self.root_leaf.is_some() && self.nodes.is_empty()
+    }
+
+    /// The closest hits of up to [`crate::bvh::PACKET`] rays of any directions against the
+    /// root leaf, the rays in groups (see [`packet::root_leaf_rays`]), when
+    /// [`WideBvh::groups_root_leaf_rays`]; nothing otherwise.
+    #[inline]
+    pub(crate) fn root_leaf_rays(&self, rays: &[Ray], active: u64, bests: &mut packet::Bests) {
+        match self.dispatch {
+            #[cfg(target_arch = "x86_64")]
+            Dispatch::Avx2(cpu) => kernel::avx2::root_leaf_rays(cpu, self, rays, active, bests),
+            #[cfg(target_arch = "x86_64")]
+            Dispatch::Avx512(cpu) => kernel::avx512::root_leaf_rays(cpu, self, rays, active, bests),
+            _ => {}
+        }
+    }
+}
+
 pub(super) use collapse::{collapse, refit};

@@ -103,6 +103,17 @@ pub(crate) struct Bests {
 }
 
 impl Bests {
+    /// Ray `i`'s best hit.
+    #[inline(always)]
+    pub fn best(&self, i: usize) -> Best {
+        Best {
+            t: self.t[i],
+            prim: self.prim[i],
+            u: self.u[i],
+            v: self.v[i],
+        }
+    }
+
     /// No hit yet for any ray: every distance `t_max`.
     #[inline(always)]
     pub fn none(t_max: f32) -> Self {
@@ -336,6 +347,42 @@ pub(crate) fn trace_packet<L: Lanes, const ANY: bool>(
         walk::<L, ANY>(w, &r, &mut tris, t_max, bests);
     }
     true
+}
+
+/// The closest hits of up to [`PACKET`] rays of any directions (the rays in `active`, bit per
+/// ray of `rays`), into `bests` (lane `i` for ray `i`; each lane's distance starts at the ray's
+/// own limit), when the layout is one root leaf: with no node to walk, the rays need not share
+/// an octant, and they are grouped by axis permutation, each group tested against every
+/// triangle at once ([`leaf_rays`]), as a packet's rays are at a leaf. Every ray gets exactly
+/// the hit it gets alone. Does nothing for a layout with nodes.
+#[inline(always)]
+pub(crate) fn root_leaf_rays<L: Lanes>(
+    w: &WideBvh,
+    rays: &[crate::geometry::Ray],
+    active: u64,
+    bests: &mut Bests,
+) {
+    let (Some((first, count)), true) = (w.root_leaf, w.nodes.is_empty()) else {
+        return;
+    };
+    debug_assert!(rays.len() <= PACKET && active >> rays.len().min(63) <= 1);
+    let mut r = Rays::zeroed(rays.len(), 0);
+    // Lanes past the list's end repeat its first ray (their results are never read).
+    for i in 0..PACKET {
+        let ray = rays.get(i).unwrap_or(&rays[0]);
+        for a in 0..3 {
+            r.origin[a][i] = ray.origin[a];
+            r.dir[a][i] = ray.dir[a];
+            r.inv[a][i] = 1.0 / ray.dir[a];
+        }
+    }
+    let mut tris = Tris {
+        made: false,
+        perm: [0; PACKET],
+        shear: [[0.0; PACKET]; 3],
+    };
+    tris.make(&r);
+    leaf_rays::<L>(w, first, count, &r, &tris, active, bests);
 }
 
 /// The packet's walk of the tree (see the module docs); with `ANY`, rays leave at their

@@ -190,6 +190,25 @@ macro_rules! entry_points {
             crate::bvh::wide::packet::trace_packet::<$lanes, ANY>(w, tile, t_max, bests)
         }
 
+        #[target_feature(enable = $features)]
+        fn root_leaf_rays_inner(w: &WideBvh, rays: &[Ray], active: u64, bests: &mut Bests) {
+            crate::bvh::wide::packet::root_leaf_rays::<$lanes>(w, rays, active, bests)
+        }
+
+        /// Rays of any directions against a root leaf, in groups (see
+        /// [`crate::bvh::wide::packet::root_leaf_rays`]).
+        #[inline]
+        pub(crate) fn root_leaf_rays(
+            _cpu: $cpu,
+            w: &WideBvh,
+            rays: &[Ray],
+            active: u64,
+            bests: &mut Bests,
+        ) {
+            // SAFETY: the proof exists only when the CPU has every feature enabled here.
+            unsafe { root_leaf_rays_inner(w, rays, active, bests) }
+        }
+
         /// Closest hit (see [`traverse::closest`]), the whole traversal compiled for this
         /// instruction set.
         #[inline]
