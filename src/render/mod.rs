@@ -277,8 +277,9 @@ pub fn trace_rows(
         .expect("a render that is never cancelled completes")
 }
 
-/// [`trace_rows`] that gives up as soon as `cancel` returns true (checked before each sample
-/// of each tile): `None`, and `rows` as they were. The viewer's still picture traces long
+/// [`trace_rows`] that gives up as soon as `cancel` returns true (checked before each batch
+/// of up to 16 samples of each tile, see `SAMPLES_PER_BATCH`): `None`, and `rows` as they
+/// were. The viewer's still picture traces long
 /// rounds of samples this way and still leaves them at once when the view changes.
 pub fn trace_rows_until(
     tracer: &Tracer,
