@@ -24,6 +24,36 @@ fn occluded_agrees_with_brute_force() {
     }
 }
 
+/// `rays` (ray `i` with the shadow limit `t_maxes[i]`) through `Bvh::intersect_batch` and
+/// `Bvh::occluded_batch` in batches of the sizes `sizes`, in turn: every ray's closest hit and
+/// whether its shadow segment is blocked.
+fn batch_answers(
+    bvh: &Bvh,
+    rays: &[Ray],
+    t_maxes: &[f32],
+    sizes: &[usize],
+) -> (Vec<Option<tracery::bvh::Hit>>, Vec<bool>) {
+    let mut hits = vec![None; rays.len()];
+    // Filled with the answer no batch gives to an invalid ray, so a ray left out shows.
+    let mut blocked = vec![true; rays.len()];
+    let mut start = 0;
+    for size in sizes.iter().cycle() {
+        if start >= rays.len() {
+            break;
+        }
+        let end = (start + size).min(rays.len());
+        bvh.intersect_batch(&rays[start..end], &mut hits[start..end]);
+        let shadow: Vec<(Ray, f32)> = rays[start..end]
+            .iter()
+            .zip(&t_maxes[start..end])
+            .map(|(r, &t)| (*r, t))
+            .collect();
+        bvh.occluded_batch(&shadow, &mut blocked[start..end]);
+        start = end;
+    }
+    (hits, blocked)
+}
+
 /// The batch queries a path tracer's rounds use give each ray what brute force gives it: the
 /// closest hit (the same triangle and distance) and, for shadow rays each with its own
 /// `t_max`, whether anything lies on the segment; on every kernel and both builders, in
@@ -37,39 +67,16 @@ fn batch_queries_agree_with_brute_force() {
         .map(|i| 0.05 + (i % 7) as f32 * 0.15)
         .collect();
     for (name, bvh) in common::all_bvhs(&tris) {
-        let mut start = 0;
-        for size in [1usize, 2, 7, 64, 65, 300].iter().cycle() {
-            if start >= rays.len() {
-                break;
-            }
-            let end = (start + size).min(rays.len());
-            let batch = &rays[start..end];
-            let mut hits = vec![None; batch.len()];
-            bvh.intersect_batch(batch, &mut hits);
-            let shadow: Vec<(Ray, f32)> = batch
-                .iter()
-                .zip(&t_maxes[start..end])
-                .map(|(r, &t)| (*r, t))
-                .collect();
-            let mut blocked = vec![false; batch.len()];
-            bvh.occluded_batch(&shadow, &mut blocked);
-            for (k, r) in batch.iter().enumerate() {
-                let want = bf.closest(r, f32::INFINITY);
-                assert_eq!(
-                    hits[k].map(|h| (h.prim, h.t)),
-                    want.map(|h| (h.prim, h.t)),
-                    "{name}, ray {}",
-                    start + k
-                );
-                let t_max = t_maxes[start + k];
-                assert_eq!(
-                    blocked[k],
-                    !bf.all_hits(r, t_max).is_empty(),
-                    "{name}, shadow ray {}",
-                    start + k
-                );
-            }
-            start = end;
+        let (hits, blocked) = batch_answers(&bvh, &rays, &t_maxes, &[1, 2, 7, 64, 65, 300]);
+        for (i, r) in rays.iter().enumerate() {
+            let want = bf.closest(r, f32::INFINITY);
+            assert_eq!(
+                hits[i].map(|h| (h.prim, h.t)),
+                want.map(|h| (h.prim, h.t)),
+                "{name}, ray {i}"
+            );
+            let blocked_bf = !bf.all_hits(r, t_maxes[i]).is_empty();
+            assert_eq!(blocked[i], blocked_bf, "{name}, shadow ray {i}");
         }
     }
 }
@@ -96,50 +103,25 @@ fn batch_queries_on_one_leaf_agree_with_single_rays() {
         .collect();
     let sah = Bvh::build(&tris, &tracery::bvh::BuildOptions::sah());
     assert!(sah.wide.root_leaf.is_some() && sah.wide.nodes.is_empty());
+    let bits = |h: Option<tracery::bvh::Hit>| {
+        h.map(|h| (h.prim, h.t.to_bits(), h.u.to_bits(), h.v.to_bits()))
+    };
     for (name, bvh) in common::all_bvhs(&tris) {
-        let mut start = 0;
-        for size in [1usize, 3, 64, 65, 300, 1024].iter().cycle() {
-            if start >= rays.len() {
-                break;
+        let sizes = [1, 3, 64, 65, 300, 1024];
+        let (hits, blocked) = batch_answers(&bvh, &rays, &t_maxes, &sizes);
+        for (i, r) in rays.iter().enumerate() {
+            let alone = bvh.intersect(r, f32::INFINITY);
+            assert_eq!(bits(hits[i]), bits(alone), "{name}, ray {i}");
+            let t_max = t_maxes[i];
+            assert_eq!(blocked[i], bvh.occluded(r, t_max), "{name}, shadow {i}");
+            if !r.is_valid() {
+                assert!(hits[i].is_none() && !blocked[i], "{name}, ray {i}");
+                continue;
             }
-            let end = (start + size).min(rays.len());
-            let batch = &rays[start..end];
-            let mut hits = vec![None; batch.len()];
-            bvh.intersect_batch(batch, &mut hits);
-            let shadow: Vec<(Ray, f32)> = batch
-                .iter()
-                .zip(&t_maxes[start..end])
-                .map(|(r, &t)| (*r, t))
-                .collect();
-            let mut blocked = vec![true; batch.len()];
-            bvh.occluded_batch(&shadow, &mut blocked);
-            for (k, r) in batch.iter().enumerate() {
-                let alone = bvh.intersect(r, f32::INFINITY);
-                let bits = |h: Option<tracery::bvh::Hit>| {
-                    h.map(|h| (h.prim, h.t.to_bits(), h.u.to_bits(), h.v.to_bits()))
-                };
-                assert_eq!(bits(hits[k]), bits(alone), "{name}, ray {}", start + k);
-                let t_max = t_maxes[start + k];
-                assert_eq!(
-                    blocked[k],
-                    bvh.occluded(r, t_max),
-                    "{name}, shadow {}",
-                    start + k
-                );
-                if !r.is_valid() {
-                    assert!(
-                        hits[k].is_none() && !blocked[k],
-                        "{name}, ray {}",
-                        start + k
-                    );
-                    continue;
-                }
-                let want = bf.closest(r, f32::INFINITY);
-                assert_eq!(hits[k].map(|h| h.prim), want.map(|h| h.prim), "{name}");
-                let any = t_max > 0.0 && !bf.all_hits(r, t_max).is_empty();
-                assert_eq!(blocked[k], any, "{name}, shadow ray {}", start + k);
-            }
-            start = end;
+            let want = bf.closest(r, f32::INFINITY);
+            assert_eq!(hits[i].map(|h| h.prim), want.map(|h| h.prim), "{name}");
+            let any = t_max > 0.0 && !bf.all_hits(r, t_max).is_empty();
+            assert_eq!(blocked[i], any, "{name}, shadow ray {i}");
         }
     }
 }

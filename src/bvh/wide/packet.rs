@@ -54,6 +54,16 @@ pub(crate) struct Tris {
 }
 
 impl Tris {
+    /// Constants not made yet.
+    #[inline(always)]
+    fn new() -> Tris {
+        Tris {
+            made: false,
+            perm: [0; PACKET],
+            shear: [[0.0; PACKET]; 3],
+        }
+    }
+
     /// Makes every ray's constants, as [`PreparedRay::new`] makes them, unless made: the
     /// choices of axes as selects rather than branches, over whole arrays of [`PACKET`] lanes
     /// (eight or sixteen rays per instruction in the SIMD kernels this is inlined into).
@@ -332,11 +342,7 @@ pub(crate) fn trace_packet<L: Lanes, const ANY: bool>(
     if !r.fill::<L>(tile) {
         return false;
     }
-    let mut tris = Tris {
-        made: false,
-        perm: [0; PACKET],
-        shear: [[0.0; PACKET]; 3],
-    };
+    let mut tris = Tris::new();
     if w.nodes.is_empty() {
         if let Some((first, count)) = w.root_leaf {
             let all = u64::MAX >> (64 - r.n);
@@ -376,11 +382,7 @@ pub(crate) fn root_leaf_rays<L: Lanes>(
             r.inv[a][i] = 1.0 / ray.dir[a];
         }
     }
-    let mut tris = Tris {
-        made: false,
-        perm: [0; PACKET],
-        shear: [[0.0; PACKET]; 3],
-    };
+    let mut tris = Tris::new();
     tris.make(&r);
     leaf_rays::<L>(w, first, count, &r, &tris, active, bests);
 }
@@ -611,11 +613,7 @@ mod tests {
                     r.inv[a][i] = 1.0 / ray.dir[a];
                 }
             }
-            let mut tris = Tris {
-                made: false,
-                perm: [0; PACKET],
-                shear: [[0.0; PACKET]; 3],
-            };
+            let mut tris = Tris::new();
             tris.make(&r);
             let single = PreparedRay::new(&rays[p % PACKET]);
             let i = p % PACKET;
