@@ -9,7 +9,7 @@ use super::wide::kernel;
 use super::wide::packet::Bests;
 use super::wide::traverse::{Best as Best8, Visits};
 use super::{Bvh, BvhNode, MAX_DEPTH};
-use crate::geometry::{PreparedRay, Ray, intersect_triangle, intersect_triangle_t};
+use crate::geometry::{PreparedRay, Ray, intersect_triangle, intersect_triangle_t, shear_axis};
 
 /// The closest hit of a ray.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -46,17 +46,10 @@ impl Hit {
 /// them), so that rays tested in groups of one permutation fill their groups.
 fn by_permutation<T>(items: &[T], ray: impl Fn(&T) -> &Ray, mut f: impl FnMut(&[u32], &[Ray])) {
     const KEYS: usize = 6;
+    // NaN directions land in some bucket; the query leaves such rays out.
     let key = |r: &Ray| {
-        let a = r.dir.abs();
-        let kz = if a.x >= a.y && a.x >= a.z {
-            0
-        } else if a.y >= a.z {
-            1
-        } else {
-            2
-        };
-        // NaN directions land in some bucket; the query leaves such rays out.
-        (2 * kz + (r.dir[kz] < 0.0) as usize).min(KEYS - 1)
+        let (kz, negative) = shear_axis(r.dir);
+        2 * kz + negative as usize
     };
     let mut count = [0usize; KEYS + 1];
     for item in items {

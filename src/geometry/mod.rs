@@ -15,6 +15,7 @@ pub mod shapes;
 mod triangle;
 
 pub use aabb::Aabb;
+pub(crate) use ray::shear_axis;
 pub use ray::{PreparedRay, Ray, interpolation_error, offset_ray_origin};
 pub use triangle::{TriangleHit, intersect_triangle, intersect_triangle_t, is_degenerate};
 

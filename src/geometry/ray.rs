@@ -46,6 +46,22 @@ pub struct PreparedRay {
     pub(crate) shear: [f32; 3],
 }
 
+/// The triangle test's axis for the direction `d` (Woop et al. 2013): the one where `|d|` is
+/// largest (the first of equals; the last for a NaN direction), and whether `d` points down
+/// it, which swaps the other two.
+#[inline(always)]
+pub(crate) fn shear_axis(d: Vec3) -> (usize, bool) {
+    let a = d.abs();
+    let kz = if a.x >= a.y && a.x >= a.z {
+        0
+    } else if a.y >= a.z {
+        1
+    } else {
+        2
+    };
+    (kz, d[kz] < 0.0)
+}
+
 impl PreparedRay {
     /// Precomputes the per-ray constants of `ray`.
     #[inline(always)]
@@ -57,17 +73,10 @@ impl PreparedRay {
             d.y.is_sign_negative(),
             d.z.is_sign_negative(),
         ];
-        let a = d.abs();
-        let kz = if a.x >= a.y && a.x >= a.z {
-            0
-        } else if a.y >= a.z {
-            1
-        } else {
-            2
-        };
+        let (kz, negative) = shear_axis(d);
         let mut kx = (kz + 1) % 3;
         let mut ky = (kx + 1) % 3;
-        if d[kz] < 0.0 {
+        if negative {
             std::mem::swap(&mut kx, &mut ky);
         }
         // One reciprocal (already computed) and two products instead of three divisions: the

@@ -12,7 +12,7 @@
 //! samples, bounce and random numbers as the general step, bit for bit (a test renders with
 //! and without this path).
 
-use std::f32::consts::{FRAC_1_PI, FRAC_PI_4};
+use std::f32::consts::FRAC_1_PI;
 
 use glam::Vec3;
 
@@ -21,7 +21,7 @@ use crate::bvh::Hit;
 use crate::geometry::{Ray, gamma, offset_ray_origin};
 use crate::render::light::{RectLight, ShadowRay, power};
 use crate::render::{RayCounts, Tracer};
-use crate::sampling::{SamplerKind, point, sin_cos_octant};
+use crate::sampling::{SamplerKind, concentric_disk, point};
 
 /// Lanes of a chunk.
 pub(super) const W: usize = 16;
@@ -382,21 +382,13 @@ fn bounce(t: &Tracer, c: &mut Chunk) {
     let go: [bool; W] =
         std::array::from_fn(|j| j < c.n && !(c.depth[j] == t.max_depth && nothing_to_find));
     let (ux, uy) = draw(c, &go);
-    // The concentric disk's point (`sampling::concentric_disk`, the same operations).
+    // The concentric disk's points, lane by lane (no call: its sine and cosine are
+    // polynomials, so the loop vectorises).
     let mut dx = [0.0; W];
     let mut dy = [0.0; W];
     for j in 0..W {
-        let (ox, oy) = (2.0 * ux[j] - 1.0, 2.0 * uy[j] - 1.0);
-        let centre = ox == 0.0 && oy == 0.0;
-        let steep = ox.abs() <= oy.abs();
-        let (r, a) = if steep {
-            (oy, FRAC_PI_4 * (ox / oy))
-        } else {
-            (ox, FRAC_PI_4 * (oy / ox))
-        };
-        let (sin, cos) = sin_cos_octant(a);
-        let (x, y) = if steep { (sin, cos) } else { (cos, sin) };
-        (dx[j], dy[j]) = if centre { (0.0, 0.0) } else { (r * x, r * y) };
+        let d = concentric_disk(glam::Vec2::new(ux[j], uy[j]));
+        (dx[j], dy[j]) = (d.x, d.y);
     }
     let mut survive = [0.0; W];
     let mut roulette = [false; W];
